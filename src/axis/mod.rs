@@ -1,0 +1,1 @@
+//! One axis: parameters, drive adapter, state.

@@ -1,0 +1,1 @@
+//! The CNC channel.

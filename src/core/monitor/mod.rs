@@ -1,0 +1,1 @@
+//! Monitoring: software limit switches (seed 001).

@@ -1,0 +1,1 @@
+//! Path segments (lines, arcs, helices) with exact extents.

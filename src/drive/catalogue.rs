@@ -1,0 +1,1 @@
+//! Drive definition files (`drives/*.toml`).

@@ -1,0 +1,1 @@
+//! CiA 402 master-side adapter.

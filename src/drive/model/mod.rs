@@ -1,0 +1,3 @@
+//! Drive models (drive side of each profile).
+
+pub mod ds402;

@@ -1,0 +1,1 @@
+//! PDO layouts.

@@ -1,0 +1,57 @@
+//! Links bind axes to a bus: each cycle they move every axis's output image to its drive and bring
+//! back the input image.
+//!
+//! | link | where |
+//! |---|---|
+//! | `sim` | [`sim::SimLink`]: drive models in memory, images laid out as the PDO mapping |
+
+pub mod sim;
+
+use crate::units::Nanos;
+
+/// One axis's process image, as the bus carries it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ProcessImage {
+    /// Master → drive (RxPDO).
+    pub outputs: Vec<u8>,
+    /// Drive → master (TxPDO).
+    pub inputs: Vec<u8>,
+}
+
+impl ProcessImage {
+    /// Zeroed image of the given sizes.
+    pub fn new(output_len: usize, input_len: usize) -> Self {
+        ProcessImage { outputs: vec![0; output_len], inputs: vec![0; input_len] }
+    }
+}
+
+/// Errors of a link.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LinkError {
+    /// The cyclic exchange did not come back (lost frame, wrong working counter); the input images
+    /// are stale and must not be used.
+    #[error("process data exchange lost in cycle at {at}: {reason}")]
+    Lost {
+        /// When.
+        at: Nanos,
+        /// Why (e.g. "frame lost", "working counter 2, expected 3").
+        reason: String,
+    },
+    /// The images do not match the link's devices.
+    #[error("link has {devices} devices but {images} process images were given")]
+    Mismatch {
+        /// Devices on the link.
+        devices: usize,
+        /// Images given.
+        images: usize,
+    },
+    /// Anything else (setup, configuration).
+    #[error("{0}")]
+    Other(String),
+}
+
+/// The transport seam: one cyclic exchange.
+pub trait Link: Send {
+    /// Exchange all process images once: outputs go to the drives, inputs come back.
+    fn exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError>;
+}

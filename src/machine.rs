@@ -1,0 +1,1 @@
+//! Machine: channel + axes + link, built from a machine file.

@@ -1,0 +1,2 @@
+//! The `fieldprobe` command-line tool.
+fn main() {}

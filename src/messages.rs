@@ -1,0 +1,153 @@
+//! CNC messages (warnings and errors) with the seeds' IDs.
+//!
+//! The IDs are stable: tests and users match on them. Where a seed names an ID it is used as is
+//! (`P-ERR-21648` → 21648). IDs the seeds do not name live in the project range 900000–999999 and
+//! are listed in [`ids`].
+
+use std::fmt;
+
+/// Severity of a [`CncMessage`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Severity {
+    /// Reported; the program goes on.
+    Warning,
+    /// The program is aborted (the seeds' "Reset the controller").
+    Error,
+}
+
+impl fmt::Display for Severity {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Severity::Warning => "warning",
+            Severity::Error => "error",
+        })
+    }
+}
+
+/// Where in the NC program a message arose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct BlockRef {
+    /// The block's `N` number, if it has one.
+    pub number: Option<u32>,
+    /// 1-based source line of the block.
+    pub line: u32,
+}
+
+impl fmt::Display for BlockRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.number {
+            Some(n) => write!(f, "N{n}"),
+            None => write!(f, "line {}", self.line),
+        }
+    }
+}
+
+/// One CNC message as the channel reports it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CncMessage {
+    /// Seed message ID (`P-ERR-<id>`), or a project ID from [`ids`].
+    pub id: u32,
+    /// Warning or error.
+    pub severity: Severity,
+    /// Human-readable text.
+    pub text: String,
+    /// The block that caused it, if any.
+    pub block: Option<BlockRef>,
+    /// The axis concerned, if any.
+    pub axis: Option<String>,
+}
+
+impl CncMessage {
+    /// A warning.
+    pub fn warning(id: u32, text: impl Into<String>) -> Self {
+        CncMessage { id, severity: Severity::Warning, text: text.into(), block: None, axis: None }
+    }
+
+    /// An error.
+    pub fn error(id: u32, text: impl Into<String>) -> Self {
+        CncMessage { id, severity: Severity::Error, text: text.into(), block: None, axis: None }
+    }
+
+    /// With the given severity.
+    pub fn new(id: u32, severity: Severity, text: impl Into<String>) -> Self {
+        CncMessage { id, severity, text: text.into(), block: None, axis: None }
+    }
+
+    /// Attach the block reference.
+    pub fn at(mut self, block: Option<BlockRef>) -> Self {
+        if self.block.is_none() {
+            self.block = block;
+        }
+        self
+    }
+
+    /// Attach the axis name.
+    pub fn on_axis(mut self, axis: &str) -> Self {
+        self.axis = Some(axis.to_string());
+        self
+    }
+
+    /// True for errors.
+    pub fn is_error(&self) -> bool {
+        self.severity == Severity::Error
+    }
+}
+
+impl fmt::Display for CncMessage {
+    /// `warning <ID>: <text> (N<block>)` — the CLI's stderr contract (DESIGN.md).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {}: {}", self.severity, self.id, self.text)?;
+        if let Some(b) = self.block {
+            write!(f, " ({b})")?;
+        }
+        Ok(())
+    }
+}
+
+/// Message IDs. Seed IDs carry the seed section; project IDs (9xxxxx) say so.
+pub mod ids {
+    /// Seed 001 §3.1: G98 computes a negative SLS below P-AXIS-00177 (with P-CHAN-00498 = 1).
+    pub const G98_BELOW_CONFIGURED: u32 = 21648;
+    /// Seed 001 §3.1: G98 computes a negative SLS ≥ the positive SLS.
+    pub const G98_NOT_BELOW_POSITIVE: u32 = 21649;
+    /// Seed 001 §3.2: G99 computes a positive SLS above P-AXIS-00178 (with P-CHAN-00498 = 1).
+    pub const G99_ABOVE_CONFIGURED: u32 = 21650;
+    /// Seed 001 §3.2: G99 computes a positive SLS ≤ the negative SLS.
+    pub const G99_NOT_ABOVE_NEGATIVE: u32 = 21878;
+    /// Seed 001 §2: actual position beyond the positive SLS + tolerance (P-AXIS-00179).
+    pub const ACTUAL_POSITIVE_SLS: u32 = 70021;
+    /// Seed 001 §2: actual position beyond the negative SLS − tolerance (P-AXIS-00179).
+    pub const ACTUAL_NEGATIVE_SLS: u32 = 70022;
+    /// Seed 001 §2: a block's command path crosses the positive SLS (block not executed).
+    pub const COMMAND_POSITIVE_SLS: u32 = 120002;
+    /// Seed 001 §2: a block's command path crosses the negative SLS (block not executed).
+    pub const COMMAND_NEGATIVE_SLS: u32 = 120003;
+    /// Seed 001 §4.3 P-AXIS-00520/00521: the axis can no longer stop before the SLS with P-AXIS-00003.
+    pub const COMMAND_STOP_DISTANCE: u32 = 70195;
+    /// Seed 001 §2: continuous jog reached an SLS / offset limit (only with P-MANU-00014).
+    pub const JOG_LIMIT_REACHED: u32 = 50720;
+    /// Seed 001 §2: incremental jog step not executed, it would pass an SLS / offset limit.
+    pub const JOG_STEP_REFUSED: u32 = 150008;
+    /// Seed 000 §6.2 P-CHAN-00268: measurement run stopped at the end of the motion path.
+    pub const MEAS_PATH_LIMITED: u32 = 50706;
+
+    /// Project: an NC expression or command could not be evaluated (unknown variable, bad
+    /// `#MSG` format, unknown axis).
+    pub const NC_EVALUATION: u32 = 900001;
+    /// Project: the drive reported a fault or left *operation enabled* during a run.
+    pub const DRIVE_FAULT: u32 = 900010;
+    /// Project: the drive did not reach *operation enabled* within the enable timeout.
+    pub const DRIVE_ENABLE_TIMEOUT: u32 = 900011;
+    /// Project: the link lost a process-data exchange (frame lost, wrong working counter).
+    pub const LINK_LOST: u32 = 900012;
+    /// Project: a command position does not fit the drive's INTEGER32 position range.
+    pub const DRIVE_RANGE: u32 = 900013;
+    /// Project: an NC feature that is recognised but not supported in this build.
+    pub const NC_UNSUPPORTED: u32 = 900020;
+    /// Project: a motion block has no valid feed (F missing or zero for G01/G02/G03).
+    pub const NC_NO_FEED: u32 = 900021;
+    /// Project: arc geometry is inconsistent (radius at start and end differ).
+    pub const NC_ARC_GEOMETRY: u32 = 900022;
+    /// Project: the run exceeded its cycle budget (a block that never ends).
+    pub const RUN_TIMEOUT: u32 = 900030;
+}

@@ -1,0 +1,3 @@
+//! The NC language subset: lexer, parser, AST, expressions, `#MSG` formatting, executor.
+
+pub mod ast;

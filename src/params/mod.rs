@@ -1,0 +1,1 @@
+//! Parameters of the seeds (P-AXIS-*, P-CHAN-*, P-MANU-*).
