@@ -1,1 +1,3 @@
 //! The CNC channel.
+
+pub mod profile;

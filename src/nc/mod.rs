@@ -1,3 +1,7 @@
 //! The NC language subset: lexer, parser, AST, expressions, `#MSG` formatting, executor.
 
 pub mod ast;
+pub mod expr;
+pub mod lexer;
+pub mod parser;
+pub mod printf;
