@@ -1,1 +1,190 @@
-//! One axis: parameters, drive adapter, state.
+//! One axis: drive adapter, scaling and state (referenced, command / actual / lag).
+//!
+//! The axis layer is where drive increments become mm (°) and back, through
+//! [`Scaling`](crate::units::Scaling) from the drive file. It does not know wire formats: the
+//! adapter encodes and decodes the process image, the link moves it.
+
+use crate::drive::{DriveAdapter, DriveCommand, DriveError, DriveFeedback};
+use crate::units::{Nanos, Scaling};
+
+/// Errors of the axis layer.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AxisError {
+    /// The drive adapter failed (short image, bad definition).
+    #[error("axis {axis}: {source}")]
+    Drive {
+        /// Axis name.
+        axis: String,
+        /// Cause.
+        source: DriveError,
+    },
+    /// The command position does not fit the drive's INTEGER32 position range.
+    #[error("axis {axis}: command position {position:.6} is outside the drive's position range")]
+    OutOfRange {
+        /// Axis name.
+        axis: String,
+        /// Offending position (mm / °).
+        position: f64,
+    },
+}
+
+/// One axis of the channel.
+#[derive(Debug)]
+pub struct Axis {
+    name: String,
+    adapter: Box<dyn DriveAdapter>,
+    scaling: Scaling,
+    referenced: bool,
+    enable: bool,
+    fault_reset: bool,
+    /// Last command position (mm / °).
+    command: f64,
+    /// Last actual position (mm / °).
+    actual: f64,
+    /// Following error (mm / °): the drive's 0x60F4 where mapped, else command − actual.
+    lag: f64,
+    feedback: Option<DriveFeedback>,
+    /// The command has been aligned with the actual position (before enabling).
+    aligned: bool,
+}
+
+impl Axis {
+    /// A new axis on the given adapter.
+    pub fn new(
+        name: impl Into<String>,
+        adapter: Box<dyn DriveAdapter>,
+        scaling: Scaling,
+        referenced: bool,
+    ) -> Self {
+        Axis {
+            name: name.into(),
+            adapter,
+            scaling,
+            referenced,
+            enable: false,
+            fault_reset: false,
+            command: 0.0,
+            actual: 0.0,
+            lag: 0.0,
+            feedback: None,
+            aligned: false,
+        }
+    }
+
+    /// Axis name (`X`, `Y2`, …).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Bytes of the output image the adapter needs.
+    pub fn output_len(&self) -> usize {
+        self.adapter.output_len()
+    }
+
+    /// Bytes of the input image the adapter needs.
+    pub fn input_len(&self) -> usize {
+        self.adapter.input_len()
+    }
+
+    /// Whether the axis is referenced (G74 done) — SLS monitoring depends on it.
+    pub fn is_referenced(&self) -> bool {
+        self.referenced
+    }
+
+    /// Set the referenced state.
+    pub fn set_referenced(&mut self, referenced: bool) {
+        self.referenced = referenced;
+    }
+
+    /// Decode this cycle's input image.
+    pub fn read(&mut self, now: Nanos, inputs: &[u8]) -> Result<&DriveFeedback, AxisError> {
+        let fb = self
+            .adapter
+            .read_inputs(now, inputs)
+            .map_err(|source| AxisError::Drive { axis: self.name.clone(), source })?;
+        self.actual = self.scaling.to_units(fb.position);
+        self.lag = match fb.following_error {
+            Some(fe) => self.scaling.delta_to_units(fe),
+            None => self.command - self.actual,
+        };
+        if !self.aligned || !fb.operational {
+            // Cyclic synchronous position: while the drive does not follow, the target must
+            // track the actual position so that enabling causes no jump (CiA 402 §8.3 CSP).
+            self.command = self.actual;
+            self.aligned = true;
+        }
+        let fb = self.feedback.insert(fb);
+        Ok(fb)
+    }
+
+    /// Encode this cycle's command into the output image.
+    pub fn write(&mut self, now: Nanos, outputs: &mut [u8]) -> Result<(), AxisError> {
+        let target = self.scaling.to_increments(self.command).ok_or_else(|| AxisError::OutOfRange {
+            axis: self.name.clone(),
+            position: self.command,
+        })?;
+        let cmd = DriveCommand {
+            enable: self.enable,
+            target,
+            fault_reset: self.fault_reset,
+            quick_stop: false,
+        };
+        self.adapter
+            .write_outputs(now, &cmd, outputs)
+            .map_err(|source| AxisError::Drive { axis: self.name.clone(), source })
+    }
+
+    /// Ask for *operation enabled* (`true`) or disable.
+    pub fn set_enable(&mut self, enable: bool) {
+        self.enable = enable;
+    }
+
+    /// Request (or stop requesting) a fault reset.
+    pub fn set_fault_reset(&mut self, reset: bool) {
+        self.fault_reset = reset;
+    }
+
+    /// Set the command position (mm / °) for the next write.
+    #[inline]
+    pub fn set_command(&mut self, position: f64) {
+        self.command = position;
+    }
+
+    /// Last command position (mm / °).
+    #[inline]
+    pub fn command(&self) -> f64 {
+        self.command
+    }
+
+    /// Last actual position (mm / °).
+    #[inline]
+    pub fn actual(&self) -> f64 {
+        self.actual
+    }
+
+    /// Following error (mm / °).
+    #[inline]
+    pub fn lag(&self) -> f64 {
+        self.lag
+    }
+
+    /// Last feedback, if any arrived.
+    pub fn feedback(&self) -> Option<&DriveFeedback> {
+        self.feedback.as_ref()
+    }
+
+    /// The drive follows the cyclic command.
+    pub fn is_operational(&self) -> bool {
+        self.feedback.is_some_and(|f| f.operational)
+    }
+
+    /// The drive reports a fault.
+    pub fn has_fault(&self) -> bool {
+        self.feedback.is_some_and(|f| f.fault)
+    }
+
+    /// Scaling of this axis.
+    pub fn scaling(&self) -> Scaling {
+        self.scaling
+    }
+}

@@ -1,3 +1,618 @@
-//! The CNC channel.
+//! The CNC channel: block preparation, the interpolator and the per-cycle monitoring.
+//!
+//! One [`Channel::cycle`] is one interpolation cycle, in the order of DESIGN.md:
+//!
+//! ```text
+//! adapter.read_inputs ─► axis feedback ─► monitor (actual positions, P-AXIS-00179)
+//!   ─► interpolator (next set-points) ─► monitor (stop distance, P-AXIS-00520/00521)
+//!   ─► adapter.write_outputs
+//! ```
+//!
+//! Blocks enter through [`Channel::start_motion`] (block preparation: the whole command path is
+//! checked against the software limit switches before anything moves) and
+//! [`Channel::program_limit`] (G98 / G99). Manual mode lives in [`manual`]. The channel does not
+//! know which bus an axis is on and never reads a clock: `now` comes in with each cycle.
+//!
+//! Motion blocks run rest to rest (exact stop at each block end) with trapezoidal (linear slope)
+//! velocity profiles; look-ahead blending is not part of this build.
 
+pub mod manual;
 pub mod profile;
+
+use crate::axis::Axis;
+use crate::core::monitor::sls::{AxisLimitConfig, PcsLimits, Side, SoftLimits, Violation};
+use crate::core::path::Segment;
+use crate::link::{LinkError, ProcessImage};
+use crate::messages::{ids, BlockRef, CncMessage, Severity};
+use crate::units::Nanos;
+use profile::{Braking, Trapezoid};
+
+/// Dynamics and limits of one channel axis, in mm (°), s.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelAxisConfig {
+    /// Rotary axis (P-AXIS-00018).
+    pub rotary: bool,
+    /// P-AXIS-00212 maximum axis velocity (mm/s) — also the rapid (G00) velocity.
+    pub v_max: f64,
+    /// P-AXIS-00001 acceleration at machining feed (mm/s²).
+    pub a_feed: f64,
+    /// P-AXIS-00002 deceleration at machining feed (mm/s²).
+    pub d_feed: f64,
+    /// P-AXIS-00004 acceleration in rapid traverse (mm/s²).
+    pub a_rapid: f64,
+    /// P-AXIS-00003 emergency deceleration (mm/s²): stops after errors.
+    pub a_emergency: f64,
+    /// Software limit switch configuration (seed 001).
+    pub limits: AxisLimitConfig,
+}
+
+/// Channel configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelConfig {
+    /// Interpolation cycle.
+    pub cycle: Nanos,
+    /// Per-axis configuration, in channel axis order.
+    pub axes: Vec<ChannelAxisConfig>,
+    /// P-CHAN-00498 `range_check_prog_soft_limits`.
+    pub range_check_programmed_limits: bool,
+    /// P-CHAN-00489 `display_pcs_limits`.
+    pub display_pcs_limits: bool,
+    /// P-MANU-00014 `move_limit_warning`.
+    pub move_limit_warning: bool,
+    /// Cycles the drives may take to reach *operation enabled*.
+    pub enable_timeout_cycles: u32,
+}
+
+/// Kind of a motion block.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MotionKind {
+    /// G00: rapid, each axis at most P-AXIS-00212, acceleration P-AXIS-00004.
+    Rapid,
+    /// G01 at the programmed feed.
+    Linear,
+    /// G02 (`clockwise`) / G03 in the plane of axes `a1`, `a2` (channel indices, in the plane's
+    /// orientation) with the centre offset from the start point.
+    Arc {
+        /// First plane axis.
+        a1: usize,
+        /// Second plane axis.
+        a2: usize,
+        /// Centre relative to the start point, in (a1, a2).
+        centre_offset: [f64; 2],
+        /// G02.
+        clockwise: bool,
+    },
+}
+
+/// A motion block after the executor resolved it to axis coordinates (ACS).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MotionRequest {
+    /// Rapid, linear or arc.
+    pub kind: MotionKind,
+    /// Target position of every channel axis (ACS, mm / °).
+    pub target: Vec<f64>,
+    /// Feed in mm/min (ignored for G00).
+    pub feed: f64,
+}
+
+/// Outcome of block preparation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Prepared {
+    /// The block runs; step the channel until it is idle.
+    Started,
+    /// Nothing to move (target = current position).
+    Empty,
+    /// The block was refused (an error was queued); it is not executed.
+    Rejected,
+}
+
+/// Coarse state of the channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChannelState {
+    /// Drives are being brought to *operation enabled*.
+    Enabling,
+    /// Ready for the next block.
+    Idle,
+    /// A block (or a jog) is running.
+    Busy,
+    /// Stopping after an error; becomes `Aborted` at standstill.
+    Stopping,
+    /// Stopped after an error; needs [`Channel::reset`].
+    Aborted,
+}
+
+#[derive(Debug, Clone)]
+struct Motion {
+    segment: Segment,
+    profile: Trapezoid,
+    k: u64,
+}
+
+#[derive(Debug, Clone)]
+enum Mode {
+    Enabling { cycles: u32 },
+    Idle,
+    Moving(Box<Motion>),
+    Manual(manual::ManualState),
+    Stopping { brakes: Vec<AxisBrake>, k: u64, then: ChannelState },
+    Aborted,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct AxisBrake {
+    start: f64,
+    sign: f64,
+    braking: Braking,
+}
+
+/// The CNC channel.
+#[derive(Debug)]
+pub struct Channel {
+    cfg: ChannelConfig,
+    axes: Vec<Axis>,
+    sls: SoftLimits,
+    mode: Mode,
+    messages: Vec<CncMessage>,
+    block: Option<BlockRef>,
+    /// PCS → ACS offsets (`acs = pcs + offset`), maintained by the executor (G92).
+    pcs_offset: Vec<f64>,
+    /// Command velocities of the last cycle (mm/s).
+    velocity: Vec<f64>,
+    /// Scratch buffers (no per-cycle allocation).
+    next: Vec<f64>,
+    violations: Vec<Violation>,
+    cycles: u64,
+}
+
+impl Channel {
+    /// A channel over the given axes (same order as `cfg.axes`).
+    ///
+    /// # Errors
+    /// When the number of axes and configurations differ.
+    pub fn new(cfg: ChannelConfig, axes: Vec<Axis>) -> Result<Self, String> {
+        if cfg.axes.len() != axes.len() {
+            return Err(format!(
+                "channel has {} axis configurations but {} axes",
+                cfg.axes.len(),
+                axes.len()
+            ));
+        }
+        let mut sls = SoftLimits::new(
+            cfg.axes.iter().map(|a| a.limits.clone()).collect(),
+            cfg.range_check_programmed_limits,
+        );
+        for (i, a) in axes.iter().enumerate() {
+            sls.set_referenced(i, a.is_referenced());
+        }
+        let n = axes.len();
+        Ok(Channel {
+            cfg,
+            axes,
+            sls,
+            mode: Mode::Enabling { cycles: 0 },
+            messages: Vec::new(),
+            block: None,
+            pcs_offset: vec![0.0; n],
+            velocity: vec![0.0; n],
+            next: vec![0.0; n],
+            violations: Vec::new(),
+            cycles: 0,
+        })
+    }
+
+    /// Number of axes.
+    pub fn axis_count(&self) -> usize {
+        self.axes.len()
+    }
+
+    /// The axes.
+    pub fn axes(&self) -> &[Axis] {
+        &self.axes
+    }
+
+    /// Index of the axis with this name.
+    pub fn axis_index(&self, name: &str) -> Option<usize> {
+        self.axes.iter().position(|a| a.name().eq_ignore_ascii_case(name))
+    }
+
+    /// The software limit switch monitor.
+    pub fn soft_limits(&self) -> &SoftLimits {
+        &self.sls
+    }
+
+    /// Configuration.
+    pub fn config(&self) -> &ChannelConfig {
+        &self.cfg
+    }
+
+    /// Interpolation cycles run so far.
+    pub fn cycles(&self) -> u64 {
+        self.cycles
+    }
+
+    /// Coarse state.
+    pub fn state(&self) -> ChannelState {
+        match &self.mode {
+            Mode::Enabling { .. } => ChannelState::Enabling,
+            Mode::Idle => ChannelState::Idle,
+            Mode::Moving(_) => ChannelState::Busy,
+            Mode::Manual(m) if m.is_moving() => ChannelState::Busy,
+            Mode::Manual(_) => ChannelState::Idle,
+            Mode::Stopping { .. } => ChannelState::Stopping,
+            Mode::Aborted => ChannelState::Aborted,
+        }
+    }
+
+    /// Ready for the next block (enabled, nothing moving, no error).
+    pub fn is_idle(&self) -> bool {
+        self.state() == ChannelState::Idle
+    }
+
+    /// Take the queued messages.
+    pub fn take_messages(&mut self) -> Vec<CncMessage> {
+        std::mem::take(&mut self.messages)
+    }
+
+    /// Queued messages, not taken.
+    pub fn messages(&self) -> &[CncMessage] {
+        &self.messages
+    }
+
+    /// Set the block that subsequent messages refer to.
+    pub fn set_block(&mut self, block: Option<BlockRef>) {
+        self.block = block;
+    }
+
+    /// Command position of every axis (ACS).
+    pub fn command_positions(&self) -> Vec<f64> {
+        self.axes.iter().map(Axis::command).collect()
+    }
+
+    /// Actual position of every axis (ACS).
+    pub fn actual_positions(&self) -> Vec<f64> {
+        self.axes.iter().map(Axis::actual).collect()
+    }
+
+    /// Set the PCS → ACS offset of axis `i` (`acs = pcs + offset`; G92 / G54).
+    pub fn set_pcs_offset(&mut self, i: usize, offset: f64) {
+        if let Some(o) = self.pcs_offset.get_mut(i) {
+            *o = offset;
+        }
+    }
+
+    /// PCS → ACS offset of axis `i`.
+    pub fn pcs_offset(&self, i: usize) -> f64 {
+        self.pcs_offset.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// The four PCS CNC objects of seed 001 §4.5 for axis `i`; `None` unless P-CHAN-00489 is
+    /// set and SLS monitoring is active for the axis.
+    pub fn pcs_limits(&self, i: usize) -> Option<PcsLimits> {
+        if !self.cfg.display_pcs_limits {
+            return None;
+        }
+        let offset = self.pcs_offset(i);
+        let pcs = self.axes.get(i)?.command() - offset;
+        self.sls.pcs_limits(i, offset, pcs)
+    }
+
+    /// Controller reset: restores the configured SLS (seed 001 §3.3), clears the error state and
+    /// re-enables the drives (with fault reset).
+    pub fn reset(&mut self) {
+        self.sls.reset();
+        self.pcs_offset.iter_mut().for_each(|o| *o = 0.0);
+        self.velocity.iter_mut().for_each(|v| *v = 0.0);
+        self.mode = Mode::Enabling { cycles: 0 };
+        for a in &mut self.axes {
+            a.set_fault_reset(true);
+        }
+    }
+
+    /// Mark axis `i` referenced or not.
+    pub fn set_referenced(&mut self, i: usize, referenced: bool) {
+        if let Some(a) = self.axes.get_mut(i) {
+            a.set_referenced(referenced);
+            self.sls.set_referenced(i, referenced);
+        }
+    }
+
+    /// Queue a message from outside the channel (e.g. the executor), tagged with the current
+    /// block. An error aborts the channel.
+    pub fn report(&mut self, m: CncMessage) {
+        let error = m.is_error();
+        self.push(m);
+        if error && !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+            self.begin_stop(ChannelState::Aborted);
+        }
+    }
+
+    fn push(&mut self, m: CncMessage) {
+        let m = m.at(self.block);
+        tracing::debug!(id = m.id, "{m}");
+        self.messages.push(m);
+    }
+
+    // ----- block preparation -------------------------------------------------------------
+
+    /// Block preparation of a motion block: build the path from the current command position,
+    /// check it completely against the software limit switches (seed 001 §2: P-ERR-120002 /
+    /// 120003, the block is not executed) and start it.
+    pub fn start_motion(&mut self, req: &MotionRequest) -> Prepared {
+        if !self.is_idle() || matches!(self.mode, Mode::Manual(_)) {
+            self.push(CncMessage::error(
+                ids::NC_UNSUPPORTED,
+                "motion block while the channel is not ready (manual mode or still moving)",
+            ));
+            return Prepared::Rejected;
+        }
+        let n = self.axes.len();
+        if req.target.len() != n || req.target.iter().any(|v| !v.is_finite()) {
+            self.push(CncMessage::error(ids::NC_EVALUATION, "motion target is not a finite position for every axis"));
+            return Prepared::Rejected;
+        }
+        let start = self.command_positions();
+        let segment = match req.kind {
+            MotionKind::Rapid | MotionKind::Linear => Segment::line(start, req.target.clone()),
+            MotionKind::Arc { a1, a2, centre_offset, clockwise } => {
+                Segment::arc(start, req.target.clone(), a1, a2, centre_offset, clockwise, ARC_RADIUS_TOLERANCE)
+            }
+        };
+        let segment = match segment {
+            Ok(s) => s,
+            Err(e) => {
+                self.push(CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()));
+                return Prepared::Rejected;
+            }
+        };
+        if segment.is_empty() {
+            return Prepared::Empty;
+        }
+        // Software limit switches: every point of the command path.
+        let mut violations = std::mem::take(&mut self.violations);
+        self.sls.check_path(&segment, &mut violations);
+        let mut rejected = false;
+        for v in &violations {
+            let m = self.sls.path_message(v);
+            rejected |= m.severity == Severity::Error;
+            self.push(m);
+        }
+        self.violations = violations;
+        if rejected {
+            // Interpolation stops, the program is aborted at this block (seed 001 §2).
+            self.mode = Mode::Aborted;
+            return Prepared::Rejected;
+        }
+        let profile = self.plan(&segment, req);
+        if profile.duration() <= 0.0 {
+            return Prepared::Empty;
+        }
+        self.mode = Mode::Moving(Box::new(Motion { segment, profile, k: 0 }));
+        Prepared::Started
+    }
+
+    /// Velocity and acceleration along the path so that no axis exceeds its own limits.
+    fn plan(&self, segment: &Segment, req: &MotionRequest) -> Trapezoid {
+        let mut v = match req.kind {
+            MotionKind::Rapid => f64::INFINITY,
+            _ => crate::units::feed_mm_min_to_mm_s(req.feed),
+        };
+        let mut a_acc = f64::INFINITY;
+        let mut a_dec = f64::INFINITY;
+        let mut a_min_axis = f64::INFINITY;
+        for (i, c) in self.cfg.axes.iter().enumerate() {
+            let f = segment.axis_speed_factor(i);
+            let (acc, dec) = match req.kind {
+                MotionKind::Rapid => (c.a_rapid, c.a_rapid),
+                _ => (c.a_feed, c.d_feed),
+            };
+            if f > 1e-12 {
+                v = v.min(c.v_max / f);
+                a_acc = a_acc.min(acc / f);
+                a_dec = a_dec.min(dec / f);
+                a_min_axis = a_min_axis.min(acc.min(dec));
+            }
+        }
+        if let (Segment::Arc(arc), true) = (segment, a_min_axis.is_finite()) {
+            // Centripetal acceleration v²/r must stay within the weakest plane axis.
+            v = v.min((a_min_axis * arc.radius).sqrt());
+        }
+        let fin = |x: f64| if x.is_finite() && x > 0.0 { x } else { 1.0 };
+        Trapezoid::plan(segment.length(), fin(v), fin(a_acc), fin(a_dec))
+    }
+
+    /// G98 (negative) / G99 (positive) for axis `i` (seed 001 §3). Errors abort the channel.
+    pub fn program_limit(&mut self, i: usize, side: Side, value: f64, relative: bool) {
+        let actual = self.axes.get(i).map(Axis::actual).unwrap_or(0.0);
+        let update = self.sls.program_limit(i, side, value, relative, actual);
+        let mut error = false;
+        for m in update.messages {
+            error |= m.is_error();
+            self.push(m);
+        }
+        if error {
+            self.begin_stop(ChannelState::Aborted);
+        }
+    }
+
+    // ----- the interpolation cycle --------------------------------------------------------
+
+    /// The link failed to exchange process data this cycle: the inputs are stale. Stop (the
+    /// drives receive braking set-points as soon as the link is back) and report.
+    pub fn link_lost(&mut self, err: &LinkError) {
+        self.cycles += 1;
+        self.push(CncMessage::error(ids::LINK_LOST, format!("{err}; axes stopped")));
+        if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+            self.begin_stop(ChannelState::Aborted);
+        }
+    }
+
+    /// One interpolation cycle. `images[i]` is axis `i`'s process image after this cycle's
+    /// exchange; the outputs written here go out with the next exchange.
+    #[allow(clippy::needless_range_loop)] // axes, images and set-points are parallel arrays
+    pub fn cycle(&mut self, now: Nanos, images: &mut [ProcessImage]) {
+        self.cycles += 1;
+        let dt = self.cfg.cycle.as_secs_f64();
+        if images.len() != self.axes.len() {
+            self.push(CncMessage::error(
+                ids::LINK_LOST,
+                format!("{} process images for {} axes", images.len(), self.axes.len()),
+            ));
+            self.mode = Mode::Aborted;
+            return;
+        }
+        // 1. Inputs.
+        let enabling = matches!(self.mode, Mode::Enabling { .. });
+        for i in 0..self.axes.len() {
+            let res = self.axes[i].read(now, &images[i].inputs).map(|fb| (fb.fault, fb.operational));
+            match res {
+                Ok((fault, operational)) => {
+                    let stopped = matches!(self.mode, Mode::Aborted | Mode::Stopping { .. });
+                    if !enabling && !stopped && (fault || !operational) {
+                        let name = self.axes[i].name().to_string();
+                        let code = if fault { "fault" } else { "left operation enabled" };
+                        self.push(
+                            CncMessage::error(ids::DRIVE_FAULT, format!("drive of axis {name} reports {code}; axes stopped"))
+                                .on_axis(&name),
+                        );
+                        self.begin_stop(ChannelState::Aborted);
+                    }
+                }
+                Err(e) => {
+                    self.push(CncMessage::error(ids::DRIVE_FAULT, e.to_string()));
+                    self.begin_stop(ChannelState::Aborted);
+                }
+            }
+        }
+        // 2. Actual positions against the SLS + tolerance (position controller, seed 001 §2).
+        for i in 0..self.axes.len() {
+            let actual = self.axes[i].actual();
+            if let Some(m) = self.sls.check_actual(i, actual) {
+                let error = m.is_error();
+                self.push(m);
+                if error && !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+                    // Interpolation stopped; the axes decelerate linearly.
+                    self.begin_stop(ChannelState::Aborted);
+                }
+            }
+        }
+        // 3. Interpolator: next set-points.
+        self.next.clear();
+        self.next.extend(self.axes.iter().map(Axis::command));
+        let mut finished: Option<ChannelState> = None;
+        match &mut self.mode {
+            Mode::Enabling { cycles } => {
+                *cycles += 1;
+                for a in &mut self.axes {
+                    a.set_enable(true);
+                }
+                if self.axes.iter().all(Axis::is_operational) {
+                    for a in &mut self.axes {
+                        a.set_fault_reset(false);
+                    }
+                    finished = Some(ChannelState::Idle);
+                } else if *cycles > self.cfg.enable_timeout_cycles {
+                    let missing: Vec<&str> =
+                        self.axes.iter().filter(|a| !a.is_operational()).map(Axis::name).collect();
+                    let text = format!(
+                        "drives of axes {} did not reach operation enabled within {} cycles",
+                        missing.join(", "),
+                        self.cfg.enable_timeout_cycles
+                    );
+                    self.messages.push(CncMessage::error(ids::DRIVE_ENABLE_TIMEOUT, text));
+                    finished = Some(ChannelState::Aborted);
+                }
+            }
+            Mode::Idle | Mode::Aborted => {}
+            Mode::Moving(m) => {
+                m.k += 1;
+                let t = m.k as f64 * dt;
+                if t >= m.profile.duration() {
+                    self.next.copy_from_slice(m.segment.end());
+                    finished = Some(ChannelState::Idle);
+                } else {
+                    let (s, _) = m.profile.sample(t);
+                    m.segment.point_at(s, &mut self.next);
+                }
+            }
+            Mode::Manual(state) => {
+                let mut events = Vec::new();
+                state.step(dt, &mut self.next, &mut events);
+                for e in events {
+                    let m = manual::event_message(e, &self.axes, self.cfg.move_limit_warning);
+                    if let Some(m) = m {
+                        self.messages.push(m.at(self.block));
+                    }
+                }
+            }
+            Mode::Stopping { brakes, k, then } => {
+                *k += 1;
+                let t = *k as f64 * dt;
+                let mut done = true;
+                for (i, b) in brakes.iter().enumerate() {
+                    let (s, v) = b.braking.sample(t);
+                    self.next[i] = b.start + b.sign * s;
+                    done &= v <= 0.0;
+                }
+                if done {
+                    finished = Some(*then);
+                }
+            }
+        }
+        // 4. Command side: can every axis still stop before its SLS (P-AXIS-00520/00521)?
+        if matches!(self.mode, Mode::Moving(_) | Mode::Manual(_)) {
+            for i in 0..self.axes.len() {
+                let v = (self.next[i] - self.axes[i].command()) / dt;
+                if let Some(side) = self.sls.check_stop_distance(i, self.next[i], v) {
+                    let m = self.sls.stop_distance_message(i, side);
+                    self.push(m);
+                    // Brake from the current state, which could still stop in time.
+                    self.begin_stop(ChannelState::Aborted);
+                    self.next.clear();
+                    self.next.extend(self.axes.iter().map(Axis::command));
+                    break;
+                }
+            }
+        }
+        match finished {
+            Some(ChannelState::Idle) => {
+                self.mode = Mode::Idle;
+            }
+            Some(ChannelState::Aborted) => self.mode = Mode::Aborted,
+            _ => {}
+        }
+        // 5. Outputs.
+        for i in 0..self.axes.len() {
+            let next = self.next[i];
+            self.velocity[i] = (next - self.axes[i].command()) / dt;
+            self.axes[i].set_command(next);
+            if let Err(e) = self.axes[i].write(now, &mut images[i].outputs) {
+                self.push(CncMessage::error(ids::DRIVE_RANGE, e.to_string()));
+                self.mode = Mode::Aborted;
+            }
+        }
+    }
+
+    /// Stop all axes: each decelerates linearly from its current command velocity with
+    /// P-AXIS-00003 (seed 001 §2: "decelerated by a linear velocity profile"; the contour may be
+    /// left when several axes move).
+    fn begin_stop(&mut self, then: ChannelState) {
+        if matches!(self.mode, Mode::Stopping { .. }) {
+            return;
+        }
+        let brakes = self
+            .axes
+            .iter()
+            .zip(&self.velocity)
+            .zip(&self.cfg.axes)
+            .map(|((a, &v), c)| AxisBrake {
+                start: a.command(),
+                sign: if v < 0.0 { -1.0 } else { 1.0 },
+                braking: Braking::new(0.0, v.abs(), c.a_emergency.max(1e-6)),
+            })
+            .collect();
+        self.mode = Mode::Stopping { brakes, k: 0, then };
+    }
+}
+
+/// Permitted difference between start and end radius of a G02 / G03 (mm).
+pub const ARC_RADIUS_TOLERANCE: f64 = 1e-3;

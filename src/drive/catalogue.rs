@@ -1,1 +1,691 @@
 //! Drive definition files (`drives/*.toml`).
+//!
+//! A drive definition says which adapter family a drive belongs to, how its process data is laid
+//! out, how increments scale to axis units, how the emulated drive behaves, and which drive
+//! functions (seed 004 §7.3.2, `#DRIVE WR [KEY=TORQUE_LIMIT …]`) map to which objects:
+//!
+//! ```toml
+//! [drive]
+//! name = "cia402-generic"
+//! profile = "cia402"                      # the only profile so far
+//!
+//! [scaling]
+//! increments_per_unit = 10000             # drive increments per mm (or per degree)
+//! offset = 0.0                            # axis position at increment 0
+//!
+//! [rxpdo]                                 # master -> drive, default = CSP mapping
+//! entries = ["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00", "0x6072:00"]
+//! defaults = { "0x6072:00" = 3000 }       # written by the adapter to objects it does not drive
+//!
+//! [txpdo]                                 # drive -> master
+//! entries = ["0x6041:00", "0x6064:00", "0x60F4:00", "0x6061:00", "0x60B9:00",
+//!            "0x60BA:00", "0x60BB:00", "0x60BC:00", "0x60BD:00"]
+//!
+//! [model]                                 # drive-model knobs (emulated drive only)
+//! kv = 40.0                               # position loop gain, 1/s
+//! following_error_window = 30000          # 0x6065, increments; 4294967295 = off
+//! following_error_timeout_ms = 10         # 0x6066, ms
+//! enable_delay_cycles = 0                 # extra cycles SWITCHED ON -> OPERATION ENABLED
+//! max_velocity = 1000.0                   # units/s; absent = unlimited
+//!
+//! [functions]
+//! TORQUE_LIMIT = { object = "0x6072:00", type = "u16", unit = "0.1 %", min = 0, max = 3000 }
+//! MON_WINDOW = { object = "0x6065:00", type = "u32", unit = "increments" }
+//! ```
+//!
+//! Every error names the file, the 1-based line (from the TOML spans), the key and what is
+//! allowed; unknown keys are errors, so a typo never silently falls back to a default.
+
+use super::pdo::{self, DataType, PdoLayout};
+use super::DriveError;
+use crate::units::Scaling;
+use std::ops::Range;
+use toml_edit::{ImDocument, Item, TableLike, Value};
+
+/// Drive profile family: which adapter and drive model play the drive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Profile {
+    /// CiA 402 (CANopen / CoE): [`super::ds402::Ds402Adapter`], [`super::model::ds402::Ds402Model`].
+    Cia402,
+}
+
+impl Profile {
+    /// Name used in drive files.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Profile::Cia402 => "cia402",
+        }
+    }
+}
+
+/// Behaviour knobs of the emulated drive (`[model]`); the real drive ignores them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelConfig {
+    /// Position loop gain kv in 1/s (default 40): steady-state lag = v / kv.
+    pub kv: f64,
+    /// Initial following error window 0x6065 in increments (default 30000; `u32::MAX` = off).
+    pub following_error_window: u32,
+    /// Initial following error time out 0x6066 in ms (default 10).
+    pub following_error_timeout_ms: u16,
+    /// Extra cycles the drive needs from *switched on* to *operation enabled* (default 0).
+    pub enable_delay_cycles: u32,
+    /// Largest speed the position loop moves, units/s (`None` = unlimited).
+    pub max_velocity: Option<f64>,
+}
+
+impl Default for ModelConfig {
+    /// The Leadshine EL7 factory values for 0x6065 / 0x6066 (SDO dump in `shared/test-data`).
+    fn default() -> Self {
+        ModelConfig {
+            kv: 40.0,
+            following_error_window: 30_000,
+            following_error_timeout_ms: 10,
+            enable_delay_cycles: 0,
+            max_velocity: None,
+        }
+    }
+}
+
+/// A value the adapter writes every cycle to a mapped output object it does not drive itself
+/// (`[rxpdo] defaults`, e.g. 0x6072 max torque).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutputDefault {
+    /// Object index.
+    pub index: u16,
+    /// Sub-index.
+    pub sub: u8,
+    /// Value (fits the mapped type).
+    pub value: i64,
+}
+
+/// One entry of the drive function table (seed 004 §7.3.2: `antr.function[i]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriveFunction {
+    /// Key used by `#DRIVE … KEY=…` (upper case, e.g. `TORQUE_LIMIT`).
+    pub key: String,
+    /// Object index (`wr_ident`).
+    pub index: u16,
+    /// Sub-index.
+    pub sub: u8,
+    /// Data type on the wire.
+    pub ty: DataType,
+    /// Unit of the wire value, for display (`"0.1 %"`).
+    pub unit: Option<String>,
+    /// Linear scaling: wire value = round(value × scale) (seed: `scaling_type LINEAR`,
+    /// `scaling_factor`); 1.0 = unscaled.
+    pub scale: f64,
+    /// Smallest allowed wire value.
+    pub min: i64,
+    /// Largest allowed wire value.
+    pub max: i64,
+}
+
+impl DriveFunction {
+    /// Wire value for a user value, `None` when it is not finite or outside `min..=max`.
+    pub fn encode(&self, value: f64) -> Option<i64> {
+        let raw = (value * self.scale).round();
+        if !raw.is_finite() || raw < self.min as f64 || raw > self.max as f64 {
+            return None;
+        }
+        Some(raw as i64)
+    }
+
+    /// User value of a wire value.
+    pub fn decode(&self, raw: i64) -> f64 {
+        raw as f64 / self.scale
+    }
+}
+
+/// A parsed drive definition file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriveDefinition {
+    /// `[drive] name`.
+    pub name: String,
+    /// `[drive] profile`.
+    pub profile: Profile,
+    /// Where the definition came from (file path or `builtin:NAME`).
+    pub file: String,
+    /// `[scaling]`.
+    pub scaling: Scaling,
+    /// `[rxpdo] entries` (master → drive).
+    pub rxpdo: PdoLayout,
+    /// `[rxpdo] defaults`.
+    pub rxpdo_defaults: Vec<OutputDefault>,
+    /// `[txpdo] entries` (drive → master).
+    pub txpdo: PdoLayout,
+    /// `[model]`.
+    pub model: ModelConfig,
+    /// `[functions]`, in file order.
+    pub functions: Vec<DriveFunction>,
+}
+
+impl DriveDefinition {
+    /// The drive function with this key.
+    pub fn function(&self, key: &str) -> Option<&DriveFunction> {
+        self.functions.iter().find(|f| f.key == key)
+    }
+}
+
+const BUILTINS: &[(&str, &str)] = &[(
+    "cia402-generic",
+    include_str!("../../drives/cia402-generic.toml"),
+)];
+
+const BUILTIN_NAMES: &[&str] = &["cia402-generic"];
+
+/// Names of the drive definitions compiled into the crate (`drives/*.toml`).
+pub fn builtin_names() -> &'static [&'static str] {
+    BUILTIN_NAMES
+}
+
+/// A built-in drive definition by name (`cia402-generic`).
+pub fn builtin(name: &str) -> Option<DriveDefinition> {
+    let (_, text) = BUILTINS.iter().find(|(n, _)| *n == name)?;
+    // The built-in files are checked by a unit test; a broken one reads as "not there".
+    parse(text, &format!("builtin:{name}")).ok()
+}
+
+/// A built-in definition by name, else the file at `name_or_path`.
+pub fn load(name_or_path: &str) -> Result<DriveDefinition, DriveError> {
+    if let Some(def) = builtin(name_or_path) {
+        return Ok(def);
+    }
+    let text = std::fs::read_to_string(name_or_path).map_err(|e| DriveError::Definition {
+        file: name_or_path.to_string(),
+        line: 0,
+        message: format!(
+            "not a built-in drive ({}) and cannot read it as a file: {e}",
+            BUILTIN_NAMES.join(", ")
+        ),
+    })?;
+    parse(&text, name_or_path)
+}
+
+/// Parse a drive definition; `file` names the source in errors.
+pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
+    let cx = Cx { text, file };
+    let doc = ImDocument::parse(text).map_err(|e| {
+        let msg = e.message().trim().replace('\n', "; ");
+        cx.err(e.span(), format!("TOML syntax: {msg}"))
+    })?;
+    let root = doc.as_table();
+    cx.check_keys(
+        root,
+        "",
+        &["drive", "scaling", "rxpdo", "txpdo", "model", "functions"],
+    )?;
+
+    let drive = cx.table(root, "drive", None)?;
+    let drive =
+        drive.ok_or_else(|| cx.err(None, "missing table [drive] (name, profile)".into()))?;
+    cx.check_keys(drive.1, "[drive]", &["name", "profile"])?;
+    let name = cx.req_str(&drive, "[drive]", "name")?;
+    let profile = match cx.req_str(&drive, "[drive]", "profile")?.as_str() {
+        "cia402" => Profile::Cia402,
+        other => {
+            return Err(cx.err(
+                cx.value_span(drive.1, "profile"),
+                format!("[drive] profile: unknown profile \"{other}\"; allowed: \"cia402\""),
+            ))
+        }
+    };
+
+    let scaling = cx
+        .table(root, "scaling", None)?
+        .ok_or_else(|| cx.err(None, "missing table [scaling] (increments_per_unit)".into()))?;
+    cx.check_keys(scaling.1, "[scaling]", &["increments_per_unit", "offset"])?;
+    let inc = cx
+        .float(scaling.1, "[scaling]", "increments_per_unit")?
+        .ok_or_else(|| {
+            cx.err(
+                scaling.0.clone(),
+                "[scaling] increments_per_unit is missing".into(),
+            )
+        })?;
+    if inc == 0.0 {
+        return Err(cx.err(
+            cx.value_span(scaling.1, "increments_per_unit"),
+            "[scaling] increments_per_unit: must be a non-zero number".into(),
+        ));
+    }
+    let offset = cx.float(scaling.1, "[scaling]", "offset")?.unwrap_or(0.0);
+    let scaling = Scaling {
+        increments_per_unit: inc,
+        offset,
+    };
+
+    let (rxpdo, rxpdo_defaults) = cx.pdo(root, "rxpdo", pdo::DEFAULT_RXPDO, true)?;
+    let (txpdo, _) = cx.pdo(root, "txpdo", pdo::DEFAULT_TXPDO, false)?;
+    for (layout, table, needed) in [
+        (&rxpdo, "rxpdo", [0x6040, 0x607A]),
+        (&txpdo, "txpdo", [0x6041, 0x6064]),
+    ] {
+        for index in needed {
+            if !layout.contains(index, 0) {
+                let span = root
+                    .get(table)
+                    .and_then(|t| t.as_table_like()?.get("entries")?.span());
+                return Err(cx.err(
+                    span,
+                    format!("[{table}] entries: profile cia402 needs 0x{index:04X}:00 mapped"),
+                ));
+            }
+        }
+    }
+
+    let model = cx.model(root)?;
+    let functions = cx.functions(root)?;
+    Ok(DriveDefinition {
+        name,
+        profile,
+        file: file.to_string(),
+        scaling,
+        rxpdo,
+        rxpdo_defaults,
+        txpdo,
+        model,
+        functions,
+    })
+}
+
+/// Parse context: the text (for line numbers) and the file name.
+struct Cx<'a> {
+    text: &'a str,
+    file: &'a str,
+}
+
+type Tbl<'d> = (Option<Range<usize>>, &'d dyn TableLike);
+
+impl Cx<'_> {
+    fn err(&self, span: Option<Range<usize>>, message: String) -> DriveError {
+        let line = span.map_or(0, |s| {
+            let end = s.start.min(self.text.len());
+            self.text.as_bytes()[..end]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count()
+                + 1
+        });
+        DriveError::Definition {
+            file: self.file.to_string(),
+            line,
+            message,
+        }
+    }
+
+    fn key_span(&self, t: &dyn TableLike, key: &str) -> Option<Range<usize>> {
+        t.get_key_value(key)
+            .and_then(|(k, v)| k.span().or_else(|| v.span()))
+    }
+
+    fn value_span(&self, t: &dyn TableLike, key: &str) -> Option<Range<usize>> {
+        t.get_key_value(key)
+            .and_then(|(k, v)| v.span().or_else(|| k.span()))
+    }
+
+    fn check_keys(
+        &self,
+        t: &dyn TableLike,
+        what: &str,
+        allowed: &[&str],
+    ) -> Result<(), DriveError> {
+        for (k, _) in t.iter() {
+            if !allowed.contains(&k) {
+                let place = if what.is_empty() {
+                    "the top level"
+                } else {
+                    what
+                };
+                return Err(self.err(
+                    self.key_span(t, k),
+                    format!(
+                        "unknown key `{k}` in {place}; allowed: {}",
+                        allowed.join(", ")
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn table<'d>(
+        &self,
+        parent: &'d dyn TableLike,
+        key: &str,
+        what: Option<&str>,
+    ) -> Result<Option<Tbl<'d>>, DriveError> {
+        let Some(item) = parent.get(key) else {
+            return Ok(None);
+        };
+        match item.as_table_like() {
+            Some(t) => Ok(Some((self.key_span(parent, key), t))),
+            None => Err(self.err(
+                self.value_span(parent, key),
+                format!(
+                    "{}{key}: expected a table",
+                    what.map(|w| format!("{w} ")).unwrap_or_default()
+                ),
+            )),
+        }
+    }
+
+    fn value<'d>(&self, t: &'d dyn TableLike, key: &str) -> Option<&'d Value> {
+        t.get(key).and_then(Item::as_value)
+    }
+
+    fn req_str(&self, t: &Tbl<'_>, what: &str, key: &str) -> Result<String, DriveError> {
+        match self.value(t.1, key) {
+            Some(Value::String(s)) => Ok(s.value().clone()),
+            Some(_) => Err(self.err(
+                self.value_span(t.1, key),
+                format!("{what} {key}: expected a string"),
+            )),
+            None => Err(self.err(t.0.clone(), format!("{what} {key} is missing"))),
+        }
+    }
+
+    fn opt_str(
+        &self,
+        t: &dyn TableLike,
+        what: &str,
+        key: &str,
+    ) -> Result<Option<String>, DriveError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Item::Value(Value::String(s))) => Ok(Some(s.value().clone())),
+            Some(_) => Err(self.err(
+                self.value_span(t, key),
+                format!("{what} {key}: expected a string"),
+            )),
+        }
+    }
+
+    /// A finite number (integer or float).
+    fn float(&self, t: &dyn TableLike, what: &str, key: &str) -> Result<Option<f64>, DriveError> {
+        let v = match t.get(key) {
+            None => return Ok(None),
+            Some(Item::Value(Value::Float(f))) => *f.value(),
+            Some(Item::Value(Value::Integer(i))) => *i.value() as f64,
+            Some(_) => f64::NAN,
+        };
+        if v.is_finite() {
+            Ok(Some(v))
+        } else {
+            Err(self.err(
+                self.value_span(t, key),
+                format!("{what} {key}: expected a finite number"),
+            ))
+        }
+    }
+
+    /// An integer in `lo..=hi`.
+    fn int(
+        &self,
+        t: &dyn TableLike,
+        what: &str,
+        key: &str,
+        lo: i64,
+        hi: i64,
+    ) -> Result<Option<i64>, DriveError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Item::Value(Value::Integer(i))) if (lo..=hi).contains(i.value()) => {
+                Ok(Some(*i.value()))
+            }
+            Some(_) => Err(self.err(
+                self.value_span(t, key),
+                format!("{what} {key}: expected an integer in {lo}..={hi}"),
+            )),
+        }
+    }
+
+    fn pdo(
+        &self,
+        root: &dyn TableLike,
+        key: &str,
+        default: &[&str],
+        with_defaults: bool,
+    ) -> Result<(PdoLayout, Vec<OutputDefault>), DriveError> {
+        let what = format!("[{key}]");
+        let Some(t) = self.table(root, key, None)? else {
+            let layout = PdoLayout::parse(default).map_err(|e| self.err(None, e.to_string()))?;
+            return Ok((layout, Vec::new()));
+        };
+        let allowed: &[&str] = if with_defaults {
+            &["entries", "defaults"]
+        } else {
+            &["entries"]
+        };
+        self.check_keys(t.1, &what, allowed)?;
+        let layout = match t.1.get("entries") {
+            None => PdoLayout::parse(default).map_err(|e| self.err(None, e.to_string()))?,
+            Some(item) => {
+                let arr = item.as_array().ok_or_else(|| {
+                    self.err(
+                        self.value_span(t.1, "entries"),
+                        format!("{what} entries: expected an array of strings like \"0x6040:00\""),
+                    )
+                })?;
+                let mut objects = Vec::new();
+                for v in arr.iter() {
+                    let s = v.as_str().ok_or_else(|| {
+                        self.err(v.span(), format!("{what} entries: expected a string like \"0x6040:00\" or \"0x2000:01:u32\""))
+                    })?;
+                    let o = pdo::parse_entry(s)
+                        .map_err(|e| self.err(v.span(), format!("{what} entries: {e}")))?;
+                    if objects.iter().any(|&(i, s, _)| (i, s) == (o.0, o.1)) {
+                        return Err(self.err(
+                            v.span(),
+                            format!("{what} entries: object {s} is mapped twice"),
+                        ));
+                    }
+                    objects.push(o);
+                }
+                PdoLayout::from_objects(&objects)
+                    .map_err(|e| self.err(item.span(), format!("{what} entries: {e}")))?
+            }
+        };
+        let mut defaults = Vec::new();
+        if let Some(d) = self.table(t.1, "defaults", Some(&what))? {
+            for (k, _) in d.1.iter() {
+                let span = self.key_span(d.1, k);
+                // The type comes from the mapping, so vendor objects need none here.
+                let (index, sub) = match pdo::parse_entry(k) {
+                    Ok((index, sub, _)) | Err(pdo::PdoError::UnknownObject { index, sub }) => {
+                        (index, sub)
+                    }
+                    Err(e) => return Err(self.err(span, format!("{what} defaults: {e}"))),
+                };
+                let entry = layout.find(index, sub).ok_or_else(|| {
+                    self.err(
+                        span.clone(),
+                        format!("{what} defaults: {k} is not in {what} entries"),
+                    )
+                })?;
+                let (lo, hi) = entry.ty.range();
+                let value = self
+                    .int(d.1, &format!("{what} defaults"), k, lo, hi)?
+                    .unwrap_or(0);
+                defaults.push(OutputDefault { index, sub, value });
+            }
+        }
+        Ok((layout, defaults))
+    }
+
+    fn model(&self, root: &dyn TableLike) -> Result<ModelConfig, DriveError> {
+        let mut m = ModelConfig::default();
+        let Some(t) = self.table(root, "model", None)? else {
+            return Ok(m);
+        };
+        let w = "[model]";
+        self.check_keys(
+            t.1,
+            w,
+            &[
+                "kv",
+                "following_error_window",
+                "following_error_timeout_ms",
+                "enable_delay_cycles",
+                "max_velocity",
+            ],
+        )?;
+        if let Some(kv) = self.float(t.1, w, "kv")? {
+            if kv <= 0.0 {
+                return Err(self.err(
+                    self.value_span(t.1, "kv"),
+                    format!("{w} kv: must be > 0 (1/s), got {kv}"),
+                ));
+            }
+            m.kv = kv;
+        }
+        if let Some(v) = self.int(t.1, w, "following_error_window", 0, u32::MAX.into())? {
+            m.following_error_window = v as u32;
+        }
+        if let Some(v) = self.int(t.1, w, "following_error_timeout_ms", 0, u16::MAX.into())? {
+            m.following_error_timeout_ms = v as u16;
+        }
+        if let Some(v) = self.int(t.1, w, "enable_delay_cycles", 0, 1_000_000)? {
+            m.enable_delay_cycles = v as u32;
+        }
+        if let Some(v) = self.float(t.1, w, "max_velocity")? {
+            if v <= 0.0 {
+                return Err(self.err(
+                    self.value_span(t.1, "max_velocity"),
+                    format!("{w} max_velocity: must be > 0 (units/s; leave it out for no limit), got {v}"),
+                ));
+            }
+            m.max_velocity = Some(v);
+        }
+        Ok(m)
+    }
+
+    fn functions(&self, root: &dyn TableLike) -> Result<Vec<DriveFunction>, DriveError> {
+        let mut out = Vec::new();
+        let Some(t) = self.table(root, "functions", None)? else {
+            return Ok(out);
+        };
+        for (key, _) in t.1.iter() {
+            let kspan = self.key_span(t.1, key);
+            if key.is_empty()
+                || !key
+                    .bytes()
+                    .all(|b| b.is_ascii_uppercase() || b.is_ascii_digit() || b == b'_')
+            {
+                return Err(self.err(
+                    kspan,
+                    format!("[functions] {key}: function keys are upper case letters, digits and `_` (e.g. TORQUE_LIMIT)"),
+                ));
+            }
+            let what = format!("[functions] {key}");
+            let f = self
+                .table(t.1, key, Some("[functions]"))?
+                .ok_or_else(|| self.err(kspan.clone(), what.clone()))?;
+            self.check_keys(
+                f.1,
+                &what,
+                &["object", "type", "unit", "scale", "min", "max"],
+            )?;
+            let object = self.opt_str(f.1, &what, "object")?.ok_or_else(|| {
+                self.err(
+                    kspan.clone(),
+                    format!("{what}: `object` is missing (e.g. \"0x6072:00\")"),
+                )
+            })?;
+            let ospan = self.value_span(f.1, "object");
+            let (index, sub, table_ty) = match pdo::parse_entry(&object) {
+                Ok(o) => (o.0, o.1, Some(o.2)),
+                Err(pdo::PdoError::UnknownObject { index, sub }) => (index, sub, None),
+                Err(e) => return Err(self.err(ospan, format!("{what} object: {e}"))),
+            };
+            let ty = match self.opt_str(f.1, &what, "type")? {
+                Some(s) => DataType::from_name(&s).ok_or_else(|| {
+                    self.err(
+                        self.value_span(f.1, "type"),
+                        format!("{what} type: unknown type \"{s}\"; allowed: bool, u8, i8, u16, i16, u32, i32"),
+                    )
+                })?,
+                None => table_ty.ok_or_else(|| {
+                    self.err(ospan.clone(), format!("{what}: {object} is not a known CiA 402 object; add `type`"))
+                })?,
+            };
+            let unit = self.opt_str(f.1, &what, "unit")?;
+            let scale = self.float(f.1, &what, "scale")?.unwrap_or(1.0);
+            if scale == 0.0 {
+                return Err(self.err(
+                    self.value_span(f.1, "scale"),
+                    format!("{what} scale: must be non-zero"),
+                ));
+            }
+            let (lo, hi) = ty.range();
+            let min = self.int(f.1, &what, "min", lo, hi)?.unwrap_or(lo);
+            let max = self.int(f.1, &what, "max", lo, hi)?.unwrap_or(hi);
+            if min > max {
+                return Err(self.err(
+                    self.value_span(f.1, "min"),
+                    format!("{what}: min {min} is greater than max {max}"),
+                ));
+            }
+            out.push(DriveFunction {
+                key: key.to_string(),
+                index,
+                sub,
+                ty,
+                unit,
+                scale,
+                min,
+                max,
+            });
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_parses() {
+        for name in builtin_names() {
+            let (_, text) = BUILTINS.iter().find(|(n, _)| n == name).unwrap();
+            let def = parse(text, name).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(&def.name, name);
+        }
+        assert_eq!(BUILTINS.len(), BUILTIN_NAMES.len());
+    }
+
+    #[test]
+    fn generic_functions_and_defaults() {
+        let def = builtin("cia402-generic").unwrap();
+        let tl = def.function("TORQUE_LIMIT").unwrap();
+        assert_eq!(
+            (tl.index, tl.sub, tl.ty, tl.max),
+            (0x6072, 0, DataType::U16, 3000)
+        );
+        assert_eq!(tl.encode(100.0), Some(100));
+        assert_eq!(tl.encode(3001.0), None);
+        assert_eq!(def.function("MON_WINDOW").unwrap().max, u32::MAX as i64);
+        assert_eq!(
+            def.rxpdo_defaults,
+            vec![OutputDefault {
+                index: 0x6072,
+                sub: 0,
+                value: 3000
+            }]
+        );
+        assert_eq!(def.model.max_velocity, Some(1000.0));
+    }
+
+    #[test]
+    fn minimal_file_uses_defaults() {
+        let def = parse(
+            "[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1000\n",
+            "x.toml",
+        )
+        .unwrap();
+        assert_eq!(def.model, ModelConfig::default());
+        assert_eq!(def.rxpdo.len(), 11);
+        assert_eq!(def.txpdo.len(), 29);
+        assert!(def.functions.is_empty());
+    }
+}

@@ -4,4 +4,5 @@ pub mod ast;
 pub mod expr;
 pub mod lexer;
 pub mod parser;
+pub mod exec;
 pub mod printf;

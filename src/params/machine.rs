@@ -1,0 +1,577 @@
+//! Machine file (TOML): the channel list, the manual-mode list and one `[[axis]]` table per axis,
+//! plus the `--set KEY=VALUE` overrides of the command line (DESIGN.md, command-line contract).
+//!
+//! ```toml
+//! [channel]
+//! cycle_time_us = 1000                 # project key: interpolation cycle, 100 ..= 100000 µs
+//! "P-CHAN-00498" = 1                   # parameters by ID …
+//! range_check_prog_soft_limits = 1     # … or by name path (seed 001 §4.2)
+//! [manual]
+//! move_limit_warning = true            # P-MANU-00014 (seed 001 §4.4)
+//! [[axis]]
+//! name = "X"                           # project key, required: X Y Z A B C U V W (+ digits)
+//! drive = "cia402-generic"             # project key: drives/<name>.toml
+//! referenced = true                    # project key: axis referenced at start
+//! kenngr.swe_neg = -2000000            # dotted keys are flattened back to the name path
+//! "P-AXIS-00178" = 2000000
+//! ```
+//!
+//! Values are TOML integers, booleans or strings in the seeds' units; each one goes through
+//! [`ParamSet::set`], so every error names the file, the line and the key.
+
+use std::path::Path;
+
+use toml_edit::{ImDocument, Item, Table, TableLike, Value};
+
+use super::registry::{
+    edit_distance, find, parse_int, strip_quotes, unknown_parameter, Origin, ParamError, ParamSet,
+    Scope,
+};
+
+/// Default interpolation cycle in µs.
+pub const DEFAULT_CYCLE_TIME_US: u32 = 1000;
+/// Smallest accepted interpolation cycle in µs.
+pub const MIN_CYCLE_TIME_US: u32 = 100;
+/// Largest accepted interpolation cycle in µs.
+pub const MAX_CYCLE_TIME_US: u32 = 100_000;
+/// Default drive definition (`drives/cia402-generic.toml`).
+pub const DEFAULT_DRIVE: &str = "cia402-generic";
+
+const AXIS_LETTERS: &str = "XYZABCUVW";
+const MAX_DEPTH: usize = 16;
+
+/// One axis of the machine.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AxisConfig {
+    /// Axis name: one of X Y Z A B C U V W, optionally followed by digits (`X2`).
+    pub name: String,
+    /// Name of the drive definition in `drives/` (without `.toml`).
+    pub drive: String,
+    /// Whether the axis is referenced at start (software limit switches are active only on
+    /// referenced axes, seed 001 §1).
+    pub referenced: bool,
+    /// The axis parameter list (P-AXIS-*).
+    pub params: ParamSet,
+}
+
+/// A machine: channel, manual mode and axes, with their parameter lists.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MachineConfig {
+    /// Where the configuration came from (file name, or `<default>`).
+    pub source: String,
+    /// Interpolation cycle in µs.
+    pub cycle_time_us: u32,
+    /// Channel parameter list (P-CHAN-*).
+    pub channel: ParamSet,
+    /// Manual-mode parameter list (P-MANU-*).
+    pub manual: ParamSet,
+    /// The axes in file order.
+    pub axes: Vec<AxisConfig>,
+}
+
+impl MachineConfig {
+    /// Parse a machine file. `file` is used in error messages.
+    pub fn parse(text: &str, file: &str) -> Result<Self, ParamError> {
+        let ctx = Ctx::new(text, file);
+        let doc = ImDocument::parse(text).map_err(|e| ParamError::Toml {
+            origin: ctx.origin(e.span().map(|s| s.start)),
+            message: e.message().trim().to_string(),
+        })?;
+        let root = doc.as_table();
+        let mut cfg = MachineConfig {
+            source: file.to_string(),
+            cycle_time_us: DEFAULT_CYCLE_TIME_US,
+            channel: ParamSet::new(Scope::Channel),
+            manual: ParamSet::new(Scope::Manual),
+            axes: Vec::new(),
+        };
+        let mut axis_lines: Vec<usize> = Vec::new();
+        for (name, item) in root.iter() {
+            let line = ctx.key_line(root, name, item, 0);
+            match name {
+                "channel" | "manual" => {
+                    let table = item.as_table_like().ok_or_else(|| ParamError::Config {
+                        origin: ctx.at(line),
+                        message: format!("'{name}' must be a table: write [{name}]"),
+                    })?;
+                    let mut leaves = Vec::new();
+                    flatten(&ctx, table, "", line, 0, &mut leaves)?;
+                    if name == "channel" {
+                        cfg.parse_channel(&ctx, &leaves)?;
+                    } else {
+                        for leaf in &leaves {
+                            set_leaf(&mut cfg.manual, leaf, &ctx, &[])?;
+                        }
+                        cfg.manual.check_cross(&ctx.at(line))?;
+                    }
+                }
+                "axis" => {
+                    let tables = item.as_array_of_tables().ok_or_else(|| ParamError::Config {
+                        origin: ctx.at(line),
+                        message: "'axis' must be an array of tables: write [[axis]] once per axis".to_string(),
+                    })?;
+                    for table in tables.iter() {
+                        cfg.parse_axis(&ctx, table, line, &mut axis_lines)?;
+                    }
+                }
+                other => return Err(outside_error(other, item, ctx.at(line))),
+            }
+        }
+        if cfg.axes.is_empty() {
+            return Err(ParamError::Config {
+                origin: Origin::new(file, 0),
+                message: "no [[axis]] table; a machine needs at least one axis (name = \"X\")".to_string(),
+            });
+        }
+        Ok(cfg)
+    }
+
+    /// Read and parse a machine file. A read error names the file.
+    pub fn load(path: &Path) -> Result<Self, ParamError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ParamError::Io { file: file.clone(), message: e.to_string() })?;
+        Self::parse(&text, &file)
+    }
+
+    /// The default machine (DESIGN.md): linear axes X, Y, Z, referenced, on `cia402-generic`
+    /// drives, parameters at the seeds' defaults plus, per axis, `kenngr.messachse 1`,
+    /// `kenngr.measure.signal DRIVE`, `kenngr.measure.input 1`, `kenngr.measure.edge POS`.
+    pub fn default_machine() -> Self {
+        let origin = Origin::new("<default>", 0);
+        let axes = ["X", "Y", "Z"]
+            .into_iter()
+            .map(|name| {
+                let mut params = ParamSet::new(Scope::Axis);
+                params.set_label(format!("axis {name}"));
+                for (key, value) in [
+                    ("kenngr.messachse", "1"),
+                    ("kenngr.measure.signal", "DRIVE"),
+                    ("kenngr.measure.input", "1"),
+                    ("kenngr.measure.edge", "POS"),
+                ] {
+                    let result = params.set(key, value, &origin);
+                    debug_assert!(result.is_ok(), "default machine: {result:?}");
+                }
+                AxisConfig {
+                    name: name.to_string(),
+                    drive: DEFAULT_DRIVE.to_string(),
+                    referenced: true,
+                    params,
+                }
+            })
+            .collect();
+        MachineConfig {
+            source: "<default>".to_string(),
+            cycle_time_us: DEFAULT_CYCLE_TIME_US,
+            channel: ParamSet::new(Scope::Channel),
+            manual: ParamSet::new(Scope::Manual),
+            axes,
+        }
+    }
+
+    /// Apply one `--set KEY=VALUE`: `P-CHAN-00498=1`, `range_check_prog_soft_limits=1`,
+    /// `P-MANU-00014=1`, `X.P-AXIS-00178=2000000`, `Z.kenngr.measure.signal=PLC`,
+    /// `cycle_time_us=500`, `X.referenced=false`, `X.drive=NAME`. Keys without an axis prefix go
+    /// to the channel or manual list by the parameter's scope; axis parameters need the prefix.
+    /// The cross checks of the changed list are re-run; on error nothing changes.
+    pub fn apply_set(&mut self, assignment: &str) -> Result<(), ParamError> {
+        let origin = Origin::new("--set", 0);
+        let Some((key, value)) = assignment.split_once('=').filter(|(k, _)| !k.trim().is_empty()) else {
+            return Err(ParamError::Config {
+                origin,
+                message: format!("'{assignment}': expected KEY=VALUE, e.g. 'X.P-AXIS-00178=2000000'"),
+            });
+        };
+        let (key, value) = (key.trim(), value.trim());
+        if let Some((prefix, rest)) = key.split_once('.') {
+            if let Some(axis) = self.axes.iter_mut().find(|a| a.name.eq_ignore_ascii_case(prefix)) {
+                return axis.apply(rest, value, &origin);
+            }
+        }
+        if key == "cycle_time_us" {
+            self.cycle_time_us = cycle_time(value, &origin)?;
+            return Ok(());
+        }
+        if let Some(def) = find(key) {
+            let set = match def.scope {
+                Scope::Channel => &mut self.channel,
+                Scope::Manual => &mut self.manual,
+                Scope::Axis => {
+                    let first = self.axes.first().map_or("X", |a| a.name.as_str());
+                    return Err(ParamError::MissingAxisPrefix {
+                        origin,
+                        def,
+                        example: format!("{first}.{key}={value}"),
+                        axes: self.axis_list(),
+                    });
+                }
+            };
+            let mut changed = set.clone();
+            changed.set(key, value, &origin)?;
+            changed.check_cross(&origin)?;
+            *set = changed;
+            return Ok(());
+        }
+        if let Some((prefix, _)) = key.split_once('.') {
+            if looks_like_axis_prefix(prefix) {
+                return Err(ParamError::UnknownAxis {
+                    origin,
+                    axis: prefix.to_string(),
+                    assignment: assignment.to_string(),
+                    axes: self.axis_list(),
+                });
+            }
+        }
+        Err(unknown_parameter(key, &origin))
+    }
+
+    /// The axis with this name.
+    pub fn axis(&self, name: &str) -> Option<&AxisConfig> {
+        self.axes.iter().find(|a| a.name == name)
+    }
+
+    /// The axis with this name, mutable.
+    pub fn axis_mut(&mut self, name: &str) -> Option<&mut AxisConfig> {
+        self.axes.iter_mut().find(|a| a.name == name)
+    }
+
+    /// The axis names, comma separated (`X, Y, Z`).
+    pub fn axis_list(&self) -> String {
+        self.axes.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", ")
+    }
+
+    fn parse_channel(&mut self, ctx: &Ctx<'_>, leaves: &[Leaf<'_>]) -> Result<(), ParamError> {
+        for leaf in leaves {
+            if leaf.key == "cycle_time_us" {
+                let origin = ctx.at(leaf.line);
+                let raw = match leaf.value {
+                    Value::Integer(i) => i.value().to_string(),
+                    _ => {
+                        return Err(ParamError::Config {
+                            origin,
+                            message: cycle_time_expectation(),
+                        })
+                    }
+                };
+                self.cycle_time_us = cycle_time(&raw, &origin)?;
+            } else {
+                set_leaf(&mut self.channel, leaf, ctx, &["cycle_time_us"])?;
+            }
+        }
+        self.channel.check_cross(&ctx.at(0))
+    }
+
+    fn parse_axis(
+        &mut self,
+        ctx: &Ctx<'_>,
+        table: &Table,
+        fallback_line: usize,
+        axis_lines: &mut Vec<usize>,
+    ) -> Result<(), ParamError> {
+        let header = ctx.line(table.span().map(|s| s.start)).unwrap_or(fallback_line);
+        let mut leaves = Vec::new();
+        flatten(ctx, table, "", header, 0, &mut leaves)?;
+        let mut name: Option<(String, usize)> = None;
+        let mut drive = DEFAULT_DRIVE.to_string();
+        let mut referenced = true;
+        let mut params = ParamSet::new(Scope::Axis);
+        for leaf in &leaves {
+            let origin = ctx.at(leaf.line);
+            match leaf.key.as_str() {
+                "name" => {
+                    let n = string_value(leaf, &origin, "an axis name such as \"X\"")?;
+                    if !valid_axis_name(n) {
+                        return Err(ParamError::Config {
+                            origin,
+                            message: format!(
+                                "invalid axis name '{n}'; expected one of X Y Z A B C U V W, optionally followed by digits (e.g. \"X2\")"
+                            ),
+                        });
+                    }
+                    if let Some(i) = self.axes.iter().position(|a| a.name == n) {
+                        return Err(ParamError::Config {
+                            origin,
+                            message: format!("duplicate axis name '{n}' (first defined at line {})", axis_lines[i]),
+                        });
+                    }
+                    name = Some((n.to_string(), leaf.line));
+                }
+                "drive" => {
+                    let d = string_value(leaf, &origin, "a drive definition name such as \"cia402-generic\"")?;
+                    drive = valid_drive(d, &origin)?;
+                }
+                "referenced" => match leaf.value {
+                    Value::Boolean(b) => referenced = *b.value(),
+                    _ => {
+                        return Err(ParamError::Config {
+                            origin,
+                            message: "'referenced' must be true or false".to_string(),
+                        })
+                    }
+                },
+                _ => set_leaf(&mut params, leaf, ctx, &["name", "drive", "referenced"])?,
+            }
+        }
+        let Some((name, line)) = name else {
+            return Err(ParamError::Config {
+                origin: ctx.at(header),
+                message: "[[axis]] without a name; expected e.g. name = \"X\"".to_string(),
+            });
+        };
+        params.set_label(format!("axis {name}"));
+        params.check_cross(&ctx.at(header))?;
+        axis_lines.push(line);
+        self.axes.push(AxisConfig { name, drive, referenced, params });
+        Ok(())
+    }
+}
+
+impl AxisConfig {
+    fn apply(&mut self, key: &str, value: &str, origin: &Origin) -> Result<(), ParamError> {
+        match key {
+            "name" => Err(ParamError::Config {
+                origin: origin.clone(),
+                message: format!("the name of axis {} cannot be changed with --set", self.name),
+            }),
+            "drive" => {
+                self.drive = valid_drive(strip_quotes(value), origin)?;
+                Ok(())
+            }
+            "referenced" => {
+                let v = strip_quotes(value);
+                self.referenced = if v.eq_ignore_ascii_case("true") || v == "1" {
+                    true
+                } else if v.eq_ignore_ascii_case("false") || v == "0" {
+                    false
+                } else {
+                    return Err(ParamError::Config {
+                        origin: origin.clone(),
+                        message: format!("{}.referenced = {value}: expected true/false or 1/0", self.name),
+                    });
+                };
+                Ok(())
+            }
+            _ => {
+                let mut changed = self.params.clone();
+                changed.set(key, value, origin)?;
+                changed.check_cross(origin)?;
+                self.params = changed;
+                Ok(())
+            }
+        }
+    }
+}
+
+/// A flattened `key = value` with the dotted path rebuilt and its 1-based line.
+struct Leaf<'a> {
+    key: String,
+    value: &'a Value,
+    line: usize,
+}
+
+/// File name and line index of the text being parsed.
+struct Ctx<'a> {
+    file: &'a str,
+    line_starts: Vec<usize>,
+}
+
+impl<'a> Ctx<'a> {
+    fn new(text: &str, file: &'a str) -> Self {
+        let mut line_starts = vec![0];
+        line_starts.extend(text.bytes().enumerate().filter(|(_, b)| *b == b'\n').map(|(i, _)| i + 1));
+        Ctx { file, line_starts }
+    }
+
+    /// 1-based line of a byte offset.
+    fn line(&self, offset: Option<usize>) -> Option<usize> {
+        let offset = offset?;
+        Some(match self.line_starts.binary_search(&offset) {
+            Ok(i) => i + 1,
+            Err(i) => i,
+        })
+    }
+
+    fn at(&self, line: usize) -> Origin {
+        Origin::new(self.file, line)
+    }
+
+    fn origin(&self, offset: Option<usize>) -> Origin {
+        self.at(self.line(offset).unwrap_or(0))
+    }
+
+    fn key_line(&self, table: &dyn TableLike, key: &str, item: &Item, fallback: usize) -> usize {
+        let span = table.get_key_value(key).and_then(|(k, _)| k.span()).or_else(|| item.span());
+        self.line(span.map(|s| s.start)).unwrap_or(fallback)
+    }
+}
+
+/// Flatten nested tables (dotted keys, `[axis.kenngr]` sub-tables, inline tables) into leaves
+/// whose keys are the ISG name paths.
+fn flatten<'a>(
+    ctx: &Ctx<'_>,
+    table: &'a dyn TableLike,
+    prefix: &str,
+    fallback_line: usize,
+    depth: usize,
+    out: &mut Vec<Leaf<'a>>,
+) -> Result<(), ParamError> {
+    for (key, item) in table.iter() {
+        let line = ctx.key_line(table, key, item, fallback_line);
+        let full = if prefix.is_empty() { key.to_string() } else { format!("{prefix}.{key}") };
+        if depth >= MAX_DEPTH {
+            return Err(ParamError::Config {
+                origin: ctx.at(line),
+                message: format!("'{full}' is nested too deeply to be a parameter path"),
+            });
+        }
+        match item {
+            Item::Value(Value::InlineTable(t)) => flatten(ctx, t, &full, line, depth + 1, out)?,
+            Item::Value(value) => out.push(Leaf { key: full, value, line }),
+            Item::Table(t) => flatten(ctx, t, &full, line, depth + 1, out)?,
+            Item::ArrayOfTables(_) => {
+                return Err(ParamError::Config {
+                    origin: ctx.at(line),
+                    message: format!("'{full}' is an array of tables; only [[axis]] may be one"),
+                })
+            }
+            Item::None => {}
+        }
+    }
+    Ok(())
+}
+
+/// Set one leaf in a parameter list; `project_keys` are the section's non-parameter keys, used
+/// for "did you mean" on typos.
+fn set_leaf(set: &mut ParamSet, leaf: &Leaf<'_>, ctx: &Ctx<'_>, project_keys: &[&str]) -> Result<(), ParamError> {
+    let origin = ctx.at(leaf.line);
+    if find(&leaf.key).is_none() {
+        if let Some(k) = project_keys.iter().find(|k| edit_distance(&leaf.key, k) <= 2) {
+            return Err(ParamError::UnknownParameter {
+                origin,
+                key: leaf.key.clone(),
+                suggestion: Some(format!("'{k}'")),
+            });
+        }
+        return Err(unknown_parameter(&leaf.key, &origin));
+    }
+    let raw = match leaf.value {
+        Value::Integer(i) => i.value().to_string(),
+        Value::Boolean(b) => b.value().to_string(),
+        Value::String(s) => s.value().clone(),
+        Value::Float(f) => format!("{:?}", f.value()),
+        Value::Datetime(d) => d.value().to_string(),
+        Value::Array(_) | Value::InlineTable(_) => {
+            return Err(ParamError::Config {
+                origin,
+                message: format!("{}: expected an integer, boolean or string", leaf.key),
+            })
+        }
+    };
+    set.set(&leaf.key, &raw, &origin).map(|_| ())
+}
+
+fn string_value<'a>(leaf: &Leaf<'a>, origin: &Origin, expected: &str) -> Result<&'a str, ParamError> {
+    match leaf.value {
+        Value::String(s) => Ok(s.value().as_str()),
+        _ => Err(ParamError::Config {
+            origin: origin.clone(),
+            message: format!("'{}' must be a string: {expected}", leaf.key),
+        }),
+    }
+}
+
+fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
+    let allowed = "allowed tables are [channel], [manual] and [[axis]]";
+    let message = if item.is_value() {
+        let hint = if name == "cycle_time_us" {
+            "; cycle_time_us belongs in [channel]".to_string()
+        } else if let Some(def) = find(name) {
+            format!("; {} belongs in {}", def.id, def.scope.section())
+        } else {
+            String::new()
+        };
+        format!("'{name}' is outside any table; {allowed}{hint}")
+    } else {
+        format!("unknown table [{name}]; {allowed}")
+    };
+    ParamError::Config { origin, message }
+}
+
+fn cycle_time_expectation() -> String {
+    format!("cycle_time_us must be an integer number of µs, {MIN_CYCLE_TIME_US} ..= {MAX_CYCLE_TIME_US}")
+}
+
+fn cycle_time(raw: &str, origin: &Origin) -> Result<u32, ParamError> {
+    match parse_int(strip_quotes(raw)) {
+        Some(v) if (i128::from(MIN_CYCLE_TIME_US)..=i128::from(MAX_CYCLE_TIME_US)).contains(&v) => {
+            Ok(u32::try_from(v).unwrap_or(DEFAULT_CYCLE_TIME_US))
+        }
+        _ => Err(ParamError::Config {
+            origin: origin.clone(),
+            message: format!("cycle_time_us = {raw}: {}", cycle_time_expectation()),
+        }),
+    }
+}
+
+/// X Y Z A B C U V W, optionally followed by digits.
+fn valid_axis_name(name: &str) -> bool {
+    let mut chars = name.chars();
+    chars.next().is_some_and(|c| AXIS_LETTERS.contains(c)) && chars.all(|c| c.is_ascii_digit())
+}
+
+/// A letter followed by digits: meant as an axis prefix in `--set`.
+fn looks_like_axis_prefix(prefix: &str) -> bool {
+    let mut chars = prefix.chars();
+    chars.next().is_some_and(|c| c.is_ascii_alphabetic()) && chars.all(|c| c.is_ascii_digit())
+}
+
+fn valid_drive(name: &str, origin: &Origin) -> Result<String, ParamError> {
+    let ok = !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if ok {
+        Ok(name.to_string())
+    } else {
+        Err(ParamError::Config {
+            origin: origin.clone(),
+            message: format!(
+                "invalid drive '{name}'; expected the name of a drives/<name>.toml definition (letters, digits, '-', '_')"
+            ),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_index() {
+        let ctx = Ctx::new("a\nbb\n\nc", "f");
+        assert_eq!(ctx.line(Some(0)), Some(1));
+        assert_eq!(ctx.line(Some(1)), Some(1));
+        assert_eq!(ctx.line(Some(2)), Some(2));
+        assert_eq!(ctx.line(Some(5)), Some(3));
+        assert_eq!(ctx.line(Some(6)), Some(4));
+        assert_eq!(ctx.line(Some(100)), Some(4));
+    }
+
+    #[test]
+    fn axis_names() {
+        for ok in ["X", "Y", "Z", "A", "W", "X2", "C10"] {
+            assert!(valid_axis_name(ok), "{ok}");
+        }
+        for bad in ["", "x", "Q", "XX", "X-1", "2X"] {
+            assert!(!valid_axis_name(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn cycle_time_bounds() {
+        let o = Origin::new("f", 1);
+        assert_eq!(cycle_time("100", &o), Ok(100));
+        assert_eq!(cycle_time("100000", &o), Ok(100_000));
+        assert!(cycle_time("99", &o).is_err());
+        assert!(cycle_time("100001", &o).is_err());
+        assert!(cycle_time("abc", &o).is_err());
+    }
+}
