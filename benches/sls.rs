@@ -1,3 +1,4 @@
+#![allow(missing_docs)]
 //! Per-cycle cost of software-limit-switch monitoring (issue 2 target: < 50 ns per axis per
 //! cycle on the CI machine). One iteration = one interpolation cycle's SLS work for 32 axes:
 //! the actual-position check (P-AXIS-00179 tolerance band, 70021 / 70022) and the command-side
@@ -28,7 +29,9 @@ fn limits() -> SoftLimits {
 fn bench_sls(c: &mut Criterion) {
     let mut s = limits();
     let positions: Vec<f64> = (0..AXES).map(|i| -150.0 + 10.0 * i as f64).collect();
-    let velocities: Vec<f64> = (0..AXES).map(|i| if i % 2 == 0 { 50.0 } else { -50.0 }).collect();
+    let velocities: Vec<f64> = (0..AXES)
+        .map(|i| if i % 2 == 0 { 50.0 } else { -50.0 })
+        .collect();
     let mut g = c.benchmark_group("sls_cycle");
     g.throughput(Throughput::Elements(AXES as u64));
     g.bench_function("32_axes_actual_and_stop_distance", |b| {
@@ -39,7 +42,9 @@ fn bench_sls(c: &mut Criterion) {
                 if s.check_actual(i, p).is_some() {
                     hits += 1;
                 }
-                if s.check_stop_distance(i, p, black_box(velocities[i])).is_some() {
+                if s.check_stop_distance(i, p, black_box(velocities[i]))
+                    .is_some()
+                {
                     hits += 1;
                 }
             }
@@ -47,7 +52,8 @@ fn bench_sls(c: &mut Criterion) {
         })
     });
     g.bench_function("32_axes_command_path_line", |b| {
-        let seg = fieldprobe::core::path::Segment::line(vec![0.0; AXES], positions.clone()).unwrap();
+        let seg =
+            fieldprobe::core::path::Segment::line(vec![0.0; AXES], positions.clone()).unwrap();
         let mut out = Vec::with_capacity(AXES);
         b.iter(|| {
             s.check_path(black_box(&seg), &mut out);

@@ -1,1 +1,340 @@
-//! Machine: channel + axes + link, built from a machine file.
+//! A machine: one channel, its axes on their drives, and the link that carries the process
+//! data — built from a [`MachineConfig`] and run cycle by cycle on virtual time.
+//!
+//! [`Machine::run_program`] is the main job of `fieldprobe run`: enable the drives, execute the
+//! NC program block by block, stream `#MSG` lines and CNC messages to the caller, and stop
+//! safely on errors.
+
+use crate::axis::Axis;
+use crate::channel::{Channel, ChannelAxisConfig, ChannelConfig, ChannelState};
+use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
+use crate::drive::catalogue;
+use crate::drive::ds402::Ds402Adapter;
+use crate::drive::model::ds402::Ds402Model;
+use crate::drive::DriveError;
+use crate::link::sim::SimLink;
+use crate::link::{Link, ProcessImage};
+use crate::messages::{ids, CncMessage};
+use crate::nc::ast::Program;
+use crate::nc::exec::{Event, Executor, Step};
+use crate::params::{AxisConfig, MachineConfig, ParamSet};
+use crate::units::{param_pos_to_mm, param_vel_to_mm_s, Nanos};
+
+/// Errors building a machine.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MachineError {
+    /// A drive definition could not be loaded.
+    #[error("axis {axis}: drive '{drive}': {source}")]
+    Drive {
+        /// Axis name.
+        axis: String,
+        /// Drive name or file.
+        drive: String,
+        /// Cause.
+        source: DriveError,
+    },
+    /// The configuration is inconsistent.
+    #[error("{0}")]
+    Config(String),
+}
+
+/// How a program run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunStatus {
+    /// The program ran to its end.
+    Completed,
+    /// A CNC error aborted it.
+    Aborted,
+}
+
+/// What happened during a run, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunEvent {
+    /// A `#MSG` line.
+    Output(String),
+    /// A warning or error.
+    Message(CncMessage),
+}
+
+/// Summary of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunReport {
+    /// Completed or aborted.
+    pub status: RunStatus,
+    /// Every event in order.
+    pub events: Vec<RunEvent>,
+    /// Interpolation cycles run.
+    pub cycles: u64,
+}
+
+impl RunReport {
+    /// The `#MSG` lines.
+    pub fn output(&self) -> Vec<&str> {
+        self.events
+            .iter()
+            .filter_map(|e| match e {
+                RunEvent::Output(s) => Some(s.as_str()),
+                RunEvent::Message(_) => None,
+            })
+            .collect()
+    }
+
+    /// The CNC messages.
+    pub fn messages(&self) -> Vec<&CncMessage> {
+        self.events
+            .iter()
+            .filter_map(|e| match e {
+                RunEvent::Message(m) => Some(m),
+                RunEvent::Output(_) => None,
+            })
+            .collect()
+    }
+
+    /// IDs of the CNC messages in order.
+    pub fn message_ids(&self) -> Vec<u32> {
+        self.messages().iter().map(|m| m.id).collect()
+    }
+}
+
+/// Upper bound on the cycles of one run (virtual time; 1 h at 1 ms).
+pub const DEFAULT_MAX_CYCLES: u64 = 3_600_000;
+
+/// A machine on the in-memory link (`--link sim`).
+#[derive(Debug)]
+pub struct Machine {
+    channel: Channel,
+    link: SimLink,
+    images: Vec<ProcessImage>,
+    now: Nanos,
+    cycle: Nanos,
+    /// Cycle budget of [`run_program`](Self::run_program).
+    pub max_cycles: u64,
+}
+
+impl Machine {
+    /// Build the machine of `cfg` with drive models on the in-memory link.
+    pub fn new(cfg: &MachineConfig) -> Result<Self, MachineError> {
+        if cfg.axes.is_empty() {
+            return Err(MachineError::Config(format!(
+                "{}: the machine has no axes",
+                cfg.source
+            )));
+        }
+        let cycle = Nanos::from_micros(u64::from(cfg.cycle_time_us));
+        let mut axes = Vec::new();
+        let mut models = Vec::new();
+        let mut images = Vec::new();
+        let mut axis_cfgs = Vec::new();
+        for a in &cfg.axes {
+            let def = catalogue::load(&a.drive).map_err(|source| MachineError::Drive {
+                axis: a.name.clone(),
+                drive: a.drive.clone(),
+                source,
+            })?;
+            let adapter = Ds402Adapter::new(&def).map_err(|source| MachineError::Drive {
+                axis: a.name.clone(),
+                drive: a.drive.clone(),
+                source,
+            })?;
+            let model = Ds402Model::new(&def);
+            let axis = Axis::new(a.name.clone(), Box::new(adapter), def.scaling, a.referenced);
+            images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
+            axes.push(axis);
+            models.push(model);
+            axis_cfgs.push(channel_axis_config(a));
+        }
+        let ch_cfg = ChannelConfig {
+            cycle,
+            axes: axis_cfgs,
+            range_check_programmed_limits: cfg.channel.int("P-CHAN-00498") != 0,
+            display_pcs_limits: cfg.channel.int("P-CHAN-00489") != 0,
+            move_limit_warning: cfg.manual.int("P-MANU-00014") != 0,
+            enable_timeout_cycles: 1000,
+        };
+        let channel = Channel::new(ch_cfg, axes).map_err(MachineError::Config)?;
+        Ok(Machine {
+            channel,
+            link: SimLink::new(models, cycle),
+            images,
+            now: Nanos::ZERO,
+            cycle,
+            max_cycles: DEFAULT_MAX_CYCLES,
+        })
+    }
+
+    /// The channel.
+    pub fn channel(&self) -> &Channel {
+        &self.channel
+    }
+
+    /// The channel, mutable (manual mode, reset, referencing).
+    pub fn channel_mut(&mut self) -> &mut Channel {
+        &mut self.channel
+    }
+
+    /// The in-memory link with its drive models (test and plant knobs).
+    pub fn link_mut(&mut self) -> &mut SimLink {
+        &mut self.link
+    }
+
+    /// Virtual time now.
+    pub fn now(&self) -> Nanos {
+        self.now
+    }
+
+    /// One interpolation cycle: exchange the process data, then run the channel.
+    pub fn step(&mut self) {
+        self.now = self.now.saturating_add(self.cycle);
+        match self.link.exchange(self.now, &mut self.images) {
+            Ok(()) => self.channel.cycle(self.now, &mut self.images),
+            Err(e) => self.channel.link_lost(&e),
+        }
+    }
+
+    /// Step until the channel leaves `Enabling` / `Busy` / `Stopping`, at most `max` cycles.
+    /// Returns the state reached.
+    pub fn settle(&mut self, max: u64) -> ChannelState {
+        for _ in 0..max {
+            match self.channel.state() {
+                ChannelState::Idle | ChannelState::Aborted => break,
+                _ => self.step(),
+            }
+        }
+        self.channel.state()
+    }
+
+    /// Run `program` to its end or to the first error. `on_event` sees every `#MSG` line and
+    /// message as it happens (for streaming output).
+    pub fn run_program(
+        &mut self,
+        program: &Program,
+        on_event: &mut dyn FnMut(&RunEvent),
+    ) -> RunReport {
+        let mut events = Vec::new();
+        let mut emit = |e: RunEvent, events: &mut Vec<RunEvent>| {
+            on_event(&e);
+            events.push(e);
+        };
+        let start_cycles = self.channel.cycles();
+        // Program start: configured SLS again (seed 001 §3.3), drives enabled.
+        if self.channel.state() != ChannelState::Enabling {
+            self.channel.reset();
+        }
+        self.settle(u64::from(self.channel.config().enable_timeout_cycles) + 2);
+        let names = self
+            .channel
+            .axes()
+            .iter()
+            .map(|a| a.name().to_string())
+            .collect();
+        let mut exec = Executor::new(program.clone(), names);
+        exec.sync(&self.channel);
+        let mut out = Vec::new();
+        let mut ended = false;
+        let status = loop {
+            for m in self.channel.take_messages() {
+                emit(RunEvent::Message(m), &mut events);
+            }
+            if self.channel.cycles() - start_cycles > self.max_cycles {
+                let m = CncMessage::error(
+                    ids::RUN_TIMEOUT,
+                    format!(
+                        "run exceeded {} interpolation cycles; stopped",
+                        self.max_cycles
+                    ),
+                );
+                self.channel.report(m);
+                self.settle(1_000_000);
+                for m in self.channel.take_messages() {
+                    emit(RunEvent::Message(m), &mut events);
+                }
+                break RunStatus::Aborted;
+            }
+            match self.channel.state() {
+                ChannelState::Aborted => break RunStatus::Aborted,
+                ChannelState::Idle if ended => break RunStatus::Completed,
+                ChannelState::Idle => {
+                    let step = exec.step(&mut self.channel, &mut out);
+                    for Event::Output(line) in out.drain(..) {
+                        emit(RunEvent::Output(line), &mut events);
+                    }
+                    match step {
+                        Step::Continue => {}
+                        Step::End => ended = true,
+                        Step::Abort => {
+                            if self.channel.state() == ChannelState::Idle {
+                                // Defensive: an aborting block always stops the channel.
+                                self.channel.report(CncMessage::error(
+                                    ids::NC_EVALUATION,
+                                    "program aborted",
+                                ));
+                            }
+                        }
+                    }
+                }
+                _ => self.step(),
+            }
+        };
+        RunReport {
+            status,
+            events,
+            cycles: self.channel.cycles() - start_cycles,
+        }
+    }
+}
+
+/// The channel's view of one axis's parameters (seed units → mm, mm/s, mm/s²).
+pub fn channel_axis_config(a: &AxisConfig) -> ChannelAxisConfig {
+    let p = &a.params;
+    let rotary = is_rotary(p);
+    let mm_s2 = |id: &str| p.int(id) as f64;
+    // P-AXIS-00003 a_emergency: 0 means P-AXIS-00008 a_max is used (ISG axis parameter docs).
+    let a_emergency = match p.int("P-AXIS-00003") {
+        0 => mm_s2("P-AXIS-00008"),
+        v => v as f64,
+    };
+    let limits = AxisLimitConfig {
+        name: a.name.clone(),
+        neg: param_pos_to_mm(p.int("P-AXIS-00177")),
+        pos: param_pos_to_mm(p.int("P-AXIS-00178")),
+        tolerance: param_pos_to_mm(p.int("P-AXIS-00179")),
+        behaviour: SlsBehaviour::from_param(p.text("P-AXIS-00554")).unwrap_or_default(),
+        check: p.int("P-AXIS-00705").clamp(-1, 1) as i8,
+        modulo: rotary && is_modulo(p),
+        absolute_encoder: p.int("P-AXIS-00014") != 0,
+        // Seed 001 §4.3: axis types T only.
+        check_pos_command: !rotary && p.int("P-AXIS-00520") != 0,
+        check_neg_command: !rotary && p.int("P-AXIS-00521") != 0,
+        emergency_decel: a_emergency,
+        manual_rel_neg: param_pos_to_mm(p.int("P-AXIS-00137")),
+        manual_rel_pos: param_pos_to_mm(p.int("P-AXIS-00138")),
+        manual_abs_neg: param_pos_to_mm(p.int("P-AXIS-00492")),
+        manual_abs_pos: param_pos_to_mm(p.int("P-AXIS-00493")),
+    };
+    ChannelAxisConfig {
+        rotary,
+        v_max: param_vel_to_mm_s(p.int("P-AXIS-00212")),
+        a_feed: mm_s2("P-AXIS-00001"),
+        d_feed: mm_s2("P-AXIS-00002"),
+        a_rapid: mm_s2("P-AXIS-00004"),
+        a_emergency,
+        limits,
+    }
+}
+
+/// P-AXIS-00018 `kenngr.achs_typ`: rotary axis (`ACHSTYP_ROTATOR`, 0x0002).
+fn is_rotary(p: &ParamSet) -> bool {
+    let t = p.text("P-AXIS-00018");
+    t.eq_ignore_ascii_case(AXIS_TYPE_ROTARY) || t == "2" || t.eq_ignore_ascii_case("0x0002")
+}
+
+/// P-AXIS-00015 `kenngr.achs_mode`: bit ACHSMODE_MODULO.
+fn is_modulo(p: &ParamSet) -> bool {
+    p.int("P-AXIS-00015") & ACHSMODE_MODULO != 0
+}
+
+/// P-AXIS-00018 value of a rotary axis (ISG: ACHSTYP_TRANSLATOR 0x1, ACHSTYP_ROTATOR 0x2,
+/// ACHSTYP_SPINDEL 0x4).
+pub const AXIS_TYPE_ROTARY: &str = "ACHSTYP_ROTATOR";
+/// P-AXIS-00015 bit ACHSMODE_MODULO (ISG axis parameter docs: 0x00000004).
+pub const ACHSMODE_MODULO: i64 = 0x4;

@@ -60,17 +60,35 @@ pub struct CncMessage {
 impl CncMessage {
     /// A warning.
     pub fn warning(id: u32, text: impl Into<String>) -> Self {
-        CncMessage { id, severity: Severity::Warning, text: text.into(), block: None, axis: None }
+        CncMessage {
+            id,
+            severity: Severity::Warning,
+            text: text.into(),
+            block: None,
+            axis: None,
+        }
     }
 
     /// An error.
     pub fn error(id: u32, text: impl Into<String>) -> Self {
-        CncMessage { id, severity: Severity::Error, text: text.into(), block: None, axis: None }
+        CncMessage {
+            id,
+            severity: Severity::Error,
+            text: text.into(),
+            block: None,
+            axis: None,
+        }
     }
 
     /// With the given severity.
     pub fn new(id: u32, severity: Severity, text: impl Into<String>) -> Self {
-        CncMessage { id, severity, text: text.into(), block: None, axis: None }
+        CncMessage {
+            id,
+            severity,
+            text: text.into(),
+            block: None,
+            axis: None,
+        }
     }
 
     /// Attach the block reference.

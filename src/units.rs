@@ -118,7 +118,10 @@ mod tests {
 
     #[test]
     fn scaling_round_trip_and_overflow() {
-        let s = Scaling { increments_per_unit: 10_000.0, offset: 0.0 };
+        let s = Scaling {
+            increments_per_unit: 10_000.0,
+            offset: 0.0,
+        };
         assert_eq!(s.to_increments(12.3456), Some(123_456));
         assert_eq!(s.to_units(123_456), 12.3456);
         assert_eq!(s.to_increments(1.0e6), None);

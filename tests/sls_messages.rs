@@ -36,7 +36,11 @@ fn run(src: &str, sets: &[&str]) -> (RunReport, Machine) {
 }
 
 fn severity_of(r: &RunReport, id: u32) -> Vec<Severity> {
-    r.messages().iter().filter(|m| m.id == id).map(|m| m.severity).collect()
+    r.messages()
+        .iter()
+        .filter(|m| m.id == id)
+        .map(|m| m.severity)
+        .collect()
 }
 
 fn x(m: &Machine) -> (f64, f64) {
@@ -46,15 +50,22 @@ fn x(m: &Machine) -> (f64, f64) {
 
 #[test]
 fn p_err_120002_block_crossing_positive_limit_is_not_executed() {
-    let (r, m) = run("N10 G01 G90 X100 F6000\nN20 X250\nN30 #MSG SYN[\"reached\"]\nN40 M30\n", &[]);
+    let (r, m) = run(
+        "N10 G01 G90 X100 F6000\nN20 X250\nN30 #MSG SYN[\"reached\"]\nN40 M30\n",
+        &[],
+    );
     assert_eq!(r.status, RunStatus::Aborted);
     assert_eq!(r.message_ids(), vec![120002]);
     assert!(r.messages()[0].is_error());
     assert_eq!(r.messages()[0].block.and_then(|b| b.number), Some(20));
     assert!(r.output().is_empty());
-    // The block was not executed: the axis is still at X100.
+    // The block was not executed: the axis stays at X100 (let the position loop settle).
+    let mut m = m;
+    for _ in 0..1000 {
+        m.step();
+    }
     assert_eq!(x(&m).0, 100.0);
-    assert!((x(&m).1 - 100.0).abs() < 0.01);
+    assert!((x(&m).1 - 100.0).abs() < 1e-3, "actual {}", x(&m).1);
 }
 
 #[test]
@@ -82,7 +93,10 @@ fn p_err_120002_arc_apex_beyond_limit_between_in_range_end_points() {
 
 #[test]
 fn error_lr_warns_in_preparation_and_stops_on_actual_p_err_70021() {
-    let (r, m) = run("N10 G01 G90 X250 F6000\nN20 M30\n", &["X.P-AXIS-00554=ERROR_LR"]);
+    let (r, m) = run(
+        "N10 G01 G90 X250 F6000\nN20 M30\n",
+        &["X.P-AXIS-00554=ERROR_LR"],
+    );
     assert_eq!(r.status, RunStatus::Aborted);
     assert_eq!(r.message_ids(), vec![120002, 70021]);
     assert_eq!(severity_of(&r, 120002), vec![Severity::Warning]);
@@ -94,7 +108,10 @@ fn error_lr_warns_in_preparation_and_stops_on_actual_p_err_70021() {
 
 #[test]
 fn warning_behaviour_only_warns_and_the_program_completes() {
-    let (r, m) = run("N10 G01 G90 X-250 F6000\nN20 M30\n", &["X.P-AXIS-00554=WARNING"]);
+    let (r, m) = run(
+        "N10 G01 G90 X-250 F6000\nN20 M30\n",
+        &["X.P-AXIS-00554=WARNING"],
+    );
     assert_eq!(r.status, RunStatus::Completed);
     assert_eq!(r.message_ids(), vec![120003, 70022]);
     assert!(r.messages().iter().all(|m| m.severity == Severity::Warning));
@@ -110,12 +127,18 @@ fn p_err_70021_and_70022_actual_beyond_newly_programmed_limit() {
     assert_eq!(r.message_ids(), vec![70021]);
     assert_eq!(r.status, RunStatus::Aborted);
     assert_eq!(r.messages()[0].block.and_then(|b| b.number), Some(130));
-    assert_eq!(m.channel().soft_limits().active_limits(0), Some((-200.0, 10.0)));
+    assert_eq!(
+        m.channel().soft_limits().active_limits(0),
+        Some((-200.0, 10.0))
+    );
     // §3.1: actual smaller than the new negative SLS → 70022.
     let src = "N110 G00 X0 Y0 G90\nN120 G00 X20 Y30\nN130 G98 Y35\nN140 M30\n";
     let (r, m) = run(src, &[]);
     assert_eq!(r.message_ids(), vec![70022]);
-    assert_eq!(m.channel().soft_limits().active_limits(1), Some((35.0, 200.0)));
+    assert_eq!(
+        m.channel().soft_limits().active_limits(1),
+        Some((35.0, 200.0))
+    );
 }
 
 #[test]
@@ -125,10 +148,17 @@ fn p_err_70021_from_the_drive_overshooting() {
     let mut m = machine(&[]);
     let r = run_on(&mut m, "N10 G01 G90 X199.95 F6000\nN20 M30\n");
     assert_eq!(r.status, RunStatus::Completed);
+    // Let the position loop settle at 199.95, then push the axis by 0.2 mm (2000 increments at
+    // 10000 inc/mm): 200.15 > 200 + 0.1.
+    for _ in 0..2000 {
+        m.step();
+    }
+    assert!((x(&m).1 - 199.95).abs() < 1e-3);
     m.link_mut().model_mut(0).unwrap().set_disturbance(2000.0);
-    let r = run_on(&mut m, "N10 G01 X199.9 F600\nN20 M30\n");
+    let r = run_on(&mut m, "N10 #MSG SYN[\"not reached\"]\nN20 M30\n");
     assert_eq!(r.message_ids(), vec![70021]);
     assert_eq!(r.status, RunStatus::Aborted);
+    assert!(r.output().is_empty());
 }
 
 #[test]
@@ -138,7 +168,10 @@ fn p_err_21649_and_21878_limits_must_stay_ordered() {
     assert_eq!(r.status, RunStatus::Aborted);
     let (r, m) = run("N10 G99 X-250\nN20 M30\n", &[]);
     assert_eq!(r.message_ids(), vec![21878]);
-    assert_eq!(m.channel().soft_limits().active_limits(0), Some((-200.0, 200.0)));
+    assert_eq!(
+        m.channel().soft_limits().active_limits(0),
+        Some((-200.0, 200.0))
+    );
 }
 
 #[test]
@@ -164,14 +197,20 @@ fn p_err_70195_stop_distance_with_p_axis_00520() {
     assert_eq!(r.message_ids(), vec![70195]);
     assert_eq!(r.status, RunStatus::Aborted);
     let (cmd, act) = x(&m);
-    assert!(cmd <= 200.0 + 1e-9 && act <= 200.0 + 1e-9, "stopped before the limit: {cmd} {act}");
+    assert!(
+        cmd <= 200.0 + 1e-9 && act <= 200.0 + 1e-9,
+        "stopped before the limit: {cmd} {act}"
+    );
     // Without the parameter the same move completes.
     let (r, _) = run("N10 G01 G90 X199 F6000\nN20 M30\n", &["X.P-AXIS-00003=10"]);
     assert_eq!(r.status, RunStatus::Completed);
     // Negative side needs P-AXIS-00521.
     let (r, _) = run("N10 G01 G90 X-199 F6000\nN20 M30\n", &sets);
     assert_eq!(r.status, RunStatus::Completed);
-    let (r, _) = run("N10 G01 G90 X-199 F6000\nN20 M30\n", &["X.P-AXIS-00521=1", "X.P-AXIS-00003=10"]);
+    let (r, _) = run(
+        "N10 G01 G90 X-199 F6000\nN20 M30\n",
+        &["X.P-AXIS-00521=1", "X.P-AXIS-00003=10"],
+    );
     assert_eq!(r.message_ids(), vec![70195]);
 }
 
@@ -200,7 +239,10 @@ fn limits_are_restored_at_the_next_program_start() {
     let mut m = machine(&[]);
     let r = run_on(&mut m, "N10 G99 X50\nN20 M30\n");
     assert_eq!(r.status, RunStatus::Completed);
-    assert_eq!(m.channel().soft_limits().active_limits(0), Some((-200.0, 50.0)));
+    assert_eq!(
+        m.channel().soft_limits().active_limits(0),
+        Some((-200.0, 50.0))
+    );
     let r = run_on(&mut m, "N10 #MSG SYN[\"%f\", V.A.+SWE.X]\nN20 M30\n");
     assert_eq!(r.output(), vec!["200.000000"]);
 }
@@ -218,7 +260,11 @@ fn manual_mode_p_err_50720_and_150008() {
         assert!(ch.jog_continuous(0, 50.0));
         m.settle(1_000_000);
         let ch = m.channel_mut();
-        assert_eq!(ch.axes()[0].command(), 100.0, "stops exactly at the offset limit");
+        assert_eq!(
+            ch.axes()[0].command(),
+            100.0,
+            "stops exactly at the offset limit"
+        );
         let ids: Vec<u32> = ch.take_messages().iter().map(|m| m.id).collect();
         assert_eq!(ids, if warn { vec![50720] } else { vec![] });
         // Incremental step beyond: not executed, warning 150008 regardless of P-MANU-00014.
@@ -235,7 +281,11 @@ fn manual_mode_p_err_50720_and_150008() {
 #[test]
 fn manual_mode_absolute_offset_limits_hold_when_g99_extends() {
     // §3.3: P-AXIS-00493 set to the configured 200 keeps manual mode inside it after G99 X500.
-    let mut m = machine(&["X.P-AXIS-00493=2000000", "X.P-AXIS-00137=0", "X.P-AXIS-00138=0"]);
+    let mut m = machine(&[
+        "X.P-AXIS-00493=2000000",
+        "X.P-AXIS-00137=0",
+        "X.P-AXIS-00138=0",
+    ]);
     let r = run_on(&mut m, "N10 G99 X500\nN20 G01 X150 F6000\nN30 M30\n");
     assert_eq!(r.status, RunStatus::Completed);
     let ch = m.channel_mut();
@@ -256,5 +306,8 @@ fn pcs_limits_objects_with_p_chan_00489() {
     assert_eq!((p.positive, p.negative), (150.0, -250.0));
     assert_eq!((p.distance_positive, p.distance_negative), (140.0, 260.0));
     let (_, m) = run(src, &[]);
-    assert!(m.channel().pcs_limits(0).is_none(), "display off by default");
+    assert!(
+        m.channel().pcs_limits(0).is_none(),
+        "display off by default"
+    );
 }

@@ -14,28 +14,50 @@ use proptest::prelude::*;
 
 #[derive(Debug, Clone)]
 enum Move {
-    Line { x: f64, y: f64 },
+    Line {
+        x: f64,
+        y: f64,
+    },
     /// Half circle to the diametrically opposite point, centre offset (i, j).
-    Half { i: f64, j: f64, cw: bool },
+    Half {
+        i: f64,
+        j: f64,
+        cw: bool,
+    },
 }
 
 fn moves() -> impl Strategy<Value = Vec<Move>> {
-    let line = (-300i32..=300, -300i32..=300).prop_map(|(x, y)| Move::Line { x: x as f64, y: y as f64 });
+    let line = (-300i32..=300, -300i32..=300).prop_map(|(x, y)| Move::Line {
+        x: x as f64,
+        y: y as f64,
+    });
     let half = (-150i32..=150, -150i32..=150, any::<bool>())
         .prop_filter("non-zero radius", |(i, j, _)| *i != 0 || *j != 0)
-        .prop_map(|(i, j, cw)| Move::Half { i: i as f64, j: j as f64, cw });
+        .prop_map(|(i, j, cw)| Move::Half {
+            i: i as f64,
+            j: j as f64,
+            cw,
+        });
     prop::collection::vec(prop_oneof![2 => line, 1 => half], 1..6)
 }
 
 /// Min/max of X and Y over a move from `start`, computed independently.
 fn sweep_extent(start: (f64, f64), m: &Move) -> ((f64, f64), (f64, f64), (f64, f64)) {
     match *m {
-        Move::Line { x, y } => ((start.0.min(x), start.0.max(x)), (start.1.min(y), start.1.max(y)), (x, y)),
+        Move::Line { x, y } => (
+            (start.0.min(x), start.0.max(x)),
+            (start.1.min(y), start.1.max(y)),
+            (x, y),
+        ),
         Move::Half { i, j, cw } => {
             let c = (start.0 + i, start.1 + j);
             let r = (i * i + j * j).sqrt();
             let a0 = (start.1 - c.1).atan2(start.0 - c.0);
-            let sweep = if cw { -std::f64::consts::PI } else { std::f64::consts::PI };
+            let sweep = if cw {
+                -std::f64::consts::PI
+            } else {
+                std::f64::consts::PI
+            };
             let (mut xl, mut xh, mut yl, mut yh) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
             let n = 20_000;
             for k in 0..=n {
@@ -60,7 +82,11 @@ fn program(moves: &[Move]) -> String {
             Move::Half { i, j, cw } => {
                 // End point = start + 2·(I, J): written relative with G91 so it is exact.
                 let g = if *cw { 2 } else { 3 };
-                s.push_str(&format!("N{n} G91 G0{g} X{} Y{} I{i} J{j}\nN{n}5 G90\n", 2.0 * i, 2.0 * j));
+                s.push_str(&format!(
+                    "N{n} G91 G0{g} X{} Y{} I{i} J{j}\nN{n}5 G90\n",
+                    2.0 * i,
+                    2.0 * j
+                ));
             }
         }
     }
@@ -69,7 +95,7 @@ fn program(moves: &[Move]) -> String {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, .. ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, .. ProptestConfig::default() })]
 
     #[test]
     fn sls_is_never_passed_and_crossing_blocks_never_run(

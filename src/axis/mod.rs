@@ -101,7 +101,10 @@ impl Axis {
         let fb = self
             .adapter
             .read_inputs(now, inputs)
-            .map_err(|source| AxisError::Drive { axis: self.name.clone(), source })?;
+            .map_err(|source| AxisError::Drive {
+                axis: self.name.clone(),
+                source,
+            })?;
         self.actual = self.scaling.to_units(fb.position);
         self.lag = match fb.following_error {
             Some(fe) => self.scaling.delta_to_units(fe),
@@ -119,10 +122,13 @@ impl Axis {
 
     /// Encode this cycle's command into the output image.
     pub fn write(&mut self, now: Nanos, outputs: &mut [u8]) -> Result<(), AxisError> {
-        let target = self.scaling.to_increments(self.command).ok_or_else(|| AxisError::OutOfRange {
-            axis: self.name.clone(),
-            position: self.command,
-        })?;
+        let target =
+            self.scaling
+                .to_increments(self.command)
+                .ok_or_else(|| AxisError::OutOfRange {
+                    axis: self.name.clone(),
+                    position: self.command,
+                })?;
         let cmd = DriveCommand {
             enable: self.enable,
             target,
@@ -131,7 +137,10 @@ impl Axis {
         };
         self.adapter
             .write_outputs(now, &cmd, outputs)
-            .map_err(|source| AxisError::Drive { axis: self.name.clone(), source })
+            .map_err(|source| AxisError::Drive {
+                axis: self.name.clone(),
+                source,
+            })
     }
 
     /// Ask for *operation enabled* (`true`) or disable.

@@ -76,7 +76,11 @@ impl ManualState {
     }
 }
 
-pub(super) fn event_message(e: Event, axes: &[Axis], move_limit_warning: bool) -> Option<CncMessage> {
+pub(super) fn event_message(
+    e: Event,
+    axes: &[Axis],
+    move_limit_warning: bool,
+) -> Option<CncMessage> {
     match e {
         Event::LimitReached(i) => {
             let name = axes.get(i).map(Axis::name).unwrap_or("?");
@@ -134,8 +138,12 @@ impl Channel {
     ///
     /// [`jog_stop`]: Channel::jog_stop
     pub fn jog_continuous(&mut self, i: usize, velocity: f64) -> bool {
-        let Some((lo, hi)) = self.jog_range(i) else { return false };
-        let Some(c) = self.cfg.axes.get(i) else { return false };
+        let Some((lo, hi)) = self.jog_range(i) else {
+            return false;
+        };
+        let Some(c) = self.cfg.axes.get(i) else {
+            return false;
+        };
         let pos = self.axes[i].command();
         let sign = if velocity < 0.0 { -1.0 } else { 1.0 };
         let end = if sign > 0.0 { hi } else { lo };
@@ -148,7 +156,9 @@ impl Channel {
         let (a_acc, a_dec) = (c.a_feed, c.d_feed);
         let block = self.block;
         let warn = self.cfg.move_limit_warning;
-        let Mode::Manual(m) = &mut self.mode else { return false };
+        let Mode::Manual(m) = &mut self.mode else {
+            return false;
+        };
         if m.jogs[i].is_some() || v.is_nan() || v <= 0.0 {
             return false;
         }
@@ -173,7 +183,9 @@ impl Channel {
 
     /// Stop a continuous jog of axis `i`: brake with P-AXIS-00002 (or stop an increment).
     pub fn jog_stop(&mut self, i: usize) {
-        let Some(c) = self.cfg.axes.get(i) else { return };
+        let Some(c) = self.cfg.axes.get(i) else {
+            return;
+        };
         let d = c.d_feed;
         let dt = self.cfg.cycle.as_secs_f64();
         if let Mode::Manual(m) = &mut self.mode {
@@ -193,8 +205,12 @@ impl Channel {
     /// Incremental jog of axis `i` by `distance` (signed) at `velocity`. A step that would end
     /// outside the range is not executed and gives warning P-ERR-150008 (seed 001 §2).
     pub fn jog_increment(&mut self, i: usize, distance: f64, velocity: f64) -> bool {
-        let Some((lo, hi)) = self.jog_range(i) else { return false };
-        let Some(c) = self.cfg.axes.get(i) else { return false };
+        let Some((lo, hi)) = self.jog_range(i) else {
+            return false;
+        };
+        let Some(c) = self.cfg.axes.get(i) else {
+            return false;
+        };
         let pos = self.axes[i].command();
         let target = pos + distance;
         let name = self.axes[i].name().to_string();
@@ -213,7 +229,9 @@ impl Channel {
         }
         let v = velocity.abs().min(c.v_max);
         let (a_acc, a_dec) = (c.a_feed, c.d_feed);
-        let Mode::Manual(m) = &mut self.mode else { return false };
+        let Mode::Manual(m) = &mut self.mode else {
+            return false;
+        };
         if m.jogs[i].is_some() || v.is_nan() || v <= 0.0 || distance == 0.0 {
             return false;
         }

@@ -130,11 +130,17 @@ struct Motion {
 
 #[derive(Debug, Clone)]
 enum Mode {
-    Enabling { cycles: u32 },
+    Enabling {
+        cycles: u32,
+    },
     Idle,
     Moving(Box<Motion>),
     Manual(manual::ManualState),
-    Stopping { brakes: Vec<AxisBrake>, k: u64, then: ChannelState },
+    Stopping {
+        brakes: Vec<AxisBrake>,
+        k: u64,
+        then: ChannelState,
+    },
     Aborted,
 }
 
@@ -212,7 +218,9 @@ impl Channel {
 
     /// Index of the axis with this name.
     pub fn axis_index(&self, name: &str) -> Option<usize> {
-        self.axes.iter().position(|a| a.name().eq_ignore_ascii_case(name))
+        self.axes
+            .iter()
+            .position(|a| a.name().eq_ignore_ascii_case(name))
     }
 
     /// The software limit switch monitor.
@@ -347,15 +355,29 @@ impl Channel {
         }
         let n = self.axes.len();
         if req.target.len() != n || req.target.iter().any(|v| !v.is_finite()) {
-            self.push(CncMessage::error(ids::NC_EVALUATION, "motion target is not a finite position for every axis"));
+            self.push(CncMessage::error(
+                ids::NC_EVALUATION,
+                "motion target is not a finite position for every axis",
+            ));
             return Prepared::Rejected;
         }
         let start = self.command_positions();
         let segment = match req.kind {
             MotionKind::Rapid | MotionKind::Linear => Segment::line(start, req.target.clone()),
-            MotionKind::Arc { a1, a2, centre_offset, clockwise } => {
-                Segment::arc(start, req.target.clone(), a1, a2, centre_offset, clockwise, ARC_RADIUS_TOLERANCE)
-            }
+            MotionKind::Arc {
+                a1,
+                a2,
+                centre_offset,
+                clockwise,
+            } => Segment::arc(
+                start,
+                req.target.clone(),
+                a1,
+                a2,
+                centre_offset,
+                clockwise,
+                ARC_RADIUS_TOLERANCE,
+            ),
         };
         let segment = match segment {
             Ok(s) => s,
@@ -386,7 +408,11 @@ impl Channel {
         if profile.duration() <= 0.0 {
             return Prepared::Empty;
         }
-        self.mode = Mode::Moving(Box::new(Motion { segment, profile, k: 0 }));
+        self.mode = Mode::Moving(Box::new(Motion {
+            segment,
+            profile,
+            k: 0,
+        }));
         Prepared::Started
     }
 
@@ -440,7 +466,10 @@ impl Channel {
     /// drives receive braking set-points as soon as the link is back) and report.
     pub fn link_lost(&mut self, err: &LinkError) {
         self.cycles += 1;
-        self.push(CncMessage::error(ids::LINK_LOST, format!("{err}; axes stopped")));
+        self.push(CncMessage::error(
+            ids::LINK_LOST,
+            format!("{err}; axes stopped"),
+        ));
         if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
             self.begin_stop(ChannelState::Aborted);
         }
@@ -455,7 +484,11 @@ impl Channel {
         if images.len() != self.axes.len() {
             self.push(CncMessage::error(
                 ids::LINK_LOST,
-                format!("{} process images for {} axes", images.len(), self.axes.len()),
+                format!(
+                    "{} process images for {} axes",
+                    images.len(),
+                    self.axes.len()
+                ),
             ));
             self.mode = Mode::Aborted;
             return;
@@ -463,16 +496,25 @@ impl Channel {
         // 1. Inputs.
         let enabling = matches!(self.mode, Mode::Enabling { .. });
         for i in 0..self.axes.len() {
-            let res = self.axes[i].read(now, &images[i].inputs).map(|fb| (fb.fault, fb.operational));
+            let res = self.axes[i]
+                .read(now, &images[i].inputs)
+                .map(|fb| (fb.fault, fb.operational));
             match res {
                 Ok((fault, operational)) => {
                     let stopped = matches!(self.mode, Mode::Aborted | Mode::Stopping { .. });
                     if !enabling && !stopped && (fault || !operational) {
                         let name = self.axes[i].name().to_string();
-                        let code = if fault { "fault" } else { "left operation enabled" };
+                        let code = if fault {
+                            "fault"
+                        } else {
+                            "left operation enabled"
+                        };
                         self.push(
-                            CncMessage::error(ids::DRIVE_FAULT, format!("drive of axis {name} reports {code}; axes stopped"))
-                                .on_axis(&name),
+                            CncMessage::error(
+                                ids::DRIVE_FAULT,
+                                format!("drive of axis {name} reports {code}; axes stopped"),
+                            )
+                            .on_axis(&name),
                         );
                         self.begin_stop(ChannelState::Aborted);
                     }
@@ -511,14 +553,19 @@ impl Channel {
                     }
                     finished = Some(ChannelState::Idle);
                 } else if *cycles > self.cfg.enable_timeout_cycles {
-                    let missing: Vec<&str> =
-                        self.axes.iter().filter(|a| !a.is_operational()).map(Axis::name).collect();
+                    let missing: Vec<&str> = self
+                        .axes
+                        .iter()
+                        .filter(|a| !a.is_operational())
+                        .map(Axis::name)
+                        .collect();
                     let text = format!(
                         "drives of axes {} did not reach operation enabled within {} cycles",
                         missing.join(", "),
                         self.cfg.enable_timeout_cycles
                     );
-                    self.messages.push(CncMessage::error(ids::DRIVE_ENABLE_TIMEOUT, text));
+                    self.messages
+                        .push(CncMessage::error(ids::DRIVE_ENABLE_TIMEOUT, text));
                     finished = Some(ChannelState::Aborted);
                 }
             }

@@ -99,7 +99,15 @@ impl Executor {
         let find = |n: &str| axis_names.iter().position(|a| a.eq_ignore_ascii_case(n));
         let main = [find("X"), find("Y"), find("Z")];
         let prog = vec![0.0; axis_names.len()];
-        Executor { program, pc: 0, modal: Modal::default(), prog, names: axis_names, main, ended: false }
+        Executor {
+            program,
+            pc: 0,
+            modal: Modal::default(),
+            prog,
+            names: axis_names,
+            main,
+            ended: false,
+        }
     }
 
     /// Static checks before the run (exit code 2 territory): every axis word names a channel
@@ -111,11 +119,20 @@ impl Executor {
                     Item::Axis { name, span, .. } if self.axis(name).is_none() => {
                         return Err((
                             *span,
-                            format!("unknown axis '{name}'; the channel has {}", self.names.join(", ")),
+                            format!(
+                                "unknown axis '{name}'; the channel has {}",
+                                self.names.join(", ")
+                            ),
                         ));
                     }
                     Item::G { code, span } if !SUPPORTED_G.contains(code) => {
-                        return Err((*span, format!("G{code} is not supported; supported: {}", supported_g_text())));
+                        return Err((
+                            *span,
+                            format!(
+                                "G{code} is not supported; supported: {}",
+                                supported_g_text()
+                            ),
+                        ));
                     }
                     _ => {}
                 }
@@ -155,7 +172,10 @@ impl Executor {
             return Step::End;
         };
         self.pc += 1;
-        let bref = BlockRef { number: block.number, line: block.span.line };
+        let bref = BlockRef {
+            number: block.number,
+            line: block.span.line,
+        };
         ch.set_block(Some(bref));
         match self.run_block(&block, ch, events) {
             Ok(end) => {
@@ -174,7 +194,12 @@ impl Executor {
         }
     }
 
-    fn run_block(&mut self, block: &Block, ch: &mut Channel, events: &mut Vec<Event>) -> Result<bool, Fail> {
+    fn run_block(
+        &mut self,
+        block: &Block,
+        ch: &mut Channel,
+        events: &mut Vec<Event>,
+    ) -> Result<bool, Fail> {
         // 1. G codes: modal groups first, so `G00 X0 Y0 G90` uses G90.
         let mut g92 = false;
         let mut limit: Option<Side> = None;
@@ -199,7 +224,10 @@ impl Executor {
                     other => {
                         return Err(Fail::New(CncMessage::error(
                             ids::NC_UNSUPPORTED,
-                            format!("G{other} is not supported; supported: {}", supported_g_text()),
+                            format!(
+                                "G{other} is not supported; supported: {}",
+                                supported_g_text()
+                            ),
                         )))
                     }
                 },
@@ -219,18 +247,28 @@ impl Executor {
                 Item::F { value, span } => {
                     let f = self.num(value, *span, ch)?;
                     if f.is_nan() || f <= 0.0 {
-                        return Err(Fail::New(CncMessage::error(ids::NC_NO_FEED, format!("feed F{f} must be > 0"))));
+                        return Err(Fail::New(CncMessage::error(
+                            ids::NC_NO_FEED,
+                            format!("feed F{f} must be > 0"),
+                        )));
                     }
                     self.modal.feed = Some(f);
                 }
                 Item::Axis { name, value, span } => {
                     let i = self.axis(name).ok_or_else(|| {
-                        Fail::New(CncMessage::error(ids::NC_EVALUATION, format!("unknown axis '{name}'")))
+                        Fail::New(CncMessage::error(
+                            ids::NC_EVALUATION,
+                            format!("unknown axis '{name}'"),
+                        ))
                     })?;
                     let v = self.num(value, *span, ch)?;
                     axes.push((i, v));
                 }
-                Item::Centre { letter, value, span } => {
+                Item::Centre {
+                    letter,
+                    value,
+                    span,
+                } => {
                     let k = match letter.to_ascii_uppercase() {
                         'I' => 0,
                         'J' => 1,
@@ -238,7 +276,10 @@ impl Executor {
                     };
                     centre[k] = Some(self.num(value, *span, ch)?);
                 }
-                Item::Command { command: Command::Msg { format, args, .. }, span } => {
+                Item::Command {
+                    command: Command::Msg { format, args, .. },
+                    span,
+                } => {
                     let mut vals = Vec::with_capacity(args.len());
                     for a in args {
                         let src = Vars { exec: self, ch };
@@ -282,11 +323,18 @@ impl Executor {
         for &(i, v) in &axes {
             prog[i] = if self.modal.absolute { v } else { prog[i] + v };
         }
-        let target: Vec<f64> = prog.iter().enumerate().map(|(i, p)| p + ch.pcs_offset(i)).collect();
+        let target: Vec<f64> = prog
+            .iter()
+            .enumerate()
+            .map(|(i, p)| p + ch.pcs_offset(i))
+            .collect();
         let feed = match self.modal.motion {
             MotionMode::G0 => 0.0,
             _ => self.modal.feed.ok_or_else(|| {
-                Fail::New(CncMessage::error(ids::NC_NO_FEED, "no feed programmed (F) for a G01/G02/G03 block"))
+                Fail::New(CncMessage::error(
+                    ids::NC_NO_FEED,
+                    "no feed programmed (F) for a G01/G02/G03 block",
+                ))
             })?,
         };
         let kind = match self.modal.motion {
@@ -335,7 +383,8 @@ impl Executor {
 
     fn num(&self, e: &Expr, span: Span, ch: &Channel) -> Result<f64, Fail> {
         let src = Vars { exec: self, ch };
-        eval_num_at(e, &src, span).map_err(|e| Fail::New(CncMessage::error(ids::NC_EVALUATION, e.to_string())))
+        eval_num_at(e, &src, span)
+            .map_err(|e| Fail::New(CncMessage::error(ids::NC_EVALUATION, e.to_string())))
     }
 }
 
@@ -343,7 +392,11 @@ impl Executor {
 pub const SUPPORTED_G: &[u32] = &[0, 1, 2, 3, 17, 18, 19, 90, 91, 92, 98, 99, 161, 162];
 
 fn supported_g_text() -> String {
-    SUPPORTED_G.iter().map(|g| format!("G{g:02}")).collect::<Vec<_>>().join(" ")
+    SUPPORTED_G
+        .iter()
+        .map(|g| format!("G{g:02}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// Why a block failed.

@@ -6,7 +6,9 @@
 //! `# …`, `; …` or `( … )` outside quotes. Blank lines are ignored. After the last line the
 //! cross-parameter ranges are checked ([`ParamSet::check_cross`]).
 
-use super::registry::{find, suggestion_text, unknown_parameter, Origin, ParamError, ParamSet, Scope};
+use super::registry::{
+    find, suggestion_text, unknown_parameter, Origin, ParamError, ParamSet, Scope,
+};
 
 /// Parse a parameter list of the given scope into a new set.
 pub fn parse_list(text: &str, file: &str, scope: Scope) -> Result<ParamSet, ParamError> {
@@ -43,7 +45,9 @@ fn split_line(line: &str) -> Option<(&str, &str)> {
     if line.is_empty() {
         return None;
     }
-    let end = line.find(|c: char| c.is_whitespace() || c == '=').unwrap_or(line.len());
+    let end = line
+        .find(|c: char| c.is_whitespace() || c == '=')
+        .unwrap_or(line.len());
     let (key, rest) = line.split_at(end);
     let rest = rest.trim_start();
     let rest = rest.strip_prefix('=').unwrap_or(rest).trim();
@@ -68,7 +72,11 @@ fn strip_comment(line: &str) -> &str {
 /// Unknown key. If the value has several words and `key_word` is known (the seeds' PDF text lost
 /// underscores: `kenngr.hub messtaster 100000`), suggest that; else the closest known key.
 fn unknown_key(key: &str, value: &str, origin: &Origin) -> ParamError {
-    if let Some(first) = value.split_whitespace().next().filter(|_| value.split_whitespace().nth(1).is_some()) {
+    if let Some(first) = value
+        .split_whitespace()
+        .next()
+        .filter(|_| value.split_whitespace().nth(1).is_some())
+    {
         let joined = format!("{key}_{first}");
         if let Some(def) = find(&joined) {
             return ParamError::UnknownParameter {
@@ -87,14 +95,26 @@ mod tests {
 
     #[test]
     fn split_forms() {
-        assert_eq!(split_line("kenngr.swe_neg  -5"), Some(("kenngr.swe_neg", "-5")));
-        assert_eq!(split_line("kenngr.swe_neg = -5 # c"), Some(("kenngr.swe_neg", "-5")));
-        assert_eq!(split_line("kenngr.swe_neg=-5"), Some(("kenngr.swe_neg", "-5")));
+        assert_eq!(
+            split_line("kenngr.swe_neg  -5"),
+            Some(("kenngr.swe_neg", "-5"))
+        );
+        assert_eq!(
+            split_line("kenngr.swe_neg = -5 # c"),
+            Some(("kenngr.swe_neg", "-5"))
+        );
+        assert_eq!(
+            split_line("kenngr.swe_neg=-5"),
+            Some(("kenngr.swe_neg", "-5"))
+        );
         assert_eq!(split_line("messtyp\t3 ( comment )"), Some(("messtyp", "3")));
         assert_eq!(split_line("  # only a comment"), None);
         assert_eq!(split_line("; also"), None);
         assert_eq!(split_line("(and this)"), None);
         assert_eq!(split_line(""), None);
-        assert_eq!(split_line("kenngr.measure.signal \"PLC;x\" ; c"), Some(("kenngr.measure.signal", "\"PLC;x\"")));
+        assert_eq!(
+            split_line("kenngr.measure.signal \"PLC;x\" ; c"),
+            Some(("kenngr.measure.signal", "\"PLC;x\""))
+        );
     }
 }

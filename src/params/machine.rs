@@ -106,10 +106,14 @@ impl MachineConfig {
                     }
                 }
                 "axis" => {
-                    let tables = item.as_array_of_tables().ok_or_else(|| ParamError::Config {
-                        origin: ctx.at(line),
-                        message: "'axis' must be an array of tables: write [[axis]] once per axis".to_string(),
-                    })?;
+                    let tables = item
+                        .as_array_of_tables()
+                        .ok_or_else(|| ParamError::Config {
+                            origin: ctx.at(line),
+                            message:
+                                "'axis' must be an array of tables: write [[axis]] once per axis"
+                                    .to_string(),
+                        })?;
                     for table in tables.iter() {
                         cfg.parse_axis(&ctx, table, line, &mut axis_lines)?;
                     }
@@ -120,7 +124,8 @@ impl MachineConfig {
         if cfg.axes.is_empty() {
             return Err(ParamError::Config {
                 origin: Origin::new(file, 0),
-                message: "no [[axis]] table; a machine needs at least one axis (name = \"X\")".to_string(),
+                message: "no [[axis]] table; a machine needs at least one axis (name = \"X\")"
+                    .to_string(),
             });
         }
         Ok(cfg)
@@ -129,8 +134,10 @@ impl MachineConfig {
     /// Read and parse a machine file. A read error names the file.
     pub fn load(path: &Path) -> Result<Self, ParamError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ParamError::Io { file: file.clone(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| ParamError::Io {
+            file: file.clone(),
+            message: e.to_string(),
+        })?;
         Self::parse(&text, &file)
     }
 
@@ -177,15 +184,24 @@ impl MachineConfig {
     /// The cross checks of the changed list are re-run; on error nothing changes.
     pub fn apply_set(&mut self, assignment: &str) -> Result<(), ParamError> {
         let origin = Origin::new("--set", 0);
-        let Some((key, value)) = assignment.split_once('=').filter(|(k, _)| !k.trim().is_empty()) else {
+        let Some((key, value)) = assignment
+            .split_once('=')
+            .filter(|(k, _)| !k.trim().is_empty())
+        else {
             return Err(ParamError::Config {
                 origin,
-                message: format!("'{assignment}': expected KEY=VALUE, e.g. 'X.P-AXIS-00178=2000000'"),
+                message: format!(
+                    "'{assignment}': expected KEY=VALUE, e.g. 'X.P-AXIS-00178=2000000'"
+                ),
             });
         };
         let (key, value) = (key.trim(), value.trim());
         if let Some((prefix, rest)) = key.split_once('.') {
-            if let Some(axis) = self.axes.iter_mut().find(|a| a.name.eq_ignore_ascii_case(prefix)) {
+            if let Some(axis) = self
+                .axes
+                .iter_mut()
+                .find(|a| a.name.eq_ignore_ascii_case(prefix))
+            {
                 return axis.apply(rest, value, &origin);
             }
         }
@@ -238,7 +254,11 @@ impl MachineConfig {
 
     /// The axis names, comma separated (`X, Y, Z`).
     pub fn axis_list(&self) -> String {
-        self.axes.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", ")
+        self.axes
+            .iter()
+            .map(|a| a.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 
     fn parse_channel(&mut self, ctx: &Ctx<'_>, leaves: &[Leaf<'_>]) -> Result<(), ParamError> {
@@ -269,7 +289,9 @@ impl MachineConfig {
         fallback_line: usize,
         axis_lines: &mut Vec<usize>,
     ) -> Result<(), ParamError> {
-        let header = ctx.line(table.span().map(|s| s.start)).unwrap_or(fallback_line);
+        let header = ctx
+            .line(table.span().map(|s| s.start))
+            .unwrap_or(fallback_line);
         let mut leaves = Vec::new();
         flatten(ctx, table, "", header, 0, &mut leaves)?;
         let mut name: Option<(String, usize)> = None;
@@ -292,13 +314,20 @@ impl MachineConfig {
                     if let Some(i) = self.axes.iter().position(|a| a.name == n) {
                         return Err(ParamError::Config {
                             origin,
-                            message: format!("duplicate axis name '{n}' (first defined at line {})", axis_lines[i]),
+                            message: format!(
+                                "duplicate axis name '{n}' (first defined at line {})",
+                                axis_lines[i]
+                            ),
                         });
                     }
                     name = Some((n.to_string(), leaf.line));
                 }
                 "drive" => {
-                    let d = string_value(leaf, &origin, "a drive definition name such as \"cia402-generic\"")?;
+                    let d = string_value(
+                        leaf,
+                        &origin,
+                        "a drive definition name such as \"cia402-generic\"",
+                    )?;
                     drive = valid_drive(d, &origin)?;
                 }
                 "referenced" => match leaf.value {
@@ -322,7 +351,12 @@ impl MachineConfig {
         params.set_label(format!("axis {name}"));
         params.check_cross(&ctx.at(header))?;
         axis_lines.push(line);
-        self.axes.push(AxisConfig { name, drive, referenced, params });
+        self.axes.push(AxisConfig {
+            name,
+            drive,
+            referenced,
+            params,
+        });
         Ok(())
     }
 }
@@ -332,7 +366,10 @@ impl AxisConfig {
         match key {
             "name" => Err(ParamError::Config {
                 origin: origin.clone(),
-                message: format!("the name of axis {} cannot be changed with --set", self.name),
+                message: format!(
+                    "the name of axis {} cannot be changed with --set",
+                    self.name
+                ),
             }),
             "drive" => {
                 self.drive = valid_drive(strip_quotes(value), origin)?;
@@ -347,7 +384,10 @@ impl AxisConfig {
                 } else {
                     return Err(ParamError::Config {
                         origin: origin.clone(),
-                        message: format!("{}.referenced = {value}: expected true/false or 1/0", self.name),
+                        message: format!(
+                            "{}.referenced = {value}: expected true/false or 1/0",
+                            self.name
+                        ),
                     });
                 };
                 Ok(())
@@ -379,7 +419,12 @@ struct Ctx<'a> {
 impl<'a> Ctx<'a> {
     fn new(text: &str, file: &'a str) -> Self {
         let mut line_starts = vec![0];
-        line_starts.extend(text.bytes().enumerate().filter(|(_, b)| *b == b'\n').map(|(i, _)| i + 1));
+        line_starts.extend(
+            text.bytes()
+                .enumerate()
+                .filter(|(_, b)| *b == b'\n')
+                .map(|(i, _)| i + 1),
+        );
         Ctx { file, line_starts }
     }
 
@@ -401,7 +446,10 @@ impl<'a> Ctx<'a> {
     }
 
     fn key_line(&self, table: &dyn TableLike, key: &str, item: &Item, fallback: usize) -> usize {
-        let span = table.get_key_value(key).and_then(|(k, _)| k.span()).or_else(|| item.span());
+        let span = table
+            .get_key_value(key)
+            .and_then(|(k, _)| k.span())
+            .or_else(|| item.span());
         self.line(span.map(|s| s.start)).unwrap_or(fallback)
     }
 }
@@ -418,7 +466,11 @@ fn flatten<'a>(
 ) -> Result<(), ParamError> {
     for (key, item) in table.iter() {
         let line = ctx.key_line(table, key, item, fallback_line);
-        let full = if prefix.is_empty() { key.to_string() } else { format!("{prefix}.{key}") };
+        let full = if prefix.is_empty() {
+            key.to_string()
+        } else {
+            format!("{prefix}.{key}")
+        };
         if depth >= MAX_DEPTH {
             return Err(ParamError::Config {
                 origin: ctx.at(line),
@@ -427,7 +479,11 @@ fn flatten<'a>(
         }
         match item {
             Item::Value(Value::InlineTable(t)) => flatten(ctx, t, &full, line, depth + 1, out)?,
-            Item::Value(value) => out.push(Leaf { key: full, value, line }),
+            Item::Value(value) => out.push(Leaf {
+                key: full,
+                value,
+                line,
+            }),
             Item::Table(t) => flatten(ctx, t, &full, line, depth + 1, out)?,
             Item::ArrayOfTables(_) => {
                 return Err(ParamError::Config {
@@ -443,10 +499,18 @@ fn flatten<'a>(
 
 /// Set one leaf in a parameter list; `project_keys` are the section's non-parameter keys, used
 /// for "did you mean" on typos.
-fn set_leaf(set: &mut ParamSet, leaf: &Leaf<'_>, ctx: &Ctx<'_>, project_keys: &[&str]) -> Result<(), ParamError> {
+fn set_leaf(
+    set: &mut ParamSet,
+    leaf: &Leaf<'_>,
+    ctx: &Ctx<'_>,
+    project_keys: &[&str],
+) -> Result<(), ParamError> {
     let origin = ctx.at(leaf.line);
     if find(&leaf.key).is_none() {
-        if let Some(k) = project_keys.iter().find(|k| edit_distance(&leaf.key, k) <= 2) {
+        if let Some(k) = project_keys
+            .iter()
+            .find(|k| edit_distance(&leaf.key, k) <= 2)
+        {
             return Err(ParamError::UnknownParameter {
                 origin,
                 key: leaf.key.clone(),
@@ -471,7 +535,11 @@ fn set_leaf(set: &mut ParamSet, leaf: &Leaf<'_>, ctx: &Ctx<'_>, project_keys: &[
     set.set(&leaf.key, &raw, &origin).map(|_| ())
 }
 
-fn string_value<'a>(leaf: &Leaf<'a>, origin: &Origin, expected: &str) -> Result<&'a str, ParamError> {
+fn string_value<'a>(
+    leaf: &Leaf<'a>,
+    origin: &Origin,
+    expected: &str,
+) -> Result<&'a str, ParamError> {
     match leaf.value {
         Value::String(s) => Ok(s.value().as_str()),
         _ => Err(ParamError::Config {
@@ -527,7 +595,10 @@ fn looks_like_axis_prefix(prefix: &str) -> bool {
 }
 
 fn valid_drive(name: &str, origin: &Origin) -> Result<String, ParamError> {
-    let ok = !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    let ok = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
     if ok {
         Ok(name.to_string())
     } else {

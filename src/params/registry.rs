@@ -149,7 +149,9 @@ pub enum Range {
         /// Largest accepted value.
         max: i64,
     },
-    /// One of these words (canonical upper case); the empty string means "not defined".
+    /// One of these words (canonical upper case). Parameters whose default is the seeds'
+    /// "blank string" (P-AXIS-00516, P-AXIS-00518: "not defined", the old parameters apply)
+    /// also accept the empty string.
     Choice(&'static [&'static str]),
     /// Any text.
     AnyText,
@@ -161,16 +163,10 @@ impl Range {
         matches!(*self, Range::Int { min, max } if min <= v && v <= max)
     }
 
-    /// The canonical spelling of `s` if it is accepted by a text range. Choices match
-    /// case-insensitively; the empty string ("not defined", the seeds' blank default) is accepted.
+    /// The canonical spelling of `s` if it is one of the choices (case-insensitive match).
     pub fn canonical_text(&self, s: &str) -> Option<&'static str> {
         match *self {
-            Range::Choice(words) => {
-                if s.is_empty() {
-                    return Some("");
-                }
-                words.iter().copied().find(|w| w.eq_ignore_ascii_case(s))
-            }
+            Range::Choice(words) => words.iter().copied().find(|w| w.eq_ignore_ascii_case(s)),
             _ => None,
         }
     }
@@ -220,12 +216,20 @@ impl ParamDef {
     /// Parse and range-check a raw value (surrounding whitespace and quotes are stripped).
     /// BOOLEAN accepts `0`, `1`, `true`, `false` in any case; integers are decimal or `0x` hex;
     /// STRING choices match case-insensitively and are stored in canonical upper case.
-    pub fn parse_value(&'static self, raw: &str, origin: &Origin) -> Result<ParamValue, ParamError> {
+    pub fn parse_value(
+        &'static self,
+        raw: &str,
+        origin: &Origin,
+    ) -> Result<ParamValue, ParamError> {
         let text = strip_quotes(raw.trim());
         if self.is_text() {
             let canonical = match self.range {
                 Range::AnyText => return Ok(ParamValue::Text(text.to_string())),
-                _ => self.range.canonical_text(text).or_else(|| choice_alias(self, text)),
+                _ if text.is_empty() && self.default == DefaultValue::Text("") => Some(""),
+                _ => self
+                    .range
+                    .canonical_text(text)
+                    .or_else(|| choice_alias(self, text)),
             };
             return match canonical {
                 Some(c) => Ok(ParamValue::Text(c.to_string())),
@@ -302,7 +306,10 @@ pub struct Origin {
 impl Origin {
     /// An origin.
     pub fn new(file: impl Into<String>, line: usize) -> Self {
-        Origin { file: file.into(), line }
+        Origin {
+            file: file.into(),
+            line,
+        }
     }
 
     /// The origin of values set through the API ([`ParamSet::set_int`]).
@@ -480,7 +487,7 @@ macro_rules! registry_table {
         /// typos: `params.int(id::SWE_NEG)`.
         pub mod id {
             $(
-                #[doc = concat!($id, " ", $path, " (", $src, "): ", $title, ".")]
+                #[doc = concat!($id, " `", $path, "` (", $src, "): ", $title, ".")]
                 pub const $name: &str = $id;
             )*
         }
@@ -841,14 +848,20 @@ pub fn find(key: &str) -> Option<&'static ParamDef> {
 /// The known parameter closest to `key` (edit distance over IDs, paths and path leaves), for
 /// "did you mean" hints; `None` when nothing is reasonably close.
 pub fn suggest(key: &str) -> Option<&'static ParamDef> {
-    let key: String = key.trim().chars().take(96).collect::<String>().to_ascii_lowercase();
+    let key: String = key
+        .trim()
+        .chars()
+        .take(96)
+        .collect::<String>()
+        .to_ascii_lowercase();
     if key.is_empty() {
         return None;
     }
     let key = key.replace("[0]", "[i]");
     let mut best: Option<(usize, &'static ParamDef)> = None;
     for def in REGISTRY {
-        let mut d = edit_distance(&key, &def.id.to_ascii_lowercase()).min(edit_distance(&key, def.path));
+        let mut d =
+            edit_distance(&key, &def.id.to_ascii_lowercase()).min(edit_distance(&key, def.path));
         if let Some((_, rest)) = def.path.split_once('.') {
             d = d.min(edit_distance(&key, rest) + 1);
         }
@@ -881,7 +894,9 @@ pub(crate) fn unknown_parameter(key: &str, origin: &Origin) -> ParamError {
 }
 
 fn looks_like_id(key: &str) -> bool {
-    key.trim().get(..2).is_some_and(|p| p.eq_ignore_ascii_case("P-"))
+    key.trim()
+        .get(..2)
+        .is_some_and(|p| p.eq_ignore_ascii_case("P-"))
 }
 
 /// Levenshtein distance over characters (inputs are short keys).
@@ -955,7 +970,11 @@ pub struct ParamSet {
 impl ParamSet {
     /// An empty set (all parameters at their defaults).
     pub fn new(scope: Scope) -> Self {
-        ParamSet { scope, label: None, values: BTreeMap::new() }
+        ParamSet {
+            scope,
+            label: None,
+            values: BTreeMap::new(),
+        }
     }
 
     /// The list this set holds.
@@ -1021,17 +1040,31 @@ impl ParamSet {
 
     /// Where the explicitly set value came from.
     pub fn origin_of(&self, id: &str) -> Option<&Origin> {
-        find(id).and_then(|d| self.values.get(d.id)).map(|e| &e.origin)
+        find(id)
+            .and_then(|d| self.values.get(d.id))
+            .map(|e| &e.origin)
     }
 
     /// Set a parameter from its text form. `key` is an ID or a name path; the raw text is parsed
     /// per type and range-checked ([`ParamDef::parse_value`]). A parameter of another list is an
     /// error naming the right section.
-    pub fn set(&mut self, key: &str, raw: &str, origin: &Origin) -> Result<&'static ParamDef, ParamError> {
+    pub fn set(
+        &mut self,
+        key: &str,
+        raw: &str,
+        origin: &Origin,
+    ) -> Result<&'static ParamDef, ParamError> {
         let def = find(key).ok_or_else(|| unknown_parameter(key, origin))?;
         self.check_scope(def, origin)?;
         let value = def.parse_value(raw, origin)?;
-        self.values.insert(def.id, Entry { def, value, origin: origin.clone() });
+        self.values.insert(
+            def.id,
+            Entry {
+                def,
+                value,
+                origin: origin.clone(),
+            },
+        );
         Ok(def)
     }
 
@@ -1041,12 +1074,27 @@ impl ParamSet {
         let def = find(id).ok_or_else(|| unknown_parameter(id, &origin))?;
         self.check_scope(def, &origin)?;
         if def.is_text() {
-            return Err(ParamError::InvalidValue { origin, def, value: v.to_string() });
+            return Err(ParamError::InvalidValue {
+                origin,
+                def,
+                value: v.to_string(),
+            });
         }
         if !def.accepts_int(v) {
-            return Err(ParamError::OutOfRange { origin, def, value: v.to_string() });
+            return Err(ParamError::OutOfRange {
+                origin,
+                def,
+                value: v.to_string(),
+            });
         }
-        self.values.insert(def.id, Entry { def, value: ParamValue::Int(v), origin });
+        self.values.insert(
+            def.id,
+            Entry {
+                def,
+                value: ParamValue::Int(v),
+                origin,
+            },
+        );
         Ok(())
     }
 
@@ -1054,7 +1102,11 @@ impl ParamSet {
         if def.scope == self.scope {
             Ok(())
         } else {
-            Err(ParamError::WrongScope { origin: origin.clone(), def, found: self.scope })
+            Err(ParamError::WrongScope {
+                origin: origin.clone(),
+                def,
+                found: self.scope,
+            })
         }
     }
 
@@ -1075,15 +1127,30 @@ impl ParamSet {
         let neg = self.int(id::SWE_NEG);
         let pos = self.int(id::SWE_POS);
         if neg >= pos {
-            return Err(self.cross_error(origin, id::SWE_NEG, &format!("< {}", self.show(id::SWE_POS)), &[id::SWE_POS]));
+            return Err(self.cross_error(
+                origin,
+                id::SWE_NEG,
+                &format!("< {}", self.show(id::SWE_POS)),
+                &[id::SWE_POS],
+            ));
         }
         for limit in [id::ACS_LIMIT_NEG, id::ACS_LIMIT_POS] {
             let v = self.int(limit);
             if v != 0 && v < neg {
-                return Err(self.cross_error(origin, limit, &format!("≥ {}", self.show(id::SWE_NEG)), &[id::SWE_NEG]));
+                return Err(self.cross_error(
+                    origin,
+                    limit,
+                    &format!("≥ {}", self.show(id::SWE_NEG)),
+                    &[id::SWE_NEG],
+                ));
             }
             if v != 0 && v > pos {
-                return Err(self.cross_error(origin, limit, &format!("≤ {}", self.show(id::SWE_POS)), &[id::SWE_POS]));
+                return Err(self.cross_error(
+                    origin,
+                    limit,
+                    &format!("≤ {}", self.show(id::SWE_POS)),
+                    &[id::SWE_POS],
+                ));
             }
         }
         let a_max = self.int(id::A_MAX);
@@ -1103,7 +1170,12 @@ impl ParamSet {
             id::D_STUFE_2,
         ] {
             if self.int(acc) > a_max {
-                return Err(self.cross_error(origin, acc, &format!("≤ {}", self.show(id::A_MAX)), &[id::A_MAX]));
+                return Err(self.cross_error(
+                    origin,
+                    acc,
+                    &format!("≤ {}", self.show(id::A_MAX)),
+                    &[id::A_MAX],
+                ));
             }
         }
         if self.int(id::A_EMERGENCY) > 2 * a_max {
@@ -1111,7 +1183,12 @@ impl ParamSet {
             return Err(self.cross_error(origin, id::A_EMERGENCY, &req, &[id::A_MAX]));
         }
         if self.int(id::VB_MESSEN) > self.int(id::VB_MAX) {
-            return Err(self.cross_error(origin, id::VB_MESSEN, &format!("≤ {}", self.show(id::VB_MAX)), &[id::VB_MAX]));
+            return Err(self.cross_error(
+                origin,
+                id::VB_MESSEN,
+                &format!("≤ {}", self.show(id::VB_MAX)),
+                &[id::VB_MAX],
+            ));
         }
         Ok(())
     }
@@ -1123,12 +1200,21 @@ impl ParamSet {
         }
     }
 
-    fn cross_error(&self, origin: &Origin, subject: &str, requirement: &str, others: &[&str]) -> ParamError {
+    fn cross_error(
+        &self,
+        origin: &Origin,
+        subject: &str,
+        requirement: &str,
+        others: &[&str],
+    ) -> ParamError {
         let origins: Vec<&Origin> = std::iter::once(subject)
             .chain(others.iter().copied())
             .filter_map(|id| self.values.get(id).map(|e| &e.origin))
             .collect();
-        let same_file = origins.iter().filter(|o| o.file == origin.file).max_by_key(|o| o.line);
+        let same_file = origins
+            .iter()
+            .filter(|o| o.file == origin.file)
+            .max_by_key(|o| o.line);
         let chosen = same_file
             .or_else(|| origins.iter().max_by_key(|o| o.line))
             .map(|o| (*o).clone())
@@ -1136,7 +1222,11 @@ impl ParamSet {
         let def = find(subject).unwrap_or(&REGISTRY[0]);
         ParamError::CrossCheck {
             origin: chosen,
-            context: self.label.as_ref().map(|l| format!(" ({l})")).unwrap_or_default(),
+            context: self
+                .label
+                .as_ref()
+                .map(|l| format!(" ({l})"))
+                .unwrap_or_default(),
             def,
             value: self.int(subject),
             requirement: requirement.to_string(),
@@ -1167,7 +1257,9 @@ pub fn parameters_markdown() -> String {
          Source *ISG online parameter docs (not in seeds)*: the seeds only mention the parameter; \
          *project assumption*: no definition was found.\n\n",
     );
-    out.push_str("| ID | path | type | default | range | accepted | dimension | title | source |\n");
+    out.push_str(
+        "| ID | path | type | default | range | accepted | dimension | title | source |\n",
+    );
     out.push_str("|---|---|---|---|---|---|---|---|---|\n");
     for d in REGISTRY {
         let default = match d.default {
@@ -1177,10 +1269,17 @@ pub fn parameters_markdown() -> String {
         };
         let accepted = match d.range {
             Range::Int { min, max } => match discrete_values(d.id) {
-                Some(vals) => vals.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(", "),
+                Some(vals) => vals
+                    .iter()
+                    .map(|v| v.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
                 None => format!("{min} … {max}"),
             },
-            Range::Choice(words) => format!("{} or blank", words.join(", ")),
+            Range::Choice(words) if d.default == DefaultValue::Text("") => {
+                format!("{} or blank", words.join(", "))
+            }
+            Range::Choice(words) => words.join(", "),
             Range::AnyText => "any text".to_string(),
         };
         out.push_str(&format!(
@@ -1200,7 +1299,10 @@ pub fn parameters_markdown() -> String {
 }
 
 fn md(s: &str) -> String {
-    s.replace('\\', "\\\\").replace('|', "\\|").replace('*', "\\*").replace('_', "\\_")
+    s.replace('\\', "\\\\")
+        .replace('|', "\\|")
+        .replace('*', "\\*")
+        .replace('_', "\\_")
 }
 
 #[cfg(test)]
@@ -1240,7 +1342,10 @@ mod tests {
         assert_eq!(parse_int("0x"), None);
         assert_eq!(parse_int("1e3"), None);
         assert_eq!(parse_int("-"), None);
-        assert_eq!(parse_int("99999999999999999999999999999999999999999"), Some(i128::MAX));
+        assert_eq!(
+            parse_int("99999999999999999999999999999999999999999"),
+            Some(i128::MAX)
+        );
     }
 
     #[test]

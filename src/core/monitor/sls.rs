@@ -203,7 +203,10 @@ impl SoftLimits {
                 cfg,
             })
             .collect();
-        SoftLimits { axes, range_check_programmed }
+        SoftLimits {
+            axes,
+            range_check_programmed,
+        }
     }
 
     /// Number of axes.
@@ -267,10 +270,20 @@ impl SoftLimits {
             let (lo, hi) = path.extent(i);
             let s = start[i];
             if hi > a.pos.max(s) + COMMAND_EPSILON {
-                out.push(Violation { axis: i, side: Side::Positive, limit: a.pos, position: hi });
+                out.push(Violation {
+                    axis: i,
+                    side: Side::Positive,
+                    limit: a.pos,
+                    position: hi,
+                });
             }
             if lo < a.neg.min(s) - COMMAND_EPSILON {
-                out.push(Violation { axis: i, side: Side::Negative, limit: a.neg, position: lo });
+                out.push(Violation {
+                    axis: i,
+                    side: Side::Negative,
+                    limit: a.neg,
+                    position: lo,
+                });
             }
         }
     }
@@ -282,9 +295,19 @@ impl SoftLimits {
             return None;
         }
         if position > a.pos + COMMAND_EPSILON {
-            Some(Violation { axis: i, side: Side::Positive, limit: a.pos, position })
+            Some(Violation {
+                axis: i,
+                side: Side::Positive,
+                limit: a.pos,
+                position,
+            })
         } else if position < a.neg - COMMAND_EPSILON {
-            Some(Violation { axis: i, side: Side::Negative, limit: a.neg, position })
+            Some(Violation {
+                axis: i,
+                side: Side::Negative,
+                limit: a.neg,
+                position,
+            })
         } else {
             None
         }
@@ -409,7 +432,10 @@ impl SoftLimits {
     ) -> LimitUpdate {
         let range_check = self.range_check_programmed;
         let Some(a) = self.axes.get_mut(i) else {
-            return LimitUpdate { messages: Vec::new(), taken_over: false };
+            return LimitUpdate {
+                messages: Vec::new(),
+                taken_over: false,
+            };
         };
         let name = a.cfg.name.clone();
         let mut messages = Vec::new();
@@ -490,7 +516,10 @@ impl SoftLimits {
                 messages.push(m);
             }
         }
-        LimitUpdate { messages, taken_over }
+        LimitUpdate {
+            messages,
+            taken_over,
+        }
     }
 
     /// Manual-mode range of axis `i` (seed 001 §2 "Manual mode", §3.3): referenced axes are

@@ -5,7 +5,10 @@ use crate::core::path::Segment;
 
 fn xy(neg: f64, pos: f64) -> SoftLimits {
     let mut s = SoftLimits::new(
-        vec![AxisLimitConfig::linear("X", neg, pos), AxisLimitConfig::linear("Y", neg, pos)],
+        vec![
+            AxisLimitConfig::linear("X", neg, pos),
+            AxisLimitConfig::linear("Y", neg, pos),
+        ],
         false,
     );
     s.set_referenced(0, true);
@@ -21,13 +24,22 @@ fn ids_of(v: &[CncMessage]) -> Vec<u32> {
 fn line_to_the_limit_is_allowed_beyond_is_not() {
     let s = xy(-200.0, 200.0);
     let mut out = Vec::new();
-    s.check_path(&Segment::line(vec![0.0, 0.0], vec![200.0, 0.0]).unwrap(), &mut out);
+    s.check_path(
+        &Segment::line(vec![0.0, 0.0], vec![200.0, 0.0]).unwrap(),
+        &mut out,
+    );
     assert!(out.is_empty());
-    s.check_path(&Segment::line(vec![0.0, 0.0], vec![200.001, 0.0]).unwrap(), &mut out);
+    s.check_path(
+        &Segment::line(vec![0.0, 0.0], vec![200.001, 0.0]).unwrap(),
+        &mut out,
+    );
     assert_eq!(out.len(), 1);
     assert_eq!(out[0].side, Side::Positive);
     assert_eq!(s.path_message(&out[0]).id, 120002);
-    s.check_path(&Segment::line(vec![0.0, 0.0], vec![0.0, -250.0]).unwrap(), &mut out);
+    s.check_path(
+        &Segment::line(vec![0.0, 0.0], vec![0.0, -250.0]).unwrap(),
+        &mut out,
+    );
     assert_eq!(s.path_message(&out[0]).id, 120003);
     assert_eq!(out[0].axis, 1);
 }
@@ -37,13 +49,29 @@ fn arc_between_in_range_points_is_checked_at_its_apex() {
     // Half circle G02 from (-150, 0) to (150, 0) around (0, 0): apex Y = +150; limit 100.
     let s = xy(-100.0, 100.0);
     let mut out = Vec::new();
-    let arc = Segment::arc(vec![-50.0, 0.0], vec![50.0, 0.0], 0, 1, [50.0, 0.0], true, 1e-6)
-        .unwrap();
+    let arc = Segment::arc(
+        vec![-50.0, 0.0],
+        vec![50.0, 0.0],
+        0,
+        1,
+        [50.0, 0.0],
+        true,
+        1e-6,
+    )
+    .unwrap();
     s.check_path(&arc, &mut out);
     assert!(out.is_empty(), "apex at Y=50 is inside: {out:?}");
     let s = xy(-40.0, 40.0);
-    let arc = Segment::arc(vec![-30.0, 0.0], vec![30.0, 0.0], 0, 1, [30.0, 0.0], true, 1e-6)
-        .unwrap();
+    let arc = Segment::arc(
+        vec![-30.0, 0.0],
+        vec![30.0, 0.0],
+        0,
+        1,
+        [30.0, 0.0],
+        true,
+        1e-6,
+    )
+    .unwrap();
     s.check_path(&arc, &mut out);
     // End points ±30 inside ±40, apex Y = +30 inside; full travel fine.
     assert!(out.is_empty());
@@ -59,8 +87,16 @@ fn arc_between_in_range_points_is_checked_at_its_apex() {
 fn arc_apex_exactly_on_limit_is_allowed() {
     let s = xy(-30.0, 30.0);
     let mut out = Vec::new();
-    let arc = Segment::arc(vec![-30.0, 0.0], vec![30.0, 0.0], 0, 1, [30.0, 0.0], true, 1e-6)
-        .unwrap();
+    let arc = Segment::arc(
+        vec![-30.0, 0.0],
+        vec![30.0, 0.0],
+        0,
+        1,
+        [30.0, 0.0],
+        true,
+        1e-6,
+    )
+    .unwrap();
     s.check_path(&arc, &mut out);
     assert!(out.is_empty(), "{out:?}");
 }
@@ -94,7 +130,10 @@ fn inactive_when_not_referenced_modulo_or_switched_off() {
 #[test]
 fn actual_uses_tolerance_and_behaviour() {
     let mut s = xy(-200.0, 200.0);
-    assert!(s.check_actual(0, 200.1).is_none(), "limit + tolerance 0.1 is still fine");
+    assert!(
+        s.check_actual(0, 200.1).is_none(),
+        "limit + tolerance 0.1 is still fine"
+    );
     let m = s.check_actual(0, 200.1001).unwrap();
     assert_eq!((m.id, m.severity), (70021, Severity::Error));
     let m = s.check_actual(1, -200.2).unwrap();
@@ -108,7 +147,10 @@ fn actual_uses_tolerance_and_behaviour() {
     assert_eq!((m.id, m.severity), (70021, Severity::Warning));
     assert!(s.check_actual(0, 12.0).is_none(), "once per excursion");
     assert!(s.check_actual(0, 5.0).is_none());
-    assert!(s.check_actual(0, 11.0).is_some(), "re-armed after coming back");
+    assert!(
+        s.check_actual(0, 11.0).is_some(),
+        "re-armed after coming back"
+    );
 }
 
 #[test]
@@ -116,8 +158,14 @@ fn g98_g99_absolute_and_relative_as_seed_001_3_1_and_3_2() {
     // Configured ±10000 mm (the seeds' defaults ±100000000 × 0.1 µm).
     let mut s = xy(-10000.0, 10000.0);
     // N130 G98 X-100 Y-200
-    assert!(s.program_limit(0, Side::Negative, -100.0, false, 20.0).taken_over);
-    assert!(s.program_limit(1, Side::Negative, -200.0, false, 30.0).taken_over);
+    assert!(
+        s.program_limit(0, Side::Negative, -100.0, false, 20.0)
+            .taken_over
+    );
+    assert!(
+        s.program_limit(1, Side::Negative, -200.0, false, 30.0)
+            .taken_over
+    );
     assert_eq!(s.active_limits(0), Some((-100.0, 10000.0)));
     assert_eq!(s.active_limits(1), Some((-200.0, 10000.0)));
     s.reset();
@@ -160,8 +208,14 @@ fn g98_g99_errors_and_warnings() {
     assert_eq!(s.active_limits(0), Some((-200.0, 200.0)));
     // Without it (default) the extension of §3.3 is allowed.
     let mut s = xy(-200.0, 200.0);
-    assert!(s.program_limit(0, Side::Negative, -500.0, false, 199.0).taken_over);
-    assert!(s.program_limit(0, Side::Positive, 500.0, false, 199.0).taken_over);
+    assert!(
+        s.program_limit(0, Side::Negative, -500.0, false, 199.0)
+            .taken_over
+    );
+    assert!(
+        s.program_limit(0, Side::Positive, 500.0, false, 199.0)
+            .taken_over
+    );
     assert_eq!(s.active_limits(0), Some((-500.0, 500.0)));
 }
 
@@ -175,7 +229,11 @@ fn stop_distance_check() {
     // v = 10 mm/s: stop distance 0.5 mm.
     assert_eq!(s.check_stop_distance(0, 99.5, 10.0), None);
     assert_eq!(s.check_stop_distance(0, 99.6, 10.0), Some(Side::Positive));
-    assert_eq!(s.check_stop_distance(0, -99.9, -10.0), None, "negative check not enabled");
+    assert_eq!(
+        s.check_stop_distance(0, -99.9, -10.0),
+        None,
+        "negative check not enabled"
+    );
     assert_eq!(s.stop_distance_message(0, Side::Positive).id, 70195);
 }
 
@@ -188,14 +246,22 @@ fn jog_range_combines_sls_and_offset_limits() {
     s.set_referenced(0, true);
     assert_eq!(s.jog_range(0, 150.0), (50.0, 200.0));
     s.set_referenced(0, false);
-    assert_eq!(s.jog_range(0, 150.0), (50.0, 250.0), "not referenced: offset limits only");
+    assert_eq!(
+        s.jog_range(0, 150.0),
+        (50.0, 250.0),
+        "not referenced: offset limits only"
+    );
     cfg.manual_rel_neg = 0.0;
     cfg.manual_rel_pos = 0.0;
     cfg.manual_abs_pos = 180.0;
     let mut s = SoftLimits::new(vec![cfg], false);
     s.set_referenced(0, true);
     s.program_limit(0, Side::Positive, 500.0, false, 0.0);
-    assert_eq!(s.jog_range(0, 0.0), (-200.0, 180.0), "absolute limit holds even when G99 extends");
+    assert_eq!(
+        s.jog_range(0, 0.0),
+        (-200.0, 180.0),
+        "absolute limit holds even when G99 extends"
+    );
 }
 
 #[test]

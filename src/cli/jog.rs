@@ -1,0 +1,107 @@
+//! `fieldprobe jog`: manual mode from the command line (seed 001 §2 "Manual mode").
+//!
+//! ```text
+//! fieldprobe jog --axis X (--continuous +|- | --step DIST) [--feed MM_PER_MIN]
+//!                [--program SETUP.nc] [--machine FILE.toml] [--set KEY=VALUE]...
+//! ```
+//! `--program` runs an NC program first (positioning, G98 / G99); then manual mode is selected
+//! and the axis jogs. Prints the position where the axis stopped; warnings (50720 with
+//! P-MANU-00014, 150008) go to stderr.
+
+use super::{load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use anyhow::Context;
+use fieldprobe::channel::ChannelState;
+use fieldprobe::machine::{Machine, RunStatus};
+use fieldprobe::nc::parser::parse;
+use std::path::PathBuf;
+
+/// Arguments of `fieldprobe jog`.
+#[derive(Debug, clap::Args)]
+pub struct JogArgs {
+    /// Axis to jog.
+    #[arg(long)]
+    axis: String,
+    /// Continuous jog in direction `+` or `-` until the end of the permitted range.
+    #[arg(long, value_parser = ["+", "-"], conflicts_with = "step")]
+    continuous: Option<String>,
+    /// Incremental jog by DIST (mm, signed).
+    #[arg(long, allow_hyphen_values = true)]
+    step: Option<f64>,
+    /// Jog feed in mm/min.
+    #[arg(long, default_value_t = 1000.0)]
+    feed: f64,
+    /// NC program to run before manual mode is selected.
+    #[arg(long)]
+    program: Option<PathBuf>,
+    /// Machine file (TOML).
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// Parameter assignment in seed units.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+}
+
+/// Run the command; returns the exit code.
+pub fn run(a: JogArgs) -> anyhow::Result<i32> {
+    if a.continuous.is_none() && a.step.is_none() {
+        anyhow::bail!("jog: give --continuous + | - or --step DIST");
+    }
+    if !(a.feed > 0.0 && a.feed.is_finite()) {
+        anyhow::bail!("jog: --feed {} must be > 0 (mm/min)", a.feed);
+    }
+    let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
+    let mut m = Machine::new(&cfg)?;
+    let i = m
+        .channel()
+        .axis_index(&a.axis)
+        .with_context(|| format!("jog: unknown axis '{}'", a.axis))?;
+    if let Some(p) = &a.program {
+        let file = p.display().to_string();
+        let src = std::fs::read_to_string(p).with_context(|| format!("cannot read {file}"))?;
+        let program = match parse(&src) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
+                return Ok(EXIT_BAD_INPUT);
+            }
+        };
+        let report = m.run_program(&program, &mut |e| {
+            if let fieldprobe::machine::RunEvent::Message(msg) = e {
+                eprintln!("{msg}");
+            }
+        });
+        if report.status == RunStatus::Aborted {
+            return Ok(EXIT_CNC_ERROR);
+        }
+    } else if m.settle(10_000) != ChannelState::Idle {
+        for msg in m.channel_mut().take_messages() {
+            eprintln!("{msg}");
+        }
+        return Ok(EXIT_CNC_ERROR);
+    }
+    let ch = m.channel_mut();
+    ch.enter_manual();
+    let v = a.feed / 60.0;
+    if let Some(dir) = &a.continuous {
+        ch.jog_continuous(i, if dir == "-" { -v } else { v });
+    } else if let Some(d) = a.step {
+        ch.jog_increment(i, d, v);
+    }
+    m.settle(100_000_000);
+    let ch = m.channel_mut();
+    let failed = ch.messages().iter().any(|x| x.is_error());
+    for msg in ch.take_messages() {
+        eprintln!("{msg}");
+    }
+    let (lo, hi) = ch
+        .jog_range(i)
+        .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+    let ax = &ch.axes()[i];
+    println!(
+        "{} command {:.6} actual {:.6} range [{lo:.6}, {hi:.6}]",
+        ax.name(),
+        ax.command(),
+        ax.actual()
+    );
+    Ok(if failed { EXIT_CNC_ERROR } else { EXIT_OK })
+}

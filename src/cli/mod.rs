@@ -1,0 +1,95 @@
+//! Command-line interface. Contract (DESIGN.md, stable):
+//!
+//! ```text
+//! fieldprobe run PROGRAM.nc [--machine FILE.toml] [--link LINK] [--set KEY=VALUE]...
+//!                           [--probe-at AXIS=POS]... [--fixed-stop-at AXIS=POS]... [--json]
+//! ```
+//! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
+//! 1 aborted by a CNC error, 2 bad input.
+
+mod jog;
+mod params;
+mod run;
+
+use clap::{Parser, Subcommand};
+
+/// Exit code: program ran to its end.
+pub const EXIT_OK: i32 = 0;
+/// Exit code: aborted by a CNC error.
+pub const EXIT_CNC_ERROR: i32 = 1;
+/// Exit code: bad input (program, machine file, arguments).
+pub const EXIT_BAD_INPUT: i32 = 2;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "fieldprobe",
+    version,
+    about = "Fieldbus drive-probing stack and commissioning tool"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run an NC program on the machine (default: emulated CiA 402 axes X, Y, Z).
+    Run(run::RunArgs),
+    /// Manual mode: jog one axis continuously or by an increment and report where it stopped.
+    Jog(jog::JogArgs),
+    /// List the parameters of the seeds (ID, name path, type, default, range).
+    Params(params::ParamsArgs),
+}
+
+/// Parse arguments, run, return the exit code.
+pub fn main() -> i32 {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let code = if e.use_stderr() {
+                EXIT_BAD_INPUT
+            } else {
+                EXIT_OK
+            };
+            let _ = e.print();
+            return code;
+        }
+    };
+    let result = match cli.command {
+        Command::Run(a) => run::run(a),
+        Command::Jog(a) => jog::run(a),
+        Command::Params(a) => params::run(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("fieldprobe: {e:#}");
+            EXIT_BAD_INPUT
+        }
+    }
+}
+
+/// Load the machine file (or the default machine) and apply `--set` assignments.
+fn load_machine(
+    machine: Option<&std::path::Path>,
+    sets: &[String],
+) -> anyhow::Result<fieldprobe::params::MachineConfig> {
+    let mut cfg = match machine {
+        Some(p) => fieldprobe::params::MachineConfig::load(p)?,
+        None => fieldprobe::params::MachineConfig::default_machine(),
+    };
+    for s in sets {
+        cfg.apply_set(s)?;
+    }
+    Ok(cfg)
+}
+
+/// `--link` values this build knows.
+fn check_link(link: &str) -> anyhow::Result<()> {
+    match link {
+        "sim" => Ok(()),
+        other => anyhow::bail!(
+            "--link {other}: not available in this build; available links: sim (drive models in memory)"
+        ),
+    }
+}

@@ -1,0 +1,155 @@
+//! `fieldprobe run`.
+
+use super::{check_link, load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use anyhow::Context;
+use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus};
+use fieldprobe::nc::exec::Executor;
+use fieldprobe::nc::parser::parse;
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Arguments of `fieldprobe run`.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// The NC program.
+    program: PathBuf,
+    /// Machine file (TOML); default: axes X, Y, Z on emulated CiA 402 drives.
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// Link: `sim` (default).
+    #[arg(long, default_value = "sim")]
+    link: String,
+    /// Parameter assignment in seed units, e.g. `P-CHAN-00498=1`, `X.P-AXIS-00178=2000000`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+    /// Simulated probe: switches when the axis's actual (ACS) position crosses POS.
+    #[arg(long = "probe-at", value_name = "AXIS=POS")]
+    probe_at: Vec<String>,
+    /// Simulated mechanical stop at ACS position POS.
+    #[arg(long = "fixed-stop-at", value_name = "AXIS=POS")]
+    fixed_stop_at: Vec<String>,
+    /// Print one JSON document on stdout instead of the `#MSG` lines.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_axis_pos(opt: &str, s: &str) -> anyhow::Result<(String, f64)> {
+    let (ax, pos) = s
+        .split_once('=')
+        .with_context(|| format!("{opt} {s}: expected AXIS=POS, e.g. Z=100"))?;
+    let pos: f64 = pos
+        .trim()
+        .parse()
+        .ok()
+        .filter(|p: &f64| p.is_finite())
+        .with_context(|| format!("{opt} {s}: '{pos}' is not a position in mm"))?;
+    Ok((ax.trim().to_string(), pos))
+}
+
+/// Run the command; returns the exit code.
+pub fn run(a: RunArgs) -> anyhow::Result<i32> {
+    let file = a.program.display().to_string();
+    let src = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {file}"))?;
+    let program = match parse(&src) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
+            return Ok(EXIT_BAD_INPUT);
+        }
+    };
+    let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
+    check_link(&a.link)?;
+    for (opt, list) in [
+        ("--probe-at", &a.probe_at),
+        ("--fixed-stop-at", &a.fixed_stop_at),
+    ] {
+        for s in list {
+            let (ax, _) = parse_axis_pos(opt, s)?;
+            if cfg.axis(&ax).is_none() {
+                anyhow::bail!("{opt} {s}: unknown axis '{ax}'");
+            }
+        }
+        if !list.is_empty() {
+            anyhow::bail!(
+                "{opt}: the simulated probe and fixed-stop plant arrive with the measurement core; not available in this build"
+            );
+        }
+    }
+    let mut machine = Machine::new(&cfg)?;
+    let names = machine
+        .channel()
+        .axes()
+        .iter()
+        .map(|x| x.name().to_string())
+        .collect();
+    if let Err((span, msg)) = Executor::new(program.clone(), names).validate() {
+        eprintln!("{file}:{}:{}: {msg}", span.line, span.col);
+        return Ok(EXIT_BAD_INPUT);
+    }
+    let json = a.json;
+    let stdout = std::io::stdout();
+    let report = machine.run_program(&program, &mut |e| match e {
+        RunEvent::Output(line) if !json => {
+            let mut o = stdout.lock();
+            let _ = writeln!(o, "{line}");
+        }
+        RunEvent::Message(m) => eprintln!("{m}"),
+        RunEvent::Output(_) => {}
+    });
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report_json(&program.name, &report, &machine))?
+        );
+    }
+    Ok(match report.status {
+        RunStatus::Completed => EXIT_OK,
+        RunStatus::Aborted => EXIT_CNC_ERROR,
+    })
+}
+
+fn report_json(name: &Option<String>, r: &RunReport, m: &Machine) -> serde_json::Value {
+    let ch = m.channel();
+    let axes: Vec<_> = ch
+        .axes()
+        .iter()
+        .enumerate()
+        .map(|(i, ax)| {
+            let (neg, pos) = ch.soft_limits().active_limits(i).unwrap_or((f64::NAN, f64::NAN));
+            serde_json::json!({
+                "name": ax.name(),
+                "command": ax.command(),
+                "actual": ax.actual(),
+                "lag": ax.lag(),
+                "sls_negative": neg,
+                "sls_positive": pos,
+                "pcs_limits": ch.pcs_limits(i).map(|p| serde_json::json!({
+                    "positive": p.positive, "negative": p.negative,
+                    "distance_positive": p.distance_positive, "distance_negative": p.distance_negative,
+                })),
+            })
+        })
+        .collect();
+    let messages: Vec<_> = r
+        .messages()
+        .iter()
+        .map(|m| {
+            serde_json::json!({
+                "id": m.id,
+                "severity": m.severity.to_string(),
+                "text": m.text,
+                "block": m.block.and_then(|b| b.number),
+                "line": m.block.map(|b| b.line),
+                "axis": m.axis,
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "program": name,
+        "status": match r.status { RunStatus::Completed => "completed", RunStatus::Aborted => "aborted" },
+        "cycles": r.cycles,
+        "msg": r.output(),
+        "messages": messages,
+        "axes": axes,
+    })
+}
