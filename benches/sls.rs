@@ -63,5 +63,35 @@ fn bench_sls(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_sls);
+criterion_group!(benches, bench_sls, bench_machine_cycle);
 criterion_main!(benches);
+
+/// One whole interpolation cycle of a 32-axis machine on the in-memory link (exchange, adapters,
+/// drive models, SLS monitoring, interpolation of a G01 through all axes) — context for the
+/// monitoring share above.
+fn bench_machine_cycle(c: &mut Criterion) {
+    use fieldprobe::machine::Machine;
+    use fieldprobe::nc::exec::Executor;
+    use fieldprobe::nc::parser::parse;
+    use fieldprobe::params::MachineConfig;
+    let mut toml = String::from("[channel]\ncycle_time_us = 1000\n");
+    let names: Vec<String> = (0..AXES)
+        .map(|i| format!("{}{}", ["X", "Y", "Z", "A"][i % 4], i / 4 + 1))
+        .collect();
+    for n in &names {
+        toml.push_str(&format!("[[axis]]\nname = \"{n}\"\n"));
+    }
+    let cfg = MachineConfig::parse(&toml, "bench.toml").expect("machine");
+    let mut m = Machine::new(&cfg).expect("machine");
+    m.settle(10_000);
+    let words: Vec<String> = names.iter().map(|n| format!("{n}=5000")).collect();
+    let prog = parse(&format!("N10 G01 {} F100000\n", words.join(" "))).expect("program");
+    let mut exec = Executor::new(prog, names.clone());
+    exec.sync(m.channel());
+    let mut ev = Vec::new();
+    exec.step(m.channel_mut(), &mut ev);
+    let mut g = c.benchmark_group("machine_cycle");
+    g.throughput(Throughput::Elements(AXES as u64));
+    g.bench_function("32_axes_sim_link_g01", |b| b.iter(|| m.step()));
+    g.finish();
+}

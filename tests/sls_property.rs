@@ -26,19 +26,43 @@ enum Move {
     },
 }
 
-fn moves() -> impl Strategy<Value = Vec<Move>> {
-    let line = (-300i32..=300, -300i32..=300).prop_map(|(x, y)| Move::Line {
-        x: x as f64,
-        y: y as f64,
-    });
-    let half = (-150i32..=150, -150i32..=150, any::<bool>())
+/// Moves in percent of the limits: lines to −130 % … +130 % of the limit on each side (so
+/// roughly one coordinate in four lies beyond), half circles with centre offsets up to 60 % of
+/// the smaller half-range. Scaled to mm by [`scale`] once the limits are known.
+#[derive(Debug, Clone)]
+enum PctMove {
+    Line(i32, i32),
+    Half(i32, i32, bool),
+}
+
+fn moves() -> impl Strategy<Value = Vec<PctMove>> {
+    let line = (-130i32..=130, -130i32..=130).prop_map(|(x, y)| PctMove::Line(x, y));
+    let half = (-60i32..=60, -60i32..=60, any::<bool>())
         .prop_filter("non-zero radius", |(i, j, _)| *i != 0 || *j != 0)
-        .prop_map(|(i, j, cw)| Move::Half {
-            i: i as f64,
-            j: j as f64,
-            cw,
-        });
-    prop::collection::vec(prop_oneof![2 => line, 1 => half], 1..6)
+        .prop_map(|(i, j, cw)| PctMove::Half(i, j, cw));
+    prop::collection::vec(prop_oneof![3 => line, 2 => half], 1..8)
+}
+
+fn scale(m: &PctMove, nx: f64, px: f64, ny: f64, py: f64) -> Move {
+    let side = |pct: i32, neg: f64, pos: f64| {
+        let l = if pct < 0 { -neg } else { pos };
+        (f64::from(pct) * l / 100.0 * 1000.0).round() / 1000.0
+    };
+    match *m {
+        PctMove::Line(x, y) => Move::Line {
+            x: side(x, nx, px),
+            y: side(y, ny, py),
+        },
+        PctMove::Half(i, j, cw) => {
+            let half = (px - nx).min(py - ny) / 2.0;
+            let r = |p: i32| (f64::from(p) * half / 100.0 * 1000.0).round() / 1000.0;
+            Move::Half {
+                i: r(i),
+                j: r(j),
+                cw,
+            }
+        }
+    }
 }
 
 /// Min/max of X and Y over a move from `start`, computed independently.
@@ -95,14 +119,15 @@ fn program(moves: &[Move]) -> String {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, .. ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, .. ProptestConfig::default() })]
 
     #[test]
     fn sls_is_never_passed_and_crossing_blocks_never_run(
         neg_x in 50i64..=250, pos_x in 50i64..=250, neg_y in 50i64..=250, pos_y in 50i64..=250,
-        moves in moves(),
+        pct_moves in moves(),
     ) {
         let (nx, px, ny, py) = (-(neg_x as f64), pos_x as f64, -(neg_y as f64), pos_y as f64);
+        let moves: Vec<Move> = pct_moves.iter().map(|m| scale(m, nx, px, ny, py)).collect();
         let tol = 0.1; // P-AXIS-00179 default 1000 × 0.1 µm
         let mut cfg = MachineConfig::default_machine();
         for s in [

@@ -21,7 +21,10 @@ pub struct ProcessImage {
 impl ProcessImage {
     /// Zeroed image of the given sizes.
     pub fn new(output_len: usize, input_len: usize) -> Self {
-        ProcessImage { outputs: vec![0; output_len], inputs: vec![0; input_len] }
+        ProcessImage {
+            outputs: vec![0; output_len],
+            inputs: vec![0; input_len],
+        }
     }
 }
 

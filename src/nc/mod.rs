@@ -1,8 +1,8 @@
 //! The NC language subset: lexer, parser, AST, expressions, `#MSG` formatting, executor.
 
 pub mod ast;
+pub mod exec;
 pub mod expr;
 pub mod lexer;
 pub mod parser;
-pub mod exec;
 pub mod printf;
