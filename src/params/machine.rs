@@ -12,6 +12,9 @@
 //! name = "X"                           # project key, required: X Y Z A B C U V W (+ digits)
 //! drive = "cia402-generic"             # project key: drives/<name>.toml
 //! referenced = true                    # project key: axis referenced at start
+//! list = "x_axis.lis"                  # project key (also in [channel] / [manual]): an ISG
+//!                                      # parameter-list file, relative to this file, applied
+//!                                      # before the table's own keys
 //! kenngr.swe_neg = -2000000            # dotted keys are flattened back to the name path
 //! "P-AXIS-00178" = 2000000
 //! ```
@@ -99,8 +102,11 @@ impl MachineConfig {
                     if name == "channel" {
                         cfg.parse_channel(&ctx, &leaves)?;
                     } else {
-                        for leaf in &leaves {
-                            set_leaf(&mut cfg.manual, leaf, &ctx, &[])?;
+                        for leaf in leaves.iter().filter(|l| l.key == "list") {
+                            apply_list_leaf(&mut cfg.manual, leaf, &ctx)?;
+                        }
+                        for leaf in leaves.iter().filter(|l| l.key != "list") {
+                            set_leaf(&mut cfg.manual, leaf, &ctx, &["list"])?;
                         }
                         cfg.manual.check_cross(&ctx.at(line))?;
                     }
@@ -262,7 +268,13 @@ impl MachineConfig {
     }
 
     fn parse_channel(&mut self, ctx: &Ctx<'_>, leaves: &[Leaf<'_>]) -> Result<(), ParamError> {
+        for leaf in leaves.iter().filter(|l| l.key == "list") {
+            apply_list_leaf(&mut self.channel, leaf, ctx)?;
+        }
         for leaf in leaves {
+            if leaf.key == "list" {
+                continue;
+            }
             if leaf.key == "cycle_time_us" {
                 let origin = ctx.at(leaf.line);
                 let raw = match leaf.value {
@@ -276,7 +288,7 @@ impl MachineConfig {
                 };
                 self.cycle_time_us = cycle_time(&raw, &origin)?;
             } else {
-                set_leaf(&mut self.channel, leaf, ctx, &["cycle_time_us"])?;
+                set_leaf(&mut self.channel, leaf, ctx, &["cycle_time_us", "list"])?;
             }
         }
         self.channel.check_cross(&ctx.at(0))
@@ -298,9 +310,13 @@ impl MachineConfig {
         let mut drive = DEFAULT_DRIVE.to_string();
         let mut referenced = true;
         let mut params = ParamSet::new(Scope::Axis);
+        for leaf in leaves.iter().filter(|l| l.key == "list") {
+            apply_list_leaf(&mut params, leaf, ctx)?;
+        }
         for leaf in &leaves {
             let origin = ctx.at(leaf.line);
             match leaf.key.as_str() {
+                "list" => {}
                 "name" => {
                     let n = string_value(leaf, &origin, "an axis name such as \"X\"")?;
                     if !valid_axis_name(n) {
@@ -339,7 +355,12 @@ impl MachineConfig {
                         })
                     }
                 },
-                _ => set_leaf(&mut params, leaf, ctx, &["name", "drive", "referenced"])?,
+                _ => set_leaf(
+                    &mut params,
+                    leaf,
+                    ctx,
+                    &["name", "drive", "referenced", "list"],
+                )?,
             }
         }
         let Some((name, line)) = name else {
@@ -499,6 +520,26 @@ fn flatten<'a>(
 
 /// Set one leaf in a parameter list; `project_keys` are the section's non-parameter keys, used
 /// for "did you mean" on typos.
+/// `list = "FILE"`: apply an ISG parameter-list file (path relative to the machine file's
+/// directory) to `set`. Errors in the list name the list file and its line.
+fn apply_list_leaf(set: &mut ParamSet, leaf: &Leaf<'_>, ctx: &Ctx<'_>) -> Result<(), ParamError> {
+    let origin = ctx.at(leaf.line);
+    let rel = string_value(
+        leaf,
+        &origin,
+        "a parameter-list file name such as \"x_axis.lis\"",
+    )?;
+    let base = std::path::Path::new(ctx.file)
+        .parent()
+        .unwrap_or(std::path::Path::new(""));
+    let path = base.join(rel);
+    let text = std::fs::read_to_string(&path).map_err(|e| ParamError::Config {
+        origin: origin.clone(),
+        message: format!("list = \"{rel}\": cannot read {}: {e}", path.display()),
+    })?;
+    crate::params::listfile::apply_list(set, &text, &path.display().to_string())
+}
+
 fn set_leaf(
     set: &mut ParamSet,
     leaf: &Leaf<'_>,

@@ -1,0 +1,72 @@
+//! Machine files that pull ISG parameter-list files (`list = "…"`), and their errors.
+
+use fieldprobe::params::MachineConfig;
+
+fn write(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn example_machine_with_list_file_loads_the_list_values() {
+    let p =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/machines/xy200-lists.toml");
+    let cfg = MachineConfig::load(&p).unwrap();
+    let x = cfg.axis("X").unwrap();
+    assert_eq!(x.params.int("P-AXIS-00177"), -2_000_000);
+    assert_eq!(x.params.int("P-AXIS-00178"), 2_000_000);
+    assert_eq!(x.params.int("P-AXIS-00118"), 1);
+}
+
+#[test]
+fn table_keys_override_the_list_and_list_errors_name_the_list_line() {
+    let dir = tempfile::tempdir().unwrap();
+    write(
+        dir.path(),
+        "x.lis",
+        "# X\nkenngr.swe_pos 3000000\nkenngr.swe_neg -3000000\n",
+    );
+    let m = write(
+        dir.path(),
+        "m.toml",
+        "[[axis]]\nname = \"X\"\nlist = \"x.lis\"\nkenngr.swe_pos = 1000000\n",
+    );
+    let cfg = MachineConfig::load(&m).unwrap();
+    assert_eq!(cfg.axis("X").unwrap().params.int("P-AXIS-00178"), 1_000_000);
+    assert_eq!(
+        cfg.axis("X").unwrap().params.int("P-AXIS-00177"),
+        -3_000_000
+    );
+
+    write(
+        dir.path(),
+        "bad.lis",
+        "kenngr.swe_neg -1000\nkenngr.swe_toleranz -5\n",
+    );
+    let m = write(
+        dir.path(),
+        "m2.toml",
+        "[[axis]]\nname = \"X\"\nlist = \"bad.lis\"\n",
+    );
+    let e = MachineConfig::load(&m).unwrap_err().to_string();
+    assert!(e.contains("bad.lis:2"), "{e}");
+    assert!(e.contains("P-AXIS-00179"), "{e}");
+
+    let m = write(
+        dir.path(),
+        "m3.toml",
+        "[channel]\ncycle_time_us = 1000\n\n[[axis]]\nname = \"X\"\nlist = \"missing.lis\"\n",
+    );
+    let e = MachineConfig::load(&m).unwrap_err().to_string();
+    assert!(e.contains("m3.toml:6") && e.contains("missing.lis"), "{e}");
+
+    write(dir.path(), "chan.lis", "range_check_prog_soft_limits 1\n");
+    let m = write(
+        dir.path(),
+        "m4.toml",
+        "[channel]\nlist = \"chan.lis\"\n[[axis]]\nname = \"X\"\n",
+    );
+    let cfg = MachineConfig::load(&m).unwrap();
+    assert_eq!(cfg.channel.int("P-CHAN-00498"), 1);
+}
