@@ -84,14 +84,35 @@ fn bench_machine_cycle(c: &mut Criterion) {
     let cfg = MachineConfig::parse(&toml, "bench.toml").expect("machine");
     let mut m = Machine::new(&cfg).expect("machine");
     m.settle(10_000);
-    let words: Vec<String> = names.iter().map(|n| format!("{n}=5000")).collect();
-    let prog = parse(&format!("N10 G01 {} F100000\n", words.join(" "))).expect("program");
+    // Long back-and-forth blocks through all axes, so every measured cycle interpolates.
+    let block = |v: i32| {
+        names
+            .iter()
+            .map(|n| format!("{n}={v}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let mut src = String::from("N1 G01 F100000\n");
+    for k in 0..1000 {
+        src.push_str(&format!(
+            "N{} {}\n",
+            k + 2,
+            block(if k % 2 == 0 { 9000 } else { -9000 })
+        ));
+    }
+    let prog = parse(&src).expect("program");
     let mut exec = Executor::new(prog, names.clone());
     exec.sync(m.channel());
     let mut ev = Vec::new();
-    exec.step(m.channel_mut(), &mut ev);
     let mut g = c.benchmark_group("machine_cycle");
     g.throughput(Throughput::Elements(AXES as u64));
-    g.bench_function("32_axes_sim_link_g01", |b| b.iter(|| m.step()));
+    g.bench_function("32_axes_sim_link_g01", |b| {
+        b.iter(|| {
+            if m.channel().is_idle() {
+                exec.step(m.channel_mut(), &mut ev);
+            }
+            m.step()
+        })
+    });
     g.finish();
 }

@@ -311,3 +311,33 @@ fn pcs_limits_objects_with_p_chan_00489() {
         "display off by default"
     );
 }
+
+#[test]
+fn limits_are_restored_at_reset_and_mode_change_but_kept_into_jog() {
+    use fieldprobe::channel::OperationMode;
+    let mut m = machine(&[]);
+    run_on(&mut m, "N10 G99 X50\nN20 M30\n");
+    // Selecting jog keeps the programmed limit (§3.3).
+    assert!(m.channel_mut().enter_manual());
+    assert_eq!(m.channel().jog_range(0), Some((-100.0, 50.0)));
+    assert!(m.channel_mut().leave_manual());
+    // A mode change (automatic → MDI) pre-assigns P-AXIS-00178 again (§3.2 Notice).
+    assert!(m
+        .channel_mut()
+        .select_operation_mode(OperationMode::ManualBlock));
+    assert_eq!(
+        m.channel().soft_limits().active_limits(0),
+        Some((-200.0, 200.0))
+    );
+    run_on(&mut m, "N10 G98 X-50\nN20 M30\n");
+    assert_eq!(
+        m.channel().soft_limits().active_limits(0),
+        Some((-50.0, 200.0))
+    );
+    // Controller reset does too.
+    m.channel_mut().reset();
+    assert_eq!(
+        m.channel().soft_limits().active_limits(0),
+        Some((-200.0, 200.0))
+    );
+}

@@ -106,6 +106,32 @@ pub enum Prepared {
     Rejected,
 }
 
+/// Operating mode of the channel (automatic program or manual block / MDI).
+///
+/// Seed 001 §3.1 / §3.2: the programmed SLS (`V.A.-SWE`, `V.A.+SWE`) are pre-assigned from
+/// P-AXIS-00177 / 00178 "at a reset, mode change or axis change". Selecting *jog* (manual mode,
+/// [`Channel::enter_manual`]) is not such a change: §3.3 lets G98 / G99 programmed before manual
+/// mode extend the manual range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OperationMode {
+    /// Automatic: NC programs.
+    #[default]
+    Automatic,
+    /// Manual block (MDI): single blocks typed in.
+    ManualBlock,
+}
+
+/// CNC object index group of the GEO task axis data (seed 001 §4.5).
+pub const CNC_OBJECT_GROUP_GEO_AXIS: u32 = 0x0012_1301;
+/// Index offset of "Positive PCS limit" (seed 001 §4.5).
+pub const CNC_OBJECT_POSITIVE_PCS_LIMIT: u32 = 0x10096;
+/// Index offset of "Negative PCS limit".
+pub const CNC_OBJECT_NEGATIVE_PCS_LIMIT: u32 = 0x10097;
+/// Index offset of "Distance to positive PCS limit".
+pub const CNC_OBJECT_DISTANCE_POSITIVE_PCS_LIMIT: u32 = 0x10098;
+/// Index offset of "Distance to negative PCS limit".
+pub const CNC_OBJECT_DISTANCE_NEGATIVE_PCS_LIMIT: u32 = 0x10099;
+
 /// Coarse state of the channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ChannelState {
@@ -168,6 +194,7 @@ pub struct Channel {
     next: Vec<f64>,
     violations: Vec<Violation>,
     cycles: u64,
+    operation_mode: OperationMode,
 }
 
 impl Channel {
@@ -203,6 +230,7 @@ impl Channel {
             next: vec![0.0; n],
             violations: Vec::new(),
             cycles: 0,
+            operation_mode: OperationMode::Automatic,
         })
     }
 
@@ -302,6 +330,42 @@ impl Channel {
         let offset = self.pcs_offset(i);
         let pcs = self.axes.get(i)?.command() - offset;
         self.sls.pcs_limits(i, offset, pcs)
+    }
+
+    /// Read one of the four PCS-limit CNC objects of seed 001 §4.5 (`REAL64`, unit 0.1 µm or
+    /// 0.0001°) for axis `i`: index group [`CNC_OBJECT_GROUP_GEO_AXIS`], index offsets
+    /// 0x10096 … 0x10099. `None` when the object does not exist or P-CHAN-00489 is not set.
+    pub fn read_cnc_object(&self, i: usize, index_group: u32, index_offset: u32) -> Option<f64> {
+        if index_group != CNC_OBJECT_GROUP_GEO_AXIS {
+            return None;
+        }
+        let p = self.pcs_limits(i)?;
+        let mm = match index_offset {
+            CNC_OBJECT_POSITIVE_PCS_LIMIT => p.positive,
+            CNC_OBJECT_NEGATIVE_PCS_LIMIT => p.negative,
+            CNC_OBJECT_DISTANCE_POSITIVE_PCS_LIMIT => p.distance_positive,
+            CNC_OBJECT_DISTANCE_NEGATIVE_PCS_LIMIT => p.distance_negative,
+            _ => return None,
+        };
+        Some(mm * crate::units::PARAM_POS_PER_UNIT)
+    }
+
+    /// Current operating mode.
+    pub fn operation_mode(&self) -> OperationMode {
+        self.operation_mode
+    }
+
+    /// Change the operating mode (only when idle). A real change restores the configured SLS
+    /// (seed 001 §3.1 / §3.2 "mode change"). Returns false when the channel is busy or in jog.
+    pub fn select_operation_mode(&mut self, mode: OperationMode) -> bool {
+        if !matches!(self.mode, Mode::Idle | Mode::Aborted) {
+            return false;
+        }
+        if mode != self.operation_mode {
+            self.operation_mode = mode;
+            self.sls.reset();
+        }
+        true
     }
 
     /// Controller reset: restores the configured SLS (seed 001 §3.3), clears the error state and
