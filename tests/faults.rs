@@ -102,3 +102,18 @@ fn modulo_rotary_axis_is_exempt_non_modulo_rotary_is_not() {
     let r = m.run_program(&prog, &mut |_| {});
     assert_eq!(r.message_ids(), vec![120002]);
 }
+
+#[test]
+fn target_beyond_drive_position_range_is_refused_in_preparation() {
+    // Not referenced: no SLS; 10000 inc/mm → INTEGER32 covers ±214748 mm.
+    let mut cfg = MachineConfig::default_machine();
+    cfg.axis_mut("X").unwrap().referenced = false;
+    let mut m = Machine::new(&cfg).unwrap();
+    let r = m.run_program(
+        &parse("N10 G01 G90 X300000 F6000\nN20 M30\n").unwrap(),
+        &mut |_| {},
+    );
+    assert_eq!(r.status, RunStatus::Aborted);
+    assert_eq!(r.message_ids(), vec![900013]);
+    assert_eq!(m.channel().axes()[0].command(), 0.0);
+}

@@ -468,6 +468,25 @@ impl Channel {
             self.mode = Mode::Aborted;
             return Prepared::Rejected;
         }
+        // Every point of the path must be representable in the drive's INTEGER32 positions.
+        for (i, a) in self.axes.iter().enumerate() {
+            let (lo, hi) = segment.extent(i);
+            let sc = a.scaling();
+            if sc.to_increments(lo).is_none() || sc.to_increments(hi).is_none() {
+                let name = a.name().to_string();
+                self.push(
+                    CncMessage::error(
+                        ids::DRIVE_RANGE,
+                        format!(
+                            "axis {name}: the path reaches [{lo:.6}, {hi:.6}], outside the drive's position range"
+                        ),
+                    )
+                    .on_axis(&name),
+                );
+                self.mode = Mode::Aborted;
+                return Prepared::Rejected;
+            }
+        }
         let profile = self.plan(&segment, req);
         if profile.duration() <= 0.0 {
             return Prepared::Empty;
@@ -694,11 +713,18 @@ impl Channel {
         // 5. Outputs.
         for i in 0..self.axes.len() {
             let next = self.next[i];
-            self.velocity[i] = (next - self.axes[i].command()) / dt;
+            let prev = self.axes[i].command();
+            self.velocity[i] = (next - prev) / dt;
             self.axes[i].set_command(next);
             if let Err(e) = self.axes[i].write(now, &mut images[i].outputs) {
-                self.push(CncMessage::error(ids::DRIVE_RANGE, e.to_string()));
-                self.mode = Mode::Aborted;
+                // Keep the last valid set-point; report once and stop.
+                self.axes[i].set_command(prev);
+                self.velocity[i] = 0.0;
+                let _ = self.axes[i].write(now, &mut images[i].outputs);
+                if !matches!(self.mode, Mode::Aborted) {
+                    self.push(CncMessage::error(ids::DRIVE_RANGE, e.to_string()));
+                    self.mode = Mode::Aborted;
+                }
             }
         }
     }

@@ -87,7 +87,14 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
     } else if let Some(d) = a.step {
         ch.jog_increment(i, d, v);
     }
-    m.settle(100_000_000);
+    // A continuous jog without any limit (non-referenced axis, offset limits 0) would run on:
+    // stop it after ten minutes of virtual time.
+    let ten_minutes = 600_000_000 / u64::from(cfg.cycle_time_us).max(1);
+    if m.settle(ten_minutes) == ChannelState::Busy {
+        eprintln!("jog: no limit reached after 10 min of jogging; stopped");
+        m.channel_mut().jog_stop(i);
+        m.settle(ten_minutes);
+    }
     let ch = m.channel_mut();
     let failed = ch.messages().iter().any(|x| x.is_error());
     for msg in ch.take_messages() {
