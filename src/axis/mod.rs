@@ -116,6 +116,9 @@ impl Axis {
             self.command = self.actual;
             self.aligned = true;
         }
+        if self.feedback.map(|f| f.state) != Some(fb.state) {
+            tracing::debug!(axis = %self.name, state = ?fb.state, statusword = format_args!("{:#06x}", fb.statusword), "drive power state");
+        }
         let fb = self.feedback.insert(fb);
         Ok(fb)
     }

@@ -216,7 +216,7 @@ impl DriveAdapter for Ds402Adapter {
         let mode_display = get(&self.tx, inputs, 0x6061).map(|v| v as i8);
         let state = decode_statusword(statusword);
         if state != self.state {
-            tracing::debug!(
+            tracing::trace!(
                 target: "fieldprobe::drive::ds402",
                 statusword = format_args!("0x{statusword:04X}"),
                 "power state {:?} -> {:?}",
