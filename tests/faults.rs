@@ -117,3 +117,30 @@ fn target_beyond_drive_position_range_is_refused_in_preparation() {
     assert_eq!(r.message_ids(), vec![900013]);
     assert_eq!(m.channel().axes()[0].command(), 0.0);
 }
+
+#[test]
+fn after_a_drive_fault_the_next_program_start_resets_and_runs() {
+    let mut m = default_machine();
+    let prog = parse("N10 G01 G90 X10 F6000\nN20 M30\n").unwrap();
+    m.link_mut()
+        .model_mut(0)
+        .unwrap()
+        .write_object(0x6065, 0, 10)
+        .unwrap();
+    let r = m.run_program(&prog, &mut |_| {});
+    assert_eq!(r.message_ids(), vec![900010]);
+    assert_eq!(
+        m.link_mut().model_mut(0).unwrap().state(),
+        fieldprobe::drive::PowerState::Fault
+    );
+    // Open the window again; the controller reset at program start sends the fault-reset edge
+    // (controlword bit 7) and re-enables.
+    m.link_mut()
+        .model_mut(0)
+        .unwrap()
+        .write_object(0x6065, 0, 300_000)
+        .unwrap();
+    let r = m.run_program(&prog, &mut |_| {});
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.message_ids());
+    assert_eq!(m.channel().axes()[0].command(), 10.0);
+}
