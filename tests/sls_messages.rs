@@ -298,11 +298,12 @@ fn manual_mode_absolute_offset_limits_hold_when_g99_extends() {
 
 #[test]
 fn pcs_limits_objects_with_p_chan_00489() {
-    let src = "N10 G00 G90 X50\nN20 G92 X0\nN30 G01 X10 F3000\nN40 M30\n";
+    let src = "N10 G92 X50\nN20 G01 G90 X10 F3000\nN40 M30\n";
     let (r, m) = run(src, &["P-CHAN-00489=1"]);
     assert_eq!(r.status, RunStatus::Completed);
     let p = m.channel().pcs_limits(0).unwrap();
-    // ACS limits ±200, PCS = ACS − 50, PCS position 10.
+    // G92 X50: ACS = PCS + 50 (ISG reference-point offset); ACS limits ±200 → PCS 150 / −250;
+    // PCS position 10.
     assert_eq!((p.positive, p.negative), (150.0, -250.0));
     assert_eq!((p.distance_positive, p.distance_negative), (140.0, 260.0));
     let (_, m) = run(src, &[]);

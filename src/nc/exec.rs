@@ -306,11 +306,13 @@ impl Executor {
             return Ok(end);
         }
         if g92 {
+            // ISG G92 is a reference-point offset: the programmed values shift the PCS
+            // additively (seed 004 §5 meas2: `G92 Z33` → ACS = PCS + 33). The axis does not move;
+            // its programmed (PCS) position changes by the difference of the offsets.
             for (i, v) in axes {
-                // The current position becomes `v` in the PCS.
-                let acs = ch.axes().get(i).map(|a| a.command()).unwrap_or(0.0);
-                ch.set_pcs_offset(i, acs - v);
-                self.prog[i] = v;
+                let old = ch.pcs_offset(i);
+                ch.set_pcs_offset(i, v);
+                self.prog[i] -= v - old;
             }
             return Ok(end);
         }
