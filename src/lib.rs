@@ -23,4 +23,5 @@ pub mod machine;
 pub mod messages;
 pub mod nc;
 pub mod params;
+pub mod sim;
 pub mod units;

@@ -236,6 +236,7 @@ impl DriveAdapter for Ds402Adapter {
             operational: state == PowerState::OperationEnabled && csp,
             fault: matches!(state, PowerState::Fault | PowerState::FaultReactionActive),
             following_error_flag: csp && statusword & 0x2000 != 0,
+            torque: None,
         })
     }
 

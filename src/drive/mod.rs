@@ -74,6 +74,86 @@ pub struct DriveFeedback {
     pub fault: bool,
     /// Statusword bit 13 (following error in CSP).
     pub following_error_flag: bool,
+    /// Torque actual value in per mille of rated torque (0x6077), when mapped.
+    pub torque: Option<i32>,
+}
+
+/// Edge of a probe signal that latches (P-AXIS-00518 `kenngr.measure.edge`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ProbeEdge {
+    /// Rising edge (POS).
+    Positive,
+    /// Falling edge (NEG).
+    Negative,
+}
+
+/// Trigger source of a touch probe (CiA 402 0x60B8 bits 2–3 / 10–11).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ProbeTrigger {
+    /// 00b: the touch probe's own digital input.
+    Input,
+    /// 01b: zero impulse (index) of the position encoder.
+    ZeroPulse,
+    /// 10b: source as defined in 0x60D0 sub 1 / 2.
+    SourceObject,
+}
+
+/// P-AXIS-00702 `antr.canopen.probing_trigger_source` (seed 004 §6.4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum TriggerSourceMode {
+    /// `DEFAULT`: probe 1 / 2 on its own input (0x60B8 source bits 00b).
+    #[default]
+    Default,
+    /// `CNC_DEFINED`: the CNC writes 0x60D0 with the input of P-AXIS-00517 and selects 10b.
+    CncDefined,
+    /// `DRIVE_DEFINED`: the drive's 0x60D0 defines the trigger; the control word selects 10b
+    /// and the status word is evaluated differently (either stored bit counts).
+    DriveDefined,
+}
+
+/// What the axis layer asks a drive's latch unit to do (one arming).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct ProbeRequest {
+    /// Touch probe 1 or 2 (P-AXIS-00517 selects it for CiA 402 drives).
+    pub probe: u8,
+    /// Edge to latch on (P-AXIS-00518).
+    pub edge: ProbeEdge,
+    /// Trigger source.
+    pub trigger: ProbeTrigger,
+    /// Continuous mode (every edge) instead of first event.
+    pub continuous: bool,
+    /// P-AXIS-00702.
+    pub source_mode: TriggerSourceMode,
+    /// The drive input number written to 0x60D0 with `CNC_DEFINED` (P-AXIS-00517).
+    pub input: u8,
+}
+
+/// One latched value reported by a drive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct ProbeEvent {
+    /// Touch probe 1 or 2.
+    pub probe: u8,
+    /// Edge that latched.
+    pub edge: ProbeEdge,
+    /// Latched position in increments (0x60BA … 0x60BD).
+    pub position: i32,
+    /// Running count of events of this arming (1 for the first), for loss detection.
+    pub sequence: u32,
+}
+
+/// State of a drive's latch unit as the adapter sees it.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum ProbeState {
+    /// Not armed.
+    #[default]
+    Idle,
+    /// Arming written, waiting for the drive to confirm (0x60B9 enabled, stored bits clear).
+    Arming,
+    /// Armed and confirmed: events are fresh.
+    Armed,
+    /// The drive does not behave as the profile demands (e.g. a stored bit without enable, a
+    /// lost continuous-mode event); the measurement must not use this latch.
+    Failed(String),
 }
 
 /// Errors of the drive layer.
@@ -87,6 +167,9 @@ pub enum DriveError {
         /// Bytes present.
         got: usize,
     },
+    /// The drive or adapter does not offer the function.
+    #[error("{0}")]
+    Unsupported(String),
     /// A drive definition file is invalid.
     #[error("{file}:{line}: {message}")]
     Definition {
@@ -114,4 +197,24 @@ pub trait DriveAdapter: Send + fmt::Debug {
         command: &DriveCommand,
         outputs: &mut [u8],
     ) -> Result<(), DriveError>;
+
+    /// Arm the latch unit (takes effect with the next [`write_outputs`](Self::write_outputs)).
+    /// Drives without a latch unit refuse.
+    fn arm_probe(&mut self, request: &ProbeRequest) -> Result<(), DriveError> {
+        let _ = request;
+        Err(DriveError::Unsupported("this drive has no latch unit".into()))
+    }
+
+    /// Disarm the latch unit; pending events are dropped.
+    fn disarm_probe(&mut self) {}
+
+    /// State of the latch unit.
+    fn probe_state(&self) -> ProbeState {
+        ProbeState::Idle
+    }
+
+    /// The next fresh latch event decoded by [`read_inputs`](Self::read_inputs), oldest first.
+    fn take_probe_event(&mut self) -> Option<ProbeEvent> {
+        None
+    }
 }

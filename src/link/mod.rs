@@ -48,6 +48,18 @@ pub enum LinkError {
         /// Images given.
         images: usize,
     },
+    /// An acyclic access was refused by the device (CiA 301 SDO abort code).
+    #[error("device {device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x}")]
+    Abort {
+        /// Device (axis) index on the link.
+        device: usize,
+        /// Object index.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// CiA 301 abort code.
+        code: u32,
+    },
     /// Anything else (setup, configuration).
     #[error("{0}")]
     Other(String),
@@ -57,4 +69,17 @@ pub enum LinkError {
 pub trait Link: Send {
     /// Exchange all process images once: outputs go to the drives, inputs come back.
     fn exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError>;
+
+    /// Acyclic read of object `index:sub` of device `device` (SDO upload / CoE). Links without
+    /// a mailbox refuse.
+    fn read_object(&mut self, device: usize, index: u16, sub: u8) -> Result<i64, LinkError> {
+        let _ = (device, index, sub);
+        Err(LinkError::Other("this link has no acyclic (mailbox) access".into()))
+    }
+
+    /// Acyclic write of object `index:sub` of device `device` (SDO download / CoE).
+    fn write_object(&mut self, device: usize, index: u16, sub: u8, value: i64) -> Result<(), LinkError> {
+        let _ = (device, index, sub, value);
+        Err(LinkError::Other("this link has no acyclic (mailbox) access".into()))
+    }
 }

@@ -74,6 +74,31 @@ pub enum Item {
         /// Position of the letter.
         span: Span,
     },
+    /// `D<expr>`: select tool offset number (probe ball radius, seed 004 §5 meas_example).
+    D {
+        /// Tool offset number.
+        value: Expr,
+        /// Position of the `D`.
+        span: Span,
+    },
+    /// An independent-axis motion: `X[INDP_SYN G100 G90 POS100 FEED500]` (seed 004 §2).
+    Independent {
+        /// Axis name.
+        axis: String,
+        /// The motion.
+        motion: IndependentMotion,
+        /// Position of the axis letter.
+        span: Span,
+    },
+    /// Arithmetic parameter assignment `P1 = <expr>` (a block of its own).
+    Assign {
+        /// Parameter number.
+        param: u32,
+        /// Value.
+        value: Expr,
+        /// Position of the `P`.
+        span: Span,
+    },
     /// A `#` control command.
     Command {
         /// The command.
@@ -81,6 +106,31 @@ pub enum Item {
         /// Position of the `#`.
         span: Span,
     },
+}
+
+/// The bracket of an independent-axis word: `[INDP_SYN G100 G90 POS100 FEED500]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IndependentMotion {
+    /// `INDP_SYN` (true; the block waits for the motion at its end) or `INDP_ASYN`.
+    pub sync: bool,
+    /// G codes inside the bracket (e.g. 100, 90, 91, 0, 1).
+    pub gcodes: Vec<u32>,
+    /// `POS<expr>` target.
+    pub pos: Expr,
+    /// `FEED<expr>` feed in mm/min.
+    pub feed: Option<Expr>,
+}
+
+/// One assignment of a bracketed keyword list: `AXNR=2`, `SIGNAL=PLC`, `WAIT`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeyArg {
+    /// Keyword, upper-cased (`AXNR`, `SIGNAL`, `KEY`, `VAL`, `P`, `TYP`, `DEC`, `SERC`, `WAIT`).
+    pub key: String,
+    /// Value: an expression, a bare word (`PLC`, `TORQUE_LIMIT`, `S-0-0092`) as [`Expr::Str`],
+    /// or `None` for a flag (`WAIT`, `SERC`).
+    pub value: Option<Expr>,
+    /// Position of the keyword.
+    pub span: Span,
 }
 
 /// `#` control commands.
@@ -95,6 +145,79 @@ pub enum Command {
         /// Arguments.
         args: Vec<Expr>,
     },
+    /// `#MEAS MODE [expr]` / `#MEAS MODE` (back to P-CHAN-00057).
+    MeasMode {
+        /// The type, or `None` for the channel default.
+        mode: Option<Expr>,
+    },
+    /// `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`: per-axis signal source override (P-AXIS-00516
+    /// / 00517 / 00518 for the program).
+    MeasConfig {
+        /// The keyword list as written.
+        args: Vec<KeyArg>,
+    },
+    /// `#MEAS PREPARE [AXNR=.. {AXNR=..}]` (seed 004 §7.2).
+    MeasPrepare {
+        /// The keyword list as written.
+        args: Vec<KeyArg>,
+    },
+    /// `#CS ON [x, y, z, a, b, c]` (missing values are 0) / `#CS OFF`.
+    Cs {
+        /// `None` for OFF.
+        on: Option<Vec<Expr>>,
+    },
+    /// `#TRAFO ON` / `#TRAFO OFF` — recognised so that it can be refused clearly.
+    Trafo {
+        /// ON.
+        on: bool,
+    },
+    /// `#DRIVE WR [SYN] [AX=.. KEY=.. VAL=.. WAIT]` / `#DRIVE RD [SYN] [AX=.. KEY=.. P=Pn]`.
+    Drive {
+        /// WR (true) or RD.
+        write: bool,
+        /// SYN.
+        sync: bool,
+        /// The keyword list as written.
+        args: Vec<KeyArg>,
+    },
+    /// `#IDENT WR|RD [SYN] [AXNR .. ID .. VAL=|P= TYP .. DEC .. SERC]` (seed 004 §7.3.1). Keywords
+    /// may be written with or without `=` (`AXNR 1`, `AXNR=1`).
+    Ident {
+        /// WR (true) or RD.
+        write: bool,
+        /// SYN.
+        sync: bool,
+        /// The keyword list as written.
+        args: Vec<KeyArg>,
+    },
+    /// `#SET AX LINK [group, [slave=master, G, p1, p2] …]` (gantry coupling, seed 004 §7.3.1).
+    SetAxLink {
+        /// Link group number.
+        group: Expr,
+        /// Couplings.
+        links: Vec<AxLink>,
+    },
+    /// `#ENABLE AX LINK [group]` / `#DISABLE AX LINK [group]`.
+    EnableAxLink {
+        /// Enable (true) or disable.
+        enable: bool,
+        /// Link group number (`None` = all).
+        group: Option<Expr>,
+    },
+}
+
+/// One coupling of `#SET AX LINK`: `[X2=X, G, 15, 20]` — slave X2 follows master X as a gantry
+/// (`G`), with the two monitoring parameters as written.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxLink {
+    /// Slave axis name.
+    pub slave: String,
+    /// Master axis name.
+    pub master: String,
+    /// Coupling kind as written (`G` = gantry).
+    pub kind: String,
+    /// Further parameters as written.
+    pub params: Vec<Expr>,
 }
 
 /// Expression (inside `[...]`, after an address letter, or as a `#MSG` argument).
@@ -110,6 +233,8 @@ pub enum Expr {
     Neg(Box<Expr>),
     /// Binary arithmetic.
     Bin(BinOp, Box<Expr>, Box<Expr>),
+    /// Arithmetic parameter `P<n>`.
+    Param(u32, Span),
     /// Function call: `ABS[x]`, `SQRT[x]`, `SIN[x]` (degrees), `COS[x]`, `TAN[x]`, `ATAN2[y, x]`,
     /// `INT[x]` (truncate), `ROUND[x]`.
     Call(String, Vec<Expr>, Span),

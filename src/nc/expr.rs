@@ -41,6 +41,11 @@ impl std::fmt::Display for Value {
 pub trait VarSource {
     /// The value of `var`, or a message such as "unknown variable V.A.FOO.X".
     fn var(&self, var: &VarRef) -> Result<Value, String>;
+
+    /// The value of arithmetic parameter `P<n>`, or a message. Unset parameters are an error.
+    fn param(&self, n: u32) -> Result<f64, String> {
+        Err(format!("P{n} has no value"))
+    }
 }
 
 /// A variable source without variables (every lookup fails).
@@ -117,6 +122,7 @@ fn first_span(expr: &Expr, depth: usize) -> Option<Span> {
     match expr {
         Expr::Num(_) | Expr::Str(_) => None,
         Expr::Var(v) => Some(v.span),
+        Expr::Param(_, span) => Some(*span),
         Expr::Call(_, _, span) => Some(*span),
         Expr::Neg(e) => first_span(e, depth + 1),
         Expr::Bin(_, a, b) => first_span(a, depth + 1).or_else(|| first_span(b, depth + 1)),
@@ -189,6 +195,10 @@ impl Evaluator<'_> {
                 Ok(Value::Num(n)) => finite(n, v.span, || format!("variable {}", v.name())),
                 Ok(s @ Value::Str(_)) => Ok(s),
                 Err(message) => fail(v.span, message),
+            },
+            Expr::Param(n, span) => match self.vars.param(*n) {
+                Ok(x) => finite(x, *span, || format!("P{n}")),
+                Err(message) => fail(*span, message),
             },
             Expr::Neg(e) => {
                 let n = self.num(e, at, depth + 1, "unary '-'")?;

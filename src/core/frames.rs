@@ -1,0 +1,1 @@
+//! Coordinate frames: PCS, offsets, #CS.

@@ -1,0 +1,1 @@
+//! Measurement: fixed_stop.

@@ -1,0 +1,3 @@
+//! Simulation of the physical world around the drives: probe surfaces, fixed stops, a scripted PLC.
+
+pub mod plant;

@@ -1,0 +1,1 @@
+//! The plant: probe surfaces and fixed stops.
