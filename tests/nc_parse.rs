@@ -5,7 +5,9 @@
 
 use std::collections::HashMap;
 
-use fieldprobe::nc::ast::{BinOp, Block, Command, Expr, Item, Program, Span, VarRef};
+use fieldprobe::nc::ast::{
+    AxLink, BinOp, Block, Command, Expr, IndependentMotion, Item, KeyArg, Program, Span, VarRef,
+};
 use fieldprobe::nc::expr::{eval, eval_at, eval_num, eval_num_at, EvalError, Value, VarSource};
 use fieldprobe::nc::parser::{parse, parse_expr, ParseError};
 use fieldprobe::nc::printf::{format, FormatError};
@@ -52,6 +54,67 @@ fn show_expr(e: &Expr) -> String {
             let a: Vec<String> = args.iter().map(show_expr).collect();
             format!("{n}[{}]", a.join(", "))
         }
+        Expr::Param(n, _) => format!("P{n}"),
+    }
+}
+
+fn show_keys(args: &[KeyArg]) -> String {
+    let a: Vec<String> = args
+        .iter()
+        .map(|k| match &k.value {
+            Some(v) => format!("{}={}", k.key, show_expr(v)),
+            None => k.key.clone(),
+        })
+        .collect();
+    format!("[{}]", a.join(" "))
+}
+
+fn show_exprs(args: &[Expr]) -> String {
+    let a: Vec<String> = args.iter().map(show_expr).collect();
+    a.join(", ")
+}
+
+fn show_command(c: &Command) -> String {
+    let syn = |s: bool| if s { " SYN" } else { "" };
+    let rw = |w: bool| if w { "WR" } else { "RD" };
+    match c {
+        Command::Msg { sync, format, args } => format!(
+            "#MSG{}[{format:?}{}{}]",
+            syn(*sync),
+            if args.is_empty() { "" } else { ", " },
+            show_exprs(args)
+        ),
+        Command::MeasMode { mode: Some(m) } => format!("#MEAS MODE[{}]", show_expr(m)),
+        Command::MeasMode { mode: None } => "#MEAS MODE".to_string(),
+        Command::MeasConfig { args } => format!("#MEAS{}", show_keys(args)),
+        Command::MeasPrepare { args } => format!("#MEAS PREPARE{}", show_keys(args)),
+        Command::Cs { on: Some(v) } => format!("#CS ON[{}]", show_exprs(v)),
+        Command::Cs { on: None } => "#CS OFF".to_string(),
+        Command::Trafo { on } => format!("#TRAFO {}", if *on { "ON" } else { "OFF" }),
+        Command::Drive { write, sync, args } => {
+            format!("#DRIVE {}{}{}", rw(*write), syn(*sync), show_keys(args))
+        }
+        Command::Ident { write, sync, args } => {
+            format!("#IDENT {}{}{}", rw(*write), syn(*sync), show_keys(args))
+        }
+        Command::SetAxLink { group, links } => {
+            let l: Vec<String> = links
+                .iter()
+                .map(|l| {
+                    let mut parts = vec![format!("{}={}", l.slave, l.master), l.kind.clone()];
+                    parts.extend(l.params.iter().map(show_expr));
+                    format!("[{}]", parts.join(", "))
+                })
+                .collect();
+            format!("#SET AX LINK[{}, {}]", show_expr(group), l.join(", "))
+        }
+        Command::EnableAxLink { enable, group } => format!(
+            "#{} AX LINK{}",
+            if *enable { "ENABLE" } else { "DISABLE" },
+            group
+                .as_ref()
+                .map_or(String::new(), |g| format!("[{}]", show_expr(g)))
+        ),
     }
 }
 
@@ -67,18 +130,18 @@ fn show(b: &Block) -> String {
             Item::F { value, .. } => format!("F{}", show_expr(value)),
             Item::Axis { name, value, .. } => format!("{name}{}", show_expr(value)),
             Item::Centre { letter, value, .. } => format!("{letter}{}", show_expr(value)),
-            Item::Command {
-                command: Command::Msg { sync, format, args },
-                ..
-            } => {
-                let a: Vec<String> = args.iter().map(show_expr).collect();
-                format!(
-                    "#MSG{}[{format:?}{}{}]",
-                    if *sync { " SYN" } else { "" },
-                    if a.is_empty() { "" } else { ", " },
-                    a.join(", ")
-                )
+            Item::D { value, .. } => format!("D{}", show_expr(value)),
+            Item::Independent { axis, motion, .. } => {
+                let mut parts = vec![if motion.sync { "INDP_SYN" } else { "INDP_ASYN" }.to_string()];
+                parts.extend(motion.gcodes.iter().map(|g| format!("G{g}")));
+                parts.push(format!("POS{}", show_expr(&motion.pos)));
+                if let Some(f) = &motion.feed {
+                    parts.push(format!("FEED{}", show_expr(f)));
+                }
+                format!("{axis}[{}]", parts.join(" "))
             }
+            Item::Assign { param, value, .. } => format!("P{param}={}", show_expr(value)),
+            Item::Command { command, .. } => show_command(command),
         });
     }
     parts.join(" ")
@@ -602,7 +665,10 @@ fn msg_command() {
         sync,
         format: f,
         args,
-    } = command;
+    } = command
+    else {
+        panic!("{command:?}")
+    };
     assert!(*sync);
     assert_eq!(f, "X=%f Y=%f");
     assert_eq!(args.len(), 2);

@@ -57,8 +57,18 @@ pub struct AxisConfig {
     pub params: ParamSet,
 }
 
+/// Tool data of one tool offset number (`D<n>`), in mm (the file keeps 0.1 µm, as the ISG
+/// tool list P-TOOL-00004 `wz[i].radius` does).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ToolData {
+    /// Tool radius — for a measuring probe the ball radius (seed 004 §5, P-CHAN-00311).
+    pub radius: f64,
+    /// Tool length along the tool axis (Z in G17).
+    pub length: f64,
+}
+
 /// A machine: channel, manual mode and axes, with their parameter lists.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MachineConfig {
     /// Where the configuration came from (file name, or `<default>`).
     pub source: String,
@@ -70,6 +80,11 @@ pub struct MachineConfig {
     pub manual: ParamSet,
     /// The axes in file order.
     pub axes: Vec<AxisConfig>,
+    /// Tool data by D number (`[tool.1] radius = 20000  # 0.1 µm`).
+    pub tools: std::collections::BTreeMap<u32, ToolData>,
+    /// Zero offsets G54 … G59 by G number, per axis name, in mm
+    /// (`[zero_offset.G54] X = 1000000  # 0.1 µm`).
+    pub zero_offsets: std::collections::BTreeMap<u32, Vec<(String, f64)>>,
 }
 
 impl MachineConfig {
@@ -87,8 +102,11 @@ impl MachineConfig {
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes: Vec::new(),
+            tools: Default::default(),
+            zero_offsets: Default::default(),
         };
         let mut axis_lines: Vec<usize> = Vec::new();
+        let mut zero_items = Vec::new();
         for (name, item) in root.iter() {
             let line = ctx.key_line(root, name, item, 0);
             match name {
@@ -124,8 +142,13 @@ impl MachineConfig {
                         cfg.parse_axis(&ctx, table, line, &mut axis_lines)?;
                     }
                 }
+                "tool" => cfg.parse_tools(&ctx, item, line)?,
+                "zero_offset" => zero_items.push((item, line)),
                 other => return Err(outside_error(other, item, ctx.at(line))),
             }
+        }
+        for (item, line) in zero_items {
+            cfg.parse_zero_offsets(&ctx, item, line)?;
         }
         if cfg.axes.is_empty() {
             return Err(ParamError::Config {
@@ -180,6 +203,9 @@ impl MachineConfig {
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes,
+            // D1: the measuring probe of seed 004 §5 "%meas_example" (ball radius 2 mm).
+            tools: [(1, ToolData { radius: 2.0, length: 0.0 })].into_iter().collect(),
+            zero_offsets: Default::default(),
         }
     }
 
@@ -265,6 +291,99 @@ impl MachineConfig {
             .map(|a| a.name.as_str())
             .collect::<Vec<_>>()
             .join(", ")
+    }
+
+    fn parse_tools(&mut self, ctx: &Ctx<'_>, item: &Item, line: usize) -> Result<(), ParamError> {
+        let table = item.as_table_like().ok_or_else(|| ParamError::Config {
+            origin: ctx.at(line),
+            message: "'tool' must be a table of tools: write [tool.1] radius = 20000".to_string(),
+        })?;
+        for (d, t) in table.iter() {
+            let l = ctx.key_line(table, d, t, line);
+            let number: u32 = d.parse().ok().filter(|n| (1..=32767).contains(n)).ok_or_else(|| {
+                ParamError::Config {
+                    origin: ctx.at(l),
+                    message: format!("[tool.{d}]: the tool offset number must be 1 ..= 32767 (D1 → [tool.1])"),
+                }
+            })?;
+            let fields = t.as_table_like().ok_or_else(|| ParamError::Config {
+                origin: ctx.at(l),
+                message: format!("[tool.{d}] must be a table with radius / length in 0.1 µm"),
+            })?;
+            let mut tool = ToolData::default();
+            for (k, v) in fields.iter() {
+                let kl = ctx.key_line(fields, k, v, l);
+                let value = v.as_integer().ok_or_else(|| ParamError::Config {
+                    origin: ctx.at(kl),
+                    message: format!("tool.{d}.{k}: expected an integer in 0.1 µm (P-TOOL-00004 unit)"),
+                })?;
+                if !(i64::from(i32::MIN)..=i64::from(i32::MAX)).contains(&value) {
+                    return Err(ParamError::Config {
+                        origin: ctx.at(kl),
+                        message: format!("tool.{d}.{k} = {value} is out of range: MIN(SGN32) ≤ value ≤ MAX(SGN32)"),
+                    });
+                }
+                match k {
+                    "radius" if value >= 0 => tool.radius = crate::units::param_pos_to_mm(value),
+                    "radius" => {
+                        return Err(ParamError::Config {
+                            origin: ctx.at(kl),
+                            message: format!("tool.{d}.radius = {value}: a probe ball radius must be ≥ 0"),
+                        })
+                    }
+                    "length" => tool.length = crate::units::param_pos_to_mm(value),
+                    other => {
+                        return Err(ParamError::Config {
+                            origin: ctx.at(kl),
+                            message: format!("unknown tool field '{other}'; allowed: radius, length"),
+                        })
+                    }
+                }
+            }
+            self.tools.insert(number, tool);
+        }
+        Ok(())
+    }
+
+    fn parse_zero_offsets(&mut self, ctx: &Ctx<'_>, item: &Item, line: usize) -> Result<(), ParamError> {
+        let table = item.as_table_like().ok_or_else(|| ParamError::Config {
+            origin: ctx.at(line),
+            message: "'zero_offset' must be a table: write [zero_offset.G54] X = 1000000".to_string(),
+        })?;
+        for (g, t) in table.iter() {
+            let l = ctx.key_line(table, g, t, line);
+            let number: u32 = g
+                .strip_prefix(['G', 'g'])
+                .and_then(|n| n.parse().ok())
+                .filter(|n| (54..=59).contains(n))
+                .ok_or_else(|| ParamError::Config {
+                    origin: ctx.at(l),
+                    message: format!("[zero_offset.{g}]: expected G54 … G59"),
+                })?;
+            let fields = t.as_table_like().ok_or_else(|| ParamError::Config {
+                origin: ctx.at(l),
+                message: format!("[zero_offset.{g}] must be a table of axis = offset (0.1 µm)"),
+            })?;
+            let mut offsets = Vec::new();
+            for (ax, v) in fields.iter() {
+                let kl = ctx.key_line(fields, ax, v, l);
+                if self.axis(ax).is_none() {
+                    return Err(ParamError::Config {
+                        origin: ctx.at(kl),
+                        message: format!("zero_offset.{g}.{ax}: unknown axis; the machine has {}", self.axis_list()),
+                    });
+                }
+                let value = v.as_integer().filter(|x| (i64::from(i32::MIN)..=i64::from(i32::MAX)).contains(x)).ok_or_else(|| {
+                    ParamError::Config {
+                        origin: ctx.at(kl),
+                        message: format!("zero_offset.{g}.{ax}: expected an integer in 0.1 µm, MIN(SGN32) ≤ value ≤ MAX(SGN32)"),
+                    }
+                })?;
+                offsets.push((ax.to_string(), crate::units::param_pos_to_mm(value)));
+            }
+            self.zero_offsets.insert(number, offsets);
+        }
+        Ok(())
     }
 
     fn parse_channel(&mut self, ctx: &Ctx<'_>, leaves: &[Leaf<'_>]) -> Result<(), ParamError> {
@@ -591,7 +710,7 @@ fn string_value<'a>(
 }
 
 fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
-    let allowed = "allowed tables are [channel], [manual] and [[axis]]";
+    let allowed = "allowed tables are [channel], [manual], [[axis]], [tool.<D>] and [zero_offset.G54…G59]";
     let message = if item.is_value() {
         let hint = if name == "cycle_time_us" {
             "; cycle_time_us belongs in [channel]".to_string()

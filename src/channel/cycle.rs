@@ -1,0 +1,218 @@
+//! The interpolation cycle (DESIGN.md "One interpolation cycle") and stopping.
+
+use super::manual;
+use super::profile::Braking;
+use super::{AxisBrake, Channel, ChannelState, Mode};
+use crate::axis::Axis;
+use crate::link::{LinkError, ProcessImage};
+use crate::messages::{ids, CncMessage};
+use crate::units::Nanos;
+
+impl Channel {
+    // ----- the interpolation cycle --------------------------------------------------------
+
+    /// The link failed to exchange process data this cycle: the inputs are stale. Stop (the
+    /// drives receive braking set-points as soon as the link is back) and report.
+    pub fn link_lost(&mut self, err: &LinkError) {
+        self.cycles += 1;
+        self.push(CncMessage::error(
+            ids::LINK_LOST,
+            format!("{err}; axes stopped"),
+        ));
+        if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+            self.begin_stop(ChannelState::Aborted);
+        }
+    }
+
+    /// One interpolation cycle. `images[i]` is axis `i`'s process image after this cycle's
+    /// exchange; the outputs written here go out with the next exchange.
+    #[allow(clippy::needless_range_loop)] // axes, images and set-points are parallel arrays
+    pub fn cycle(&mut self, now: Nanos, images: &mut [ProcessImage]) {
+        self.cycles += 1;
+        let dt = self.cfg.cycle.as_secs_f64();
+        if images.len() != self.axes.len() {
+            self.push(CncMessage::error(
+                ids::LINK_LOST,
+                format!(
+                    "{} process images for {} axes",
+                    images.len(),
+                    self.axes.len()
+                ),
+            ));
+            self.mode = Mode::Aborted;
+            return;
+        }
+        // 1. Inputs.
+        let enabling = matches!(self.mode, Mode::Enabling { .. });
+        for i in 0..self.axes.len() {
+            let res = self.axes[i]
+                .read(now, &images[i].inputs)
+                .map(|fb| (fb.fault, fb.operational));
+            match res {
+                Ok((fault, operational)) => {
+                    let stopped = matches!(self.mode, Mode::Aborted | Mode::Stopping { .. });
+                    if !enabling && !stopped && (fault || !operational) {
+                        let name = self.axes[i].name().to_string();
+                        let code = if fault {
+                            "fault"
+                        } else {
+                            "left operation enabled"
+                        };
+                        self.push(
+                            CncMessage::error(
+                                ids::DRIVE_FAULT,
+                                format!("drive of axis {name} reports {code}; axes stopped"),
+                            )
+                            .on_axis(&name),
+                        );
+                        self.begin_stop(ChannelState::Aborted);
+                    }
+                }
+                Err(e) => {
+                    self.push(CncMessage::error(ids::DRIVE_FAULT, e.to_string()));
+                    self.begin_stop(ChannelState::Aborted);
+                }
+            }
+        }
+        // 2. Actual positions against the SLS + tolerance (position controller, seed 001 §2).
+        for i in 0..self.axes.len() {
+            let actual = self.axes[i].actual();
+            if let Some(m) = self.sls.check_actual(i, actual) {
+                let error = m.is_error();
+                self.push(m);
+                if error && !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+                    // Interpolation stopped; the axes decelerate linearly.
+                    self.begin_stop(ChannelState::Aborted);
+                }
+            }
+        }
+        // 3. Interpolator: next set-points.
+        self.next.clear();
+        self.next.extend(self.axes.iter().map(Axis::command));
+        let mut finished: Option<ChannelState> = None;
+        match &mut self.mode {
+            Mode::Enabling { cycles } => {
+                *cycles += 1;
+                for a in &mut self.axes {
+                    a.set_enable(true);
+                }
+                if self.axes.iter().all(Axis::is_operational) {
+                    for a in &mut self.axes {
+                        a.set_fault_reset(false);
+                    }
+                    finished = Some(ChannelState::Idle);
+                } else if *cycles > self.cfg.enable_timeout_cycles {
+                    let missing: Vec<&str> = self
+                        .axes
+                        .iter()
+                        .filter(|a| !a.is_operational())
+                        .map(Axis::name)
+                        .collect();
+                    let text = format!(
+                        "drives of axes {} did not reach operation enabled within {} cycles",
+                        missing.join(", "),
+                        self.cfg.enable_timeout_cycles
+                    );
+                    self.messages
+                        .push(CncMessage::error(ids::DRIVE_ENABLE_TIMEOUT, text));
+                    finished = Some(ChannelState::Aborted);
+                }
+            }
+            Mode::Idle | Mode::Aborted => {}
+            Mode::Moving(m) => {
+                m.k += 1;
+                let t = m.k as f64 * dt;
+                if t >= m.profile.duration() {
+                    self.next.copy_from_slice(m.segment.end());
+                    finished = Some(ChannelState::Idle);
+                } else {
+                    let (s, _) = m.profile.sample(t);
+                    m.segment.point_at(s, &mut self.next);
+                }
+            }
+            Mode::Manual(state) => {
+                let mut events = Vec::new();
+                state.step(dt, &mut self.next, &mut events);
+                for e in events {
+                    let m = manual::event_message(e, &self.axes, self.cfg.move_limit_warning);
+                    if let Some(m) = m {
+                        self.messages.push(m.at(self.block));
+                    }
+                }
+            }
+            Mode::Stopping { brakes, k, then } => {
+                *k += 1;
+                let t = *k as f64 * dt;
+                let mut done = true;
+                for (i, b) in brakes.iter().enumerate() {
+                    let (s, v) = b.braking.sample(t);
+                    self.next[i] = b.start + b.sign * s;
+                    done &= v <= 0.0;
+                }
+                if done {
+                    finished = Some(*then);
+                }
+            }
+        }
+        // 4. Command side: can every axis still stop before its SLS (P-AXIS-00520/00521)?
+        if matches!(self.mode, Mode::Moving(_) | Mode::Manual(_)) {
+            for i in 0..self.axes.len() {
+                let v = (self.next[i] - self.axes[i].command()) / dt;
+                if let Some(side) = self.sls.check_stop_distance(i, self.next[i], v) {
+                    let m = self.sls.stop_distance_message(i, side);
+                    self.push(m);
+                    // Brake from the current state, which could still stop in time.
+                    self.begin_stop(ChannelState::Aborted);
+                    self.next.clear();
+                    self.next.extend(self.axes.iter().map(Axis::command));
+                    break;
+                }
+            }
+        }
+        match finished {
+            Some(ChannelState::Idle) => {
+                self.mode = Mode::Idle;
+            }
+            Some(ChannelState::Aborted) => self.mode = Mode::Aborted,
+            _ => {}
+        }
+        // 5. Outputs.
+        for i in 0..self.axes.len() {
+            let next = self.next[i];
+            let prev = self.axes[i].command();
+            self.velocity[i] = (next - prev) / dt;
+            self.axes[i].set_command(next);
+            if let Err(e) = self.axes[i].write(now, &mut images[i].outputs) {
+                // Keep the last valid set-point; report once and stop.
+                self.axes[i].set_command(prev);
+                self.velocity[i] = 0.0;
+                let _ = self.axes[i].write(now, &mut images[i].outputs);
+                if !matches!(self.mode, Mode::Aborted) {
+                    self.push(CncMessage::error(ids::DRIVE_RANGE, e.to_string()));
+                    self.mode = Mode::Aborted;
+                }
+            }
+        }
+    }
+
+    /// Stop all axes: each decelerates linearly from its current command velocity with
+    /// P-AXIS-00003 (seed 001 §2: "decelerated by a linear velocity profile"; the contour may be
+    /// left when several axes move).
+    pub(super) fn begin_stop(&mut self, then: ChannelState) {
+        if matches!(self.mode, Mode::Stopping { .. }) {
+            return;
+        }
+        let brakes = self
+            .axes
+            .iter()
+            .zip(&self.velocity)
+            .zip(&self.cfg.axes)
+            .map(|((a, &v), c)| AxisBrake {
+                start: a.command(),
+                sign: if v < 0.0 { -1.0 } else { 1.0 },
+                braking: Braking::new(0.0, v.abs(), c.a_emergency.max(1e-6)),
+            })
+            .collect();
+        self.mode = Mode::Stopping { brakes, k: 0, then };
+    }
+}
