@@ -7,7 +7,11 @@
 
 use crate::axis::Axis;
 use crate::channel::{Channel, ChannelAxisConfig, ChannelConfig, ChannelState};
+use crate::core::measure::{
+    edge_from_text, trigger_mode_from_text, AxisMeasConfig, ChannelMeasConfig, MeasType, SignalSource,
+};
 use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
+use crate::drive::ProbeEdge;
 use crate::drive::catalogue;
 use crate::drive::ds402::Ds402Adapter;
 use crate::drive::model::ds402::Ds402Model;
@@ -150,6 +154,7 @@ impl Machine {
             display_pcs_limits: cfg.channel.int("P-CHAN-00489") != 0,
             move_limit_warning: cfg.manual.int("P-MANU-00014") != 0,
             enable_timeout_cycles: 1000,
+            meas: channel_meas_config(&cfg.channel),
         };
         let channel = Channel::new(ch_cfg, axes).map_err(MachineError::Config)?;
         Ok(Machine {
@@ -311,6 +316,24 @@ pub fn channel_axis_config(a: &AxisConfig) -> ChannelAxisConfig {
         manual_abs_neg: param_pos_to_mm(p.int("P-AXIS-00492")),
         manual_abs_pos: param_pos_to_mm(p.int("P-AXIS-00493")),
     };
+    let a_rapid = mm_s2("P-AXIS-00004");
+    let meas = AxisMeasConfig {
+        enabled: p.int("P-AXIS-00118") != 0,
+        signal: SignalSource::from_text(p.text("P-AXIS-00516")).unwrap_or(SignalSource::DriveTypeDefault),
+        input: u8::try_from(p.int("P-AXIS-00517")).unwrap_or(1).max(1),
+        edge: edge_from_text(p.text("P-AXIS-00518")).unwrap_or(ProbeEdge::Positive),
+        trigger_mode: trigger_mode_from_text(p.text("P-AXIS-00702")).unwrap_or_default(),
+        stroke: param_pos_to_mm(p.int("P-AXIS-00086")),
+        feed_type2: param_vel_to_mm_s(p.int("P-AXIS-00215")),
+        overtravel: param_pos_to_mm(p.int("P-AXIS-00467")),
+        // P-AXIS-00053 a_feedh: 0 means P-AXIS-00004 (ISG axis parameter docs).
+        a_feedhold: match p.int("P-AXIS-00053") {
+            0 => a_rapid,
+            v => v as f64,
+        },
+        lag_limit: param_pos_to_mm(p.int("P-AXIS-00168")),
+        sercos: false,
+    };
     ChannelAxisConfig {
         rotary,
         v_max: param_vel_to_mm_s(p.int("P-AXIS-00212")),
@@ -319,6 +342,21 @@ pub fn channel_axis_config(a: &AxisConfig) -> ChannelAxisConfig {
         a_rapid: mm_s2("P-AXIS-00004"),
         a_emergency,
         limits,
+        meas,
+    }
+}
+
+/// The channel's measurement settings from its parameter list (seed 004 §8.2.1, seed 000 §6.2).
+pub fn channel_meas_config(p: &ParamSet) -> ChannelMeasConfig {
+    ChannelMeasConfig {
+        default_type: MeasType::from_number(p.int("P-CHAN-00057")).unwrap_or(MeasType::Type1),
+        feedhold_param_decel: p.int("P-CHAN-00097") != 0,
+        rapid_decel_on_signal: p.int("P-CHAN-00214") != 0,
+        std_dynamics: p.int("P-CHAN-00296") != 0,
+        error_no_signal_type1: p.int("P-CHAN-00176") != 0,
+        fixed_stop_no_error: p.int("P-CHAN-00266") != 0,
+        limit_at_sls: p.int("P-CHAN-00268") != 0,
+        pcs_without_radius: p.int("P-CHAN-00311") != 0,
     }
 }
 

@@ -149,6 +149,30 @@ pub mod ids {
     /// Seed 000 §6.2 P-CHAN-00268: measurement run stopped at the end of the motion path.
     pub const MEAS_PATH_LIMITED: u32 = 50706;
 
+    /// Seed 004 §8.2.2 P-AXIS-00777: per-mille start distance > 1000 at controller start.
+    pub const FIXED_STOP_PER_MILLE_WARNING: u32 = 110757;
+    /// Seed 004 §8.2.2 P-AXIS-00777: per-mille start distance > 1000 at a measuring travel.
+    pub const FIXED_STOP_PER_MILLE_ERROR: u32 = 51026;
+
+    /// Project: the measuring block is not allowed as programmed (type / G code / axes /
+    /// P-AXIS-00118).
+    pub const MEAS_CONFIG: u32 = 900040;
+    /// Project: probing signal missing (type 2; type 1 with P-CHAN-00176 = 1).
+    pub const MEAS_NO_SIGNAL: u32 = 900041;
+    /// Project: fixed stop not detected (type 7 with P-CHAN-00266 = 0).
+    pub const MEAS_NO_FIXED_STOP: u32 = 900042;
+    /// Project: a latch source failed (drive latch unit, lost event, PLC handshake, timestamp).
+    pub const MEAS_LATCH: u32 = 900043;
+    /// Project (warning): measuring feed reduced so that the braking distance stays inside the
+    /// probe stroke P-AXIS-00086 (types 2 and 4).
+    pub const MEAS_FEED_REDUCED: u32 = 900044;
+    /// Project: G101 for an axis without measured value.
+    pub const MEAS_NO_VALUE: u32 = 900045;
+    /// Project: CNC position lag monitoring (P-AXIS-00168) tripped.
+    pub const LAG_LIMIT: u32 = 900014;
+    /// Project: an acyclic drive access (`#DRIVE`, `#IDENT`) failed.
+    pub const ACYCLIC_FAILED: u32 = 900050;
+
     /// Project: an NC expression or command could not be evaluated (unknown variable, bad
     /// `#MSG` format, unknown axis).
     pub const NC_EVALUATION: u32 = 900001;

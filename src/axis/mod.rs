@@ -4,7 +4,7 @@
 //! [`Scaling`](crate::units::Scaling) from the drive file. It does not know wire formats: the
 //! adapter encodes and decodes the process image, the link moves it.
 
-use crate::drive::{DriveAdapter, DriveCommand, DriveError, DriveFeedback};
+use crate::drive::{DriveAdapter, DriveCommand, DriveError, DriveFeedback, ProbeRequest, ProbeState};
 use crate::units::{Nanos, Scaling};
 
 /// Errors of the axis layer.
@@ -193,6 +193,28 @@ impl Axis {
     /// The drive reports a fault.
     pub fn has_fault(&self) -> bool {
         self.feedback.is_some_and(|f| f.fault)
+    }
+
+    /// Arm the drive's latch unit (seed 004 §6).
+    pub fn arm_probe(&mut self, request: &ProbeRequest) -> Result<(), DriveError> {
+        self.adapter.arm_probe(request)
+    }
+
+    /// Disarm the drive's latch unit.
+    pub fn disarm_probe(&mut self) {
+        self.adapter.disarm_probe();
+    }
+
+    /// State of the drive's latch unit.
+    pub fn probe_state(&self) -> ProbeState {
+        self.adapter.probe_state()
+    }
+
+    /// The next fresh latched position (mm / °) decoded this cycle.
+    pub fn take_latch(&mut self) -> Option<f64> {
+        self.adapter
+            .take_probe_event()
+            .map(|e| self.scaling.to_units(e.position))
     }
 
     /// Scaling of this axis.

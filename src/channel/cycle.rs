@@ -2,7 +2,8 @@
 
 use super::manual;
 use super::profile::Braking;
-use super::{AxisBrake, Channel, ChannelState, Mode};
+use super::measure::MeasStep;
+use super::{AxisBrake, Channel, ChannelState, Mode, Motion};
 use crate::axis::Axis;
 use crate::link::{LinkError, ProcessImage};
 use crate::messages::{ids, CncMessage};
@@ -90,6 +91,11 @@ impl Channel {
         self.next.clear();
         self.next.extend(self.axes.iter().map(Axis::command));
         let mut finished: Option<ChannelState> = None;
+        if matches!(self.mode, Mode::Moving(_)) {
+            if let Mode::Moving(m) = std::mem::replace(&mut self.mode, Mode::Idle) {
+                self.mode = self.step_motion(m, now, dt);
+            }
+        }
         match &mut self.mode {
             Mode::Enabling { cycles } => {
                 *cycles += 1;
@@ -119,17 +125,7 @@ impl Channel {
                 }
             }
             Mode::Idle | Mode::Aborted => {}
-            Mode::Moving(m) => {
-                m.k += 1;
-                let t = m.k as f64 * dt;
-                if t >= m.profile.duration() {
-                    self.next.copy_from_slice(m.segment.end());
-                    finished = Some(ChannelState::Idle);
-                } else {
-                    let (s, _) = m.profile.sample(t);
-                    m.segment.point_at(s, &mut self.next);
-                }
-            }
+            Mode::Moving(_) => {}
             Mode::Manual(state) => {
                 let mut events = Vec::new();
                 state.step(dt, &mut self.next, &mut events);
@@ -195,12 +191,86 @@ impl Channel {
         }
     }
 
+    /// One cycle of a motion block (path interpolation, measurement, braking after the probing
+    /// signal). Writes the set-points into `self.next` and returns the next mode.
+    fn step_motion(&mut self, mut m: Box<Motion>, now: Nanos, dt: f64) -> Mode {
+        let t_now = m.k as f64 * dt;
+        let (s_now, v_now) = match m.braking {
+            Some((b, k0)) => {
+                let (sb, vb) = b.sample((m.k - k0) as f64 * dt);
+                let (sp, vp) = m.profile.sample(t_now);
+                if sp < sb { (sp, vp) } else { (sb, vb) }
+            }
+            None => m.profile.sample(t_now),
+        };
+        if let Some(mut run) = m.meas.take() {
+            match self.measurement_step(&mut run, now, s_now) {
+                MeasStep::Hold => {
+                    m.meas = Some(run);
+                    return Mode::Moving(m);
+                }
+                MeasStep::Go => {}
+                MeasStep::Brake => {
+                    if m.braking.is_none() {
+                        let a = self.path_brake_decel(&run, &m.segment);
+                        m.braking = Some((Braking::new(s_now, v_now, a), m.k));
+                    }
+                }
+                MeasStep::Fail(msg) => {
+                    self.disarm_sources(&run);
+                    self.push(msg);
+                    self.mode = Mode::Moving(m);
+                    self.begin_stop(ChannelState::Aborted);
+                    return std::mem::replace(&mut self.mode, Mode::Aborted);
+                }
+            }
+            m.meas = Some(run);
+        }
+        m.k += 1;
+        let t = m.k as f64 * dt;
+        let (s, done, at_end) = match m.braking {
+            Some((b, k0)) => {
+                let (sb, vb) = b.sample((m.k - k0) as f64 * dt);
+                let (sp, _) = m.profile.sample(t);
+                let end = t >= m.profile.duration();
+                (sb.min(sp), vb <= 0.0 || end, end && sp <= sb)
+            }
+            None => {
+                let (sp, _) = m.profile.sample(t);
+                let end = t >= m.profile.duration();
+                (sp, end, end)
+            }
+        };
+        if at_end {
+            self.next.copy_from_slice(m.segment.end());
+        } else {
+            m.segment.point_at(s, &mut self.next);
+        }
+        if !done {
+            return Mode::Moving(m);
+        }
+        if let Some(run) = m.meas.take() {
+            let reached = m.braking.is_none();
+            if let Err(msg) = self.finish_measurement(*run, reached) {
+                self.push(msg);
+                return Mode::Aborted;
+            }
+        }
+        Mode::Idle
+    }
+
     /// Stop all axes: each decelerates linearly from its current command velocity with
     /// P-AXIS-00003 (seed 001 §2: "decelerated by a linear velocity profile"; the contour may be
     /// left when several axes move).
     pub(super) fn begin_stop(&mut self, then: ChannelState) {
         if matches!(self.mode, Mode::Stopping { .. }) {
             return;
+        }
+        // A running measurement is abandoned: its sources are disarmed and nothing is published.
+        if let Mode::Moving(m) = &mut self.mode {
+            if let Some(run) = m.meas.take() {
+                self.disarm_sources(&run);
+            }
         }
         let brakes = self
             .axes

@@ -18,15 +18,18 @@
 
 mod cycle;
 pub mod manual;
+pub mod measure;
 mod prep;
 pub mod profile;
 
 use crate::axis::Axis;
+use crate::core::measure::{AxisMeasConfig, ChannelMeasConfig, MeasurementOutcome};
 use crate::core::monitor::sls::{AxisLimitConfig, PcsLimits, SoftLimits, Violation};
 use crate::core::path::Segment;
 
 use crate::messages::{BlockRef, CncMessage};
 use crate::units::Nanos;
+pub use measure::{MeasureRequest, SignalOverride};
 use profile::{Braking, Trapezoid};
 
 /// Dynamics and limits of one channel axis, in mm (°), s.
@@ -46,6 +49,8 @@ pub struct ChannelAxisConfig {
     pub a_emergency: f64,
     /// Software limit switch configuration (seed 001).
     pub limits: AxisLimitConfig,
+    /// Measurement configuration (seed 004).
+    pub meas: AxisMeasConfig,
 }
 
 /// Channel configuration.
@@ -63,6 +68,8 @@ pub struct ChannelConfig {
     pub move_limit_warning: bool,
     /// Cycles the drives may take to reach *operation enabled*.
     pub enable_timeout_cycles: u32,
+    /// Channel measurement settings (seed 004 §8.2.1).
+    pub meas: ChannelMeasConfig,
 }
 
 /// Kind of a motion block.
@@ -95,6 +102,8 @@ pub struct MotionRequest {
     pub target: Vec<f64>,
     /// Feed in mm/min (ignored for G00).
     pub feed: f64,
+    /// A measuring block (G100 / G210 / G310).
+    pub measure: Option<measure::MeasureRequest>,
 }
 
 /// Outcome of block preparation.
@@ -154,6 +163,10 @@ struct Motion {
     segment: Segment,
     profile: Trapezoid,
     k: u64,
+    /// Braking along the path after a measurement event: (braking, cycle it began).
+    braking: Option<(Braking, u64)>,
+    /// The measurement of a measuring block.
+    meas: Option<Box<measure::MeasRun>>,
 }
 
 #[derive(Debug, Clone)]
@@ -197,6 +210,8 @@ pub struct Channel {
     violations: Vec<Violation>,
     cycles: u64,
     operation_mode: OperationMode,
+    /// Outcome of the last measuring block, until the executor takes it.
+    measurement: Option<MeasurementOutcome>,
 }
 
 impl Channel {
@@ -233,6 +248,7 @@ impl Channel {
             violations: Vec::new(),
             cycles: 0,
             operation_mode: OperationMode::Automatic,
+            measurement: None,
         })
     }
 

@@ -60,6 +60,23 @@ impl Channel {
         if segment.is_empty() {
             return Prepared::Empty;
         }
+        let mut target_len = segment.length();
+        let mut limited = false;
+        let segment = match &req.measure {
+            Some(mreq) => match self.measuring_path(segment, mreq) {
+                Ok((seg, len, lim)) => {
+                    target_len = len;
+                    limited = lim;
+                    seg
+                }
+                Err(msg) => {
+                    self.push(msg);
+                    self.mode = Mode::Aborted;
+                    return Prepared::Rejected;
+                }
+            },
+            None => segment,
+        };
         // Software limit switches: every point of the command path.
         let mut violations = std::mem::take(&mut self.violations);
         self.sls.check_path(&segment, &mut violations);
@@ -94,14 +111,36 @@ impl Channel {
                 return Prepared::Rejected;
             }
         }
-        let profile = self.plan(&segment, req);
+        let meas = match &req.measure {
+            Some(mreq) => match self.prepare_measurement(mreq, &segment, target_len) {
+                Ok(mut run) => {
+                    run.limited_at_sls = limited;
+                    Some(Box::new(run))
+                }
+                Err(msg) => {
+                    self.push(msg);
+                    self.mode = Mode::Aborted;
+                    return Prepared::Rejected;
+                }
+            },
+            None => None,
+        };
+        let profile = match &meas {
+            Some(run) => self.plan_measuring(&segment, req, run.mtype()),
+            None => self.plan(&segment, req),
+        };
         if profile.duration() <= 0.0 {
+            if let Some(run) = meas {
+                self.disarm_sources(&run);
+            }
             return Prepared::Empty;
         }
         self.mode = Mode::Moving(Box::new(Motion {
             segment,
             profile,
             k: 0,
+            braking: None,
+            meas,
         }));
         Prepared::Started
     }
@@ -131,6 +170,125 @@ impl Channel {
         if let (Segment::Arc(arc), true) = (segment, a_min_axis.is_finite()) {
             // Centripetal acceleration v²/r must stay within the weakest plane axis.
             v = v.min((a_min_axis * arc.radius).sqrt());
+        }
+        let fin = |x: f64| if x.is_finite() && x > 0.0 { x } else { 1.0 };
+        Trapezoid::plan(segment.length(), fin(v), fin(a_acc), fin(a_dec))
+    }
+
+    /// The path of a measuring block (seed 004): a line, extended past the target by the
+    /// permitted overtravel P-AXIS-00467 (not for type 3) and, with P-CHAN-00268 = 1 (types 1–4),
+    /// cut where it reaches a software limit switch. Returns (path, length up to the programmed
+    /// target, cut at an SLS).
+    fn measuring_path(
+        &self,
+        segment: Segment,
+        mreq: &super::measure::MeasureRequest,
+    ) -> Result<(Segment, f64, bool), CncMessage> {
+        use crate::core::measure::MeasType;
+        if !matches!(segment, Segment::Line(_)) {
+            return Err(CncMessage::error(
+                ids::MEAS_CONFIG,
+                format!("G{} measures on a straight line only (no G02/G03 in a measuring block)", mreq.gcode),
+            ));
+        }
+        let start = segment.start().to_vec();
+        let target = segment.end().to_vec();
+        let len = segment.length();
+        let dir: Vec<f64> = start.iter().zip(&target).map(|(a, b)| (b - a) / len).collect();
+        let n = start.len();
+        // Overtravel: as far as every moved axis permits (P-AXIS-00467 is per axis).
+        let mut ext = if mreq.mtype == MeasType::Type3 { 0.0 } else { f64::INFINITY };
+        for i in 0..n {
+            if dir[i].abs() > 1e-12 {
+                ext = ext.min(self.cfg.axes[i].meas.overtravel / dir[i].abs());
+            }
+        }
+        if !ext.is_finite() {
+            ext = 0.0;
+        }
+        let mut total = len + ext;
+        // The software limit switches bound the path: the overtravel silently, the programmed
+        // part only with P-CHAN-00268 (otherwise the normal SLS check refuses the block).
+        let limit_target = self.cfg.meas.limit_at_sls
+            && matches!(mreq.mtype, MeasType::Type1 | MeasType::Type2 | MeasType::Type3 | MeasType::Type4);
+        let mut limited = false;
+        for i in 0..n {
+            if !self.sls.is_active(i) || dir[i].abs() <= 1e-12 {
+                continue;
+            }
+            let Some((neg, pos)) = self.sls.active_limits(i) else { continue };
+            let bound = if dir[i] > 0.0 { pos } else { neg };
+            let s_cut = ((bound - start[i]) / dir[i]).max(0.0);
+            if s_cut < total {
+                if s_cut >= len || limit_target {
+                    if s_cut < len {
+                        limited = true;
+                    }
+                    total = s_cut;
+                }
+            }
+        }
+        let target_len = len.min(total);
+        if total <= 1e-12 {
+            return Err(CncMessage::error(
+                ids::MEAS_PATH_LIMITED,
+                "measurement run cannot start: the axis stands at the software limit switch in the direction of measurement",
+            ));
+        }
+        let end: Vec<f64> = (0..n).map(|i| start[i] + dir[i] * total).collect();
+        let end = if (total - len).abs() < 1e-12 { target } else { end };
+        let seg = Segment::line(start, end).map_err(|e| CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()))?;
+        Ok((seg, target_len, limited))
+    }
+
+    /// Dynamics of a measuring block (seed 004 §2.1): G00 acceleration (P-AXIS-00004) unless
+    /// P-CHAN-00296 asks for G01 dynamics; the feed is F, or P-AXIS-00215 for type 2; types 2 and 4
+    /// limit the feed so that braking stays inside the probe stroke P-AXIS-00086 (with a warning).
+    pub(super) fn plan_measuring(
+        &mut self,
+        segment: &Segment,
+        req: &MotionRequest,
+        mtype: crate::core::measure::MeasType,
+    ) -> Trapezoid {
+        use crate::core::measure::MeasType;
+        let std = self.cfg.meas.std_dynamics;
+        let dt = self.cfg.cycle.as_secs_f64();
+        let mut v = crate::units::feed_mm_min_to_mm_s(req.feed);
+        let mut a_acc = f64::INFINITY;
+        let mut a_dec = f64::INFINITY;
+        let mut v_stroke = f64::INFINITY;
+        for (i, c) in self.cfg.axes.iter().enumerate() {
+            let f = segment.axis_speed_factor(i);
+            if f <= 1e-12 {
+                continue;
+            }
+            if mtype == MeasType::Type2 {
+                v = c.meas.feed_type2 / f;
+            }
+            let (acc, dec) = if std { (c.a_feed, c.d_feed) } else { (c.a_rapid, c.a_rapid) };
+            v = v.min(c.v_max / f);
+            a_acc = a_acc.min(acc / f);
+            a_dec = a_dec.min(dec / f);
+            if matches!(mtype, MeasType::Type2 | MeasType::Type4) && c.meas.enabled {
+                // Axis velocity u with dead time T (2 cycles: latch seen, braking starts) and the
+                // braking deceleration a: u·T + u²/(2a) ≤ stroke.
+                let a = self.measurement_brake_decel_pub(i).max(1e-9);
+                let t = 2.0 * dt;
+                let h = c.meas.stroke;
+                let u = a * (-t + (t * t + 2.0 * h / a).sqrt());
+                v_stroke = v_stroke.min(u / f);
+            }
+        }
+        if v > v_stroke {
+            self.push(CncMessage::warning(
+                ids::MEAS_FEED_REDUCED,
+                format!(
+                    "measuring feed reduced from {:.3} to {:.3} mm/min so that braking stays inside the probe stroke (P-AXIS-00086)",
+                    v * 60.0,
+                    v_stroke * 60.0
+                ),
+            ));
+            v = v_stroke;
         }
         let fin = |x: f64| if x.is_finite() && x > 0.0 { x } else { 1.0 };
         Trapezoid::plan(segment.length(), fin(v), fin(a_acc), fin(a_dec))

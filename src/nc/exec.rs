@@ -344,7 +344,7 @@ impl Executor {
             MotionMode::G1 => MotionKind::Linear,
             MotionMode::G2 | MotionMode::G3 => self.arc_kind(&centre).map_err(Fail::New)?,
         };
-        let req = MotionRequest { kind, target, feed };
+        let req = MotionRequest { kind, target, feed, measure: None };
         match ch.start_motion(&req) {
             Prepared::Started | Prepared::Empty => {
                 self.prog = prog;

@@ -450,6 +450,65 @@ impl<'a> Cursor<'a> {
         }
     }
 
+    /// True if the characters at the cursor spell `word` (ASCII letters compared
+    /// case-insensitively). Nothing is consumed.
+    pub fn at_word(&self, word: &str) -> bool {
+        word.chars().enumerate().all(|(i, w)| {
+            self.peek_at(i)
+                .is_some_and(|c| c.eq_ignore_ascii_case(&w))
+        })
+    }
+
+    /// Skip `n` characters (or up to the end of the block).
+    pub fn advance(&mut self, n: usize) {
+        self.pos = self.pos.saturating_add(n).min(self.chars.len());
+    }
+
+    /// Scan a drive parameter ident written as one word: a SERCOS IDN `S-0-0092` / `P-0-0270`
+    /// (`<letter>-<digits>-<digits>`, the letter upper-cased) or a CANopen object `0x6072_00`
+    /// (returned as `0x` + upper-case hex digits). The word must not run on into an identifier
+    /// character. Returns `None` (consuming nothing) otherwise.
+    pub fn scan_drive_ident(&mut self) -> Option<String> {
+        let run = |from: usize, ok: &dyn Fn(char) -> bool| {
+            let mut k = from;
+            while self.peek_at(k).is_some_and(ok) {
+                k += 1;
+            }
+            k
+        };
+        let ends_word = |k: usize| !self.peek_at(k).is_some_and(|c| is_ident_char(c) || c == '.');
+        let first = self.peek()?;
+        let len = if first.is_ascii_alphabetic() && self.peek_at(1) == Some('-') {
+            let a = run(2, &|c| c.is_ascii_digit());
+            if a == 2 || self.peek_at(a) != Some('-') {
+                return None;
+            }
+            let b = run(a + 1, &|c| c.is_ascii_digit());
+            if b == a + 1 || !ends_word(b) {
+                return None;
+            }
+            b
+        } else if first == '0' && matches!(self.peek_at(1), Some('x' | 'X')) {
+            let k = run(2, &|c| c.is_ascii_hexdigit() || c == '_');
+            let digits = (2..k).any(|i| self.peek_at(i).is_some_and(|c| c.is_ascii_hexdigit()));
+            if !digits || !ends_word(k) {
+                return None;
+            }
+            k
+        } else {
+            return None;
+        };
+        let mut word: String = self.chars[self.pos..self.pos + len]
+            .iter()
+            .map(|c| c.ch.to_ascii_uppercase())
+            .collect();
+        if first == '0' {
+            word.replace_range(1..2, "x");
+        }
+        self.pos += len;
+        Some(word)
+    }
+
     /// Scan the next expression-level token (blanks skipped).
     pub fn next_token(&mut self) -> Result<Token, ParseError> {
         self.skip_ws();

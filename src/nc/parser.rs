@@ -1,6 +1,6 @@
 //! NC parser: DIN 66025 blocks plus the seeds' `#` control commands → [`Program`].
 //!
-//! Syntax (the programming examples of seed 001 §3, seed 004 §2/§4/§5 and seed 000 §3):
+//! Syntax (the programming examples of seed 001 §3, seed 004 §2–§7 and seed 000 §3):
 //!
 //! ```text
 //! %name                              optional program name (first line)
@@ -10,24 +10,58 @@
 //! N60 X2 = 100 Y2=100                indexed axis names (seed 000 §4)
 //! N30 X[V.A.ABS.X - 5] F=V.G.FEED    bracketed expressions, variables, '='
 //! N30 #MSG SYN["V.A.MESS.Z=%f", V.A.MESS.Z]
+//! D1                                 tool offset number (probe ball radius, seed 004 §5)
+//! N20 X[INDP_SYN G100 G90 POS100 FEED500]   independent axis (seed 004 §2)
+//! N10 P1 = V.A.ABS.X + 2             arithmetic parameter assignment
 //! ```
 //!
-//! Words: `N<digits>` (first word only), `G<int>`, `M<int>`, `F<value>`, `I J K <value>`, axis
-//! letters `X Y Z A B C U V W` (optionally followed by digits and `=`, e.g. `X2=100`). A value is
-//! a signed number, a signed `[expression]` or a signed variable, optionally after `=`. Letters
-//! are case-insensitive. Lexical rules (comments, continuation lines) are in [`super::lexer`].
+//! Words: `N<digits>` (first word only), `G<int>`, `M<int>`, `F<value>`, `D<value>`,
+//! `I J K <value>`, axis letters `X Y Z A B C U V W` (optionally followed by digits and `=`, e.g.
+//! `X2=100`). A value is a signed number, a signed `[expression]`, a signed variable or a signed
+//! parameter `P<n>`, optionally after `=`. Letters are case-insensitive. Lexical rules (comments,
+//! continuation lines) are in [`super::lexer`].
 //!
-//! Expressions: numbers, strings, variables, unary `+ -`, `+ - * /` with the usual precedence
-//! (left associative), grouping with `[ ]` or `( )`, and the functions of
+//! Independent axes: an axis letter (optionally with digits, `X2`) followed by `[` whose first
+//! word is `INDP_SYN` or `INDP_ASYN` is an [`Item::Independent`]; after that first word the
+//! bracket holds, in any order, `G<int>` words, exactly one `POS<value>` and at most one
+//! `FEED<value>` (`POS100`, `POS=-5`, `POS[expr]`, same for `FEED`), separated by blanks. Any
+//! other `X[…]` is an expression as before.
+//!
+//! Arithmetic parameters: `P<n> = <expr>` is an [`Item::Assign`]; the expression is written
+//! without brackets and ends before the next word. An assignment is a block of its own: only the
+//! `N` number and further assignments may share its block. Inside expressions (and as a word
+//! value, `X=P1`) `P<n>` is [`Expr::Param`]. `P` is not an address letter otherwise.
+//!
+//! Expressions: numbers, strings, variables, parameters `P<n>`, unary `+ -`, `+ - * /` with the
+//! usual precedence (left associative), grouping with `[ ]` or `( )`, and the functions of
 //! [`super::expr::FUNCTIONS`] written `ABS[x]`, `ATAN2[y, x]`. A sign directly in front of a
 //! number literal is folded into the literal (`X-5` → `Expr::Num(-5.0)`). Nesting is limited to
 //! [`MAX_NESTING`] levels and the tree height to [`MAX_EXPR_HEIGHT`], so no input can exhaust the
 //! stack.
 //!
-//! `#` commands are dispatched by keyword through a table (`COMMANDS`); adding `#MEAS`, `#CS`,
-//! `#CONTROL AREA` … means adding one entry and one function.
+//! `#` commands are dispatched by keyword through a table; their syntax is documented in the
+//! `commands` submodule (`#MSG`, `#MEAS`, `#CS`, `#TRAFO`, `#DRIVE`, `#IDENT`, `#SET AX LINK`,
+//! `#ENABLE AX LINK`, `#DISABLE AX LINK`).
+//!
+//! # Leniencies for the seed texts
+//!
+//! The seeds are PDF extractions; these artefacts are accepted on purpose, each as narrowly as
+//! possible (any other use is still an error):
+//!
+//! * `\#` is read as `#` at the start of a command (seed 004 §4: `N50 \#CS ON[0,0,0,0,0,90]`).
+//! * `NO<digits>` (letter O instead of zero) is read as the block number `N<digits>` only when it
+//!   is the first word and is followed by blanks and a `#` command (seed 004 §7.3:
+//!   `NO80 #IDENT WR SYN […]`, `NO30 #DRIVE WR SYN […]`).
+//! * A `#` command whose line ends right after its keywords (`N060 #IDENT RD`) takes its bracket
+//!   from the next non-empty line if that line starts with `[` (seed 004 §7.3.1, where the
+//!   bracket `[AXNR 4 ID …]` was moved to the following line). The bracket may itself continue
+//!   over further lines as long as it is open (see [`super::lexer`]). Since no block can start
+//!   with `[`, this never changes the meaning of an otherwise valid program.
+//! * `KEY=TORQUE LIMIT` in `#DRIVE` (underscore lost) — see the `commands` submodule.
 
-use super::ast::{BinOp, Block, Command, Expr, Item, Program, Span};
+mod commands;
+
+use super::ast::{BinOp, Block, Expr, IndependentMotion, Item, Program, Span};
 use super::expr::{function_arity, FUNCTIONS, MAX_EXPR_HEIGHT};
 use super::lexer::{expression_lines, logical_lines, Cursor, LogicalLine, Token, TokenKind};
 
@@ -76,7 +110,9 @@ const PERCENT_MISPLACED: &str =
 pub fn parse(src: &str) -> Result<Program, ParseError> {
     let lines = logical_lines(src)?;
     let mut program = Program::default();
-    for (k, line) in lines.iter().enumerate() {
+    let mut k = 0;
+    while k < lines.len() {
+        let line = &lines[k];
         if let Some((first, rest)) = line.chars.split_first().filter(|(c, _)| c.ch == '%') {
             if k != 0 {
                 return Err(ParseError::at(first.span, PERCENT_MISPLACED));
@@ -84,9 +120,17 @@ pub fn parse(src: &str) -> Result<Program, ParseError> {
             let name: String = rest.iter().map(|c| c.ch).collect();
             let name = name.trim();
             program.name = (!name.is_empty()).then(|| name.to_string());
+            k += 1;
             continue;
         }
-        program.blocks.push(parse_block(line)?);
+        // A following line that starts with '[' may supply the bracket of a `#` command that
+        // ends this line (module documentation, leniencies).
+        let next = lines
+            .get(k + 1)
+            .filter(|l| l.chars.first().is_some_and(|c| c.ch == '['));
+        let (block, used_next) = parse_block(line, next)?;
+        program.blocks.push(block);
+        k += if used_next { 2 } else { 1 };
     }
     Ok(program)
 }
@@ -101,9 +145,7 @@ pub fn parse_expr(src: &str) -> Result<Expr, ParseError> {
             .map_or(Span { line: 1, col: 1 }, LogicalLine::start);
         return Err(ParseError::at(span, "expected exactly one expression"));
     };
-    let mut p = BlockParser {
-        cur: Cursor::new(line),
-    };
+    let mut p = BlockParser::new(line, None);
     let (e, _) = p.expr(0)?;
     let t = p.cur.next_token()?;
     if t.kind != TokenKind::End {
@@ -118,22 +160,29 @@ pub fn parse_expr(src: &str) -> Result<Expr, ParseError> {
     Ok(e)
 }
 
-fn parse_block(line: &LogicalLine) -> PResult<Block> {
-    let mut p = BlockParser {
-        cur: Cursor::new(line),
-    };
+/// Parse one logical line; `next` is the following line if it starts with `[` (it may supply
+/// the bracket of a `#` command). Returns the block and whether `next` was used.
+fn parse_block<'a>(
+    line: &'a LogicalLine,
+    next: Option<&'a LogicalLine>,
+) -> PResult<(Block, bool)> {
+    let mut p = BlockParser::new(line, next);
     let mut block = Block {
         span: line.start(),
         number: None,
         items: Vec::new(),
     };
+    // Where the block's first parameter assignment / first other word is (an assignment is a
+    // block of its own).
+    let mut assign_at: Option<Span> = None;
+    let mut other_at: Option<Span> = None;
     let mut first = true;
     loop {
         p.cur.skip_ws();
         let Some(c) = p.cur.peek() else { break };
         let span = p.cur.span();
         let letter = c.to_ascii_uppercase();
-        match letter {
+        let item = match letter {
             'N' => {
                 if !first {
                     return Err(ParseError::at(
@@ -142,32 +191,40 @@ fn parse_block(line: &LogicalLine) -> PResult<Block> {
                     ));
                 }
                 p.cur.bump();
-                block.number = Some(p.integer('N')?);
+                block.number = Some(p.block_number()?);
+                first = false;
+                continue;
             }
             'G' => {
                 p.cur.bump();
                 let code = p.integer('G')?;
-                block.items.push(Item::G { code, span });
+                Item::G { code, span }
             }
             'M' => {
                 p.cur.bump();
                 let code = p.integer('M')?;
-                block.items.push(Item::M { code, span });
+                Item::M { code, span }
             }
             'F' => {
                 p.cur.bump();
                 let value = p.word_value("F")?;
-                block.items.push(Item::F { value, span });
+                Item::F { value, span }
+            }
+            'D' => {
+                p.cur.bump();
+                let value = p.word_value("D")?;
+                Item::D { value, span }
             }
             'I' | 'J' | 'K' => {
                 p.cur.bump();
                 let value = p.word_value(&letter.to_string())?;
-                block.items.push(Item::Centre {
+                Item::Centre {
                     letter,
                     value,
                     span,
-                });
+                }
             }
+            'P' => p.assignment(span)?,
             'X' | 'Y' | 'Z' | 'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
                 if p.cur.at_var() {
                     return Err(ParseError::at(
@@ -178,21 +235,39 @@ fn parse_block(line: &LogicalLine) -> PResult<Block> {
                 }
                 p.cur.bump();
                 let name = p.axis_name(letter);
-                let value = p.word_value(&name)?;
-                block.items.push(Item::Axis { name, value, span });
+                if let Some(sync) = p.indp_at(0) {
+                    let motion = p.independent(&name, sync)?;
+                    Item::Independent {
+                        axis: name,
+                        motion,
+                        span,
+                    }
+                } else {
+                    let value = p.word_value(&name)?;
+                    Item::Axis { name, value, span }
+                }
             }
             '#' => {
                 p.cur.bump();
                 let command = p.command(span)?;
-                block.items.push(Item::Command { command, span });
+                Item::Command { command, span }
+            }
+            // Seed 004 §4 `N50 \#CS ON[…]`: a stray '\' in front of a command (PDF extraction).
+            '\\' if p.cur.peek_at(1) == Some('#') => {
+                p.cur.bump();
+                let span = p.cur.span();
+                p.cur.bump();
+                let command = p.command(span)?;
+                Item::Command { command, span }
             }
             '%' => return Err(ParseError::at(span, PERCENT_MISPLACED)),
             _ if c.is_ascii_alphabetic() => {
                 return Err(ParseError::at(
                     span,
                     format!(
-                        "unknown address letter '{letter}' (expected N, G, M, F, I, J, K, \
-                         an axis X Y Z A B C U V W, or a # command)"
+                        "unknown address letter '{letter}' (expected N, G, M, F, D, I, J, K, \
+                         an axis X Y Z A B C U V W, a parameter assignment P<n> = …, \
+                         or a # command)"
                     ),
                 ))
             }
@@ -204,28 +279,281 @@ fn parse_block(line: &LogicalLine) -> PResult<Block> {
                     ),
                 ))
             }
+        };
+        if matches!(item, Item::Assign { .. }) {
+            if let Some(other) = other_at {
+                return Err(ParseError::at(
+                    span,
+                    format!(
+                        "a parameter assignment must be a block of its own, but this block \
+                         already has a word at column {} (only 'N' and further assignments may \
+                         share the block)",
+                        other.col
+                    ),
+                ));
+            }
+            assign_at.get_or_insert(span);
+        } else {
+            if let Some(assign) = assign_at {
+                return Err(ParseError::at(
+                    span,
+                    format!(
+                        "a parameter assignment must be a block of its own: expected another \
+                         assignment 'P<n> = …' or end of block after the assignment at column {}",
+                        assign.col
+                    ),
+                ));
+            }
+            other_at.get_or_insert(span);
         }
+        block.items.push(item);
         first = false;
     }
-    Ok(block)
-}
-
-/// Signature of a `#` command parser: called after the keyword, with the span of the `#`.
-type CommandFn = fn(&mut BlockParser<'_>, Span) -> PResult<Command>;
-
-/// `#` command keyword dispatch table (keywords upper case).
-const COMMANDS: &[(&str, CommandFn)] = &[("MSG", command_msg)];
-
-/// `#MSG` entry of [`COMMANDS`].
-fn command_msg(p: &mut BlockParser<'_>, _hash: Span) -> PResult<Command> {
-    p.msg()
+    Ok((block, p.used_next))
 }
 
 struct BlockParser<'a> {
     cur: Cursor<'a>,
+    /// The next logical line if it starts with `[` and has not been taken yet.
+    next_line: Option<&'a LogicalLine>,
+    /// The next line was taken as the continuation of a `#` command.
+    used_next: bool,
+}
+
+/// `P<digits>` as scanned by the token scanner (`P1159`): the parameter number.
+fn param_number(name: &str, span: Span) -> PResult<Option<u32>> {
+    let Some(digits) = name.strip_prefix('P') else {
+        return Ok(None);
+    };
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return Ok(None);
+    }
+    digits
+        .parse::<u32>()
+        .map(Some)
+        .map_err(|_| ParseError::at(span, format!("parameter number is too large: P{digits}")))
+}
+
+impl<'a> BlockParser<'a> {
+    fn new(line: &'a LogicalLine, next_line: Option<&'a LogicalLine>) -> Self {
+        BlockParser {
+            cur: Cursor::new(line),
+            next_line,
+            used_next: false,
+        }
+    }
+
+    /// Where a `#` command's bracket may start: skip blanks; if the block ends here and the next
+    /// line starts with `[`, continue on that line (module documentation, leniencies).
+    fn continue_at_next_line_bracket(&mut self) {
+        self.cur.skip_ws();
+        if self.cur.peek().is_none() {
+            if let Some(next) = self.next_line.take() {
+                self.cur = Cursor::new(next);
+                self.used_next = true;
+            }
+        }
+    }
 }
 
 impl BlockParser<'_> {
+    /// The block number after `N`: `<digits>`, or `O<digits>` (letter O) when followed by blanks
+    /// and a `#` command (seed 004 §7.3 transcription artefact `NO80 #IDENT …`).
+    fn block_number(&mut self) -> PResult<u32> {
+        if matches!(self.cur.peek(), Some('O' | 'o')) {
+            let mut k = 1;
+            while self.cur.peek_at(k).is_some_and(|c| c.is_ascii_digit()) {
+                k += 1;
+            }
+            let mut j = k;
+            while self.cur.peek_at(j) == Some(' ') {
+                j += 1;
+            }
+            let command_follows = match self.cur.peek_at(j) {
+                Some('#') => true,
+                Some('\\') => self.cur.peek_at(j + 1) == Some('#'),
+                _ => false,
+            };
+            if k > 1 && j > k && command_follows {
+                self.cur.bump();
+                return self.integer('N');
+            }
+            return Err(ParseError::at(
+                self.cur.span(),
+                "expected an integer after 'N', found the letter 'O' \
+                 ('NO<digits>' is only accepted as a block number in front of a # command)",
+            ));
+        }
+        self.integer('N')
+    }
+
+    /// `P<n> = <expr>` starting at the `P` (at `span`).
+    fn assignment(&mut self, span: Span) -> PResult<Item> {
+        self.cur.bump();
+        let digits_span = self.cur.span();
+        let digits = self.cur.scan_digits();
+        if digits.is_empty() {
+            return Err(ParseError::at(
+                digits_span,
+                format!(
+                    "expected a parameter number after 'P' (assignment 'P<n> = <expr>'), found {}",
+                    self.cur.describe_next()
+                ),
+            ));
+        }
+        let param = digits.parse::<u32>().map_err(|_| {
+            ParseError::at(span, format!("parameter number is too large: P{digits}"))
+        })?;
+        self.cur.skip_ws();
+        if self.cur.peek() != Some('=') {
+            return Err(ParseError::at(
+                span,
+                format!(
+                    "'P' is not an address letter: expected '=' after P{param} (an arithmetic \
+                     parameter is assigned in a block of its own, 'P{param} = <expr>', or used \
+                     inside an expression), found {}",
+                    self.cur.describe_next()
+                ),
+            ));
+        }
+        self.cur.bump();
+        let (value, _) = self.expr(1)?;
+        Ok(Item::Assign { param, value, span })
+    }
+
+    /// If the text `n` characters ahead is `[` (blanks allowed) followed by `INDP_SYN` or
+    /// `INDP_ASYN` as a whole word: `Some(sync)`.
+    fn indp_at(&self, n: usize) -> Option<bool> {
+        let mut k = n;
+        while self.cur.peek_at(k) == Some(' ') {
+            k += 1;
+        }
+        if self.cur.peek_at(k) != Some('[') {
+            return None;
+        }
+        k += 1;
+        while self.cur.peek_at(k) == Some(' ') {
+            k += 1;
+        }
+        let word: String = (k..)
+            .map_while(|i| {
+                self.cur
+                    .peek_at(i)
+                    .filter(|c| c.is_ascii_alphanumeric() || *c == '_')
+            })
+            .take(10)
+            .map(|c| c.to_ascii_uppercase())
+            .collect();
+        match word.as_str() {
+            "INDP_SYN" => Some(true),
+            "INDP_ASYN" => Some(false),
+            _ => None,
+        }
+    }
+
+    /// True if the keyword `kw` (upper case) starts here and is followed by its value, not by
+    /// more letters (a variable `V.…` or a parameter `P<digit>` may follow directly).
+    fn at_value_keyword(&self, kw: &str) -> bool {
+        if !self.cur.at_word(kw) {
+            return false;
+        }
+        let n = kw.chars().count();
+        match self.cur.peek_at(n) {
+            Some(c) if c.is_ascii_alphabetic() || c == '_' => match c.to_ascii_uppercase() {
+                'V' => self.cur.peek_at(n + 1) == Some('.'),
+                'P' => self.cur.peek_at(n + 1).is_some_and(|d| d.is_ascii_digit()),
+                _ => false,
+            },
+            _ => true,
+        }
+    }
+
+    /// The bracket of an independent-axis word, at the `[` (known to hold `INDP_SYN` /
+    /// `INDP_ASYN`): `[INDP_SYN {G<int>} POS<value> [FEED<value>]]`, any order after the first
+    /// word.
+    fn independent(&mut self, axis: &str, sync: bool) -> PResult<IndependentMotion> {
+        self.cur.skip_ws();
+        let open = self.cur.span();
+        self.cur.bump();
+        self.cur.skip_ws();
+        let kw = if sync { "INDP_SYN" } else { "INDP_ASYN" };
+        self.cur.advance(kw.len());
+        let mut gcodes = Vec::new();
+        let mut pos: Option<Expr> = None;
+        let mut feed: Option<Expr> = None;
+        loop {
+            self.cur.skip_ws();
+            let span = self.cur.span();
+            match self.cur.peek().map(|c| c.to_ascii_uppercase()) {
+                Some(']') => {
+                    self.cur.bump();
+                    break;
+                }
+                None => {
+                    return Err(ParseError::at(
+                        span,
+                        format!(
+                            "expected ']' to close {axis}[{kw} … at line {}, column {}, found end \
+                             of block",
+                            open.line, open.col
+                        ),
+                    ))
+                }
+                Some('G')
+                    if self
+                        .cur
+                        .peek_at(1)
+                        .is_some_and(|c| c == ' ' || c.is_ascii_digit()) =>
+                {
+                    self.cur.bump();
+                    gcodes.push(self.integer('G')?);
+                }
+                _ if self.at_value_keyword("POS") => {
+                    if pos.is_some() {
+                        return Err(ParseError::at(
+                            span,
+                            format!("POS is given twice in {axis}[{kw} …]"),
+                        ));
+                    }
+                    self.cur.advance(3);
+                    pos = Some(self.word_value("POS")?);
+                }
+                _ if self.at_value_keyword("FEED") => {
+                    if feed.is_some() {
+                        return Err(ParseError::at(
+                            span,
+                            format!("FEED is given twice in {axis}[{kw} …]"),
+                        ));
+                    }
+                    self.cur.advance(4);
+                    feed = Some(self.word_value("FEED")?);
+                }
+                _ => {
+                    return Err(ParseError::at(
+                        span,
+                        format!(
+                            "expected G<code>, POS<value>, FEED<value> or ']' in {axis}[{kw} …], \
+                             found {}",
+                            self.cur.describe_next()
+                        ),
+                    ))
+                }
+            }
+        }
+        let Some(pos) = pos else {
+            return Err(ParseError::at(
+                open,
+                format!("{axis}[{kw} …] needs a target position POS<value>"),
+            ));
+        };
+        Ok(IndependentMotion {
+            sync,
+            gcodes,
+            pos,
+            feed,
+        })
+    }
+
     /// Unsigned integer after `N`, `G` or `M` (blanks allowed after the letter).
     fn integer(&mut self, letter: char) -> PResult<u32> {
         self.cur.skip_ws();
@@ -255,7 +583,7 @@ impl BlockParser<'_> {
     }
 
     /// After an axis letter: `X2=` → `"X2"` (digits directly after the letter, then blanks and
-    /// `=`), otherwise just the letter.
+    /// `=`, or `X2[INDP_SYN …]`), otherwise just the letter.
     fn axis_name(&mut self, letter: char) -> String {
         let mut n = 0;
         while self.cur.peek_at(n).is_some_and(|c| c.is_ascii_digit()) {
@@ -268,7 +596,7 @@ impl BlockParser<'_> {
         while self.cur.peek_at(k) == Some(' ') {
             k += 1;
         }
-        if self.cur.peek_at(k) != Some('=') {
+        if self.cur.peek_at(k) != Some('=') && self.indp_at(n).is_none() {
             return letter.to_string();
         }
         let mut name = letter.to_string();
@@ -276,7 +604,7 @@ impl BlockParser<'_> {
         name
     }
 
-    /// Value of an address word: `[=] [+|-] (number | [expr] | variable)`.
+    /// Value of an address word: `[=] [+|-] (number | [expr] | variable | P<n>)`.
     fn word_value(&mut self, word: &str) -> PResult<Expr> {
         self.cur.skip_ws();
         if self.cur.peek() == Some('=') {
@@ -305,6 +633,17 @@ impl BlockParser<'_> {
         if let Some(v) = self.cur.scan_var() {
             return Ok(Expr::Var(v));
         }
+        if matches!(self.cur.peek(), Some('P' | 'p'))
+            && self.cur.peek_at(1).is_some_and(|c| c.is_ascii_digit())
+        {
+            let span = self.cur.span();
+            self.cur.bump();
+            let digits = self.cur.scan_digits();
+            let n = digits.parse::<u32>().map_err(|_| {
+                ParseError::at(span, format!("parameter number is too large: P{digits}"))
+            })?;
+            return Ok(Expr::Param(n, span));
+        }
         if self.cur.peek() == Some('[') {
             let open = self.cur.span();
             self.cur.bump();
@@ -315,7 +654,7 @@ impl BlockParser<'_> {
         Err(ParseError::at(
             self.cur.span(),
             format!(
-                "expected a number, '[' or a variable after '{word}', found {}",
+                "expected a number, '[', a variable or a parameter P<n> after '{word}', found {}",
                 self.cur.describe_next()
             ),
         ))
@@ -416,7 +755,8 @@ impl BlockParser<'_> {
         }
     }
 
-    /// `primary := number | string | variable | FUNC '[' args ']' | '[' expr ']' | '(' expr ')'`.
+    /// `primary := number | string | variable | P<n> | FUNC '[' args ']' | '[' expr ']'
+    ///          | '(' expr ')'`.
     fn primary(&mut self, depth: usize) -> PResult<(Expr, usize)> {
         let t = self.cur.next_token()?;
         match t.kind {
@@ -429,12 +769,15 @@ impl BlockParser<'_> {
                 Ok((e, h))
             }
             TokenKind::Ident(name) => {
+                if let Some(n) = param_number(&name, t.span)? {
+                    return Ok((Expr::Param(n, t.span), 1));
+                }
                 if self.cur.peek_token()?.kind != TokenKind::Punct('[') {
                     return Err(ParseError::at(
                         t.span,
                         format!(
-                            "unknown name '{name}': expected a number, a variable V.…, a string, \
-                             '[' or a function call such as ABS[…]"
+                            "unknown name '{name}': expected a number, a variable V.…, a \
+                             parameter P<n>, a string, '[' or a function call such as ABS[…]"
                         ),
                     ));
                 }
@@ -506,84 +849,5 @@ impl BlockParser<'_> {
         }
         let h = self.grow(span, h + 1)?;
         Ok((Expr::Call(name, args, span), h))
-    }
-
-    /// `#KEYWORD …` after the `#`: look the keyword up in [`COMMANDS`].
-    fn command(&mut self, hash: Span) -> PResult<Command> {
-        let Some((keyword, _)) = self.cur.scan_ident() else {
-            return Err(ParseError::at(
-                self.cur.span(),
-                format!(
-                    "expected a command name after '#', found {}",
-                    self.cur.describe_next()
-                ),
-            ));
-        };
-        match COMMANDS.iter().find(|(k, _)| *k == keyword) {
-            Some((_, f)) => f(self, hash),
-            None => Err(ParseError::at(
-                hash,
-                format!("unknown control command #{keyword}"),
-            )),
-        }
-    }
-
-    fn expect_token(&mut self, what: &str) -> PResult<Token> {
-        let t = self.cur.next_token()?;
-        if t.kind == TokenKind::End {
-            return Err(ParseError::at(
-                t.span,
-                format!("expected {what}, found end of block"),
-            ));
-        }
-        Ok(t)
-    }
-
-    /// `#MSG [SYN] ["format", expr, …]` (seed 004 §5).
-    fn msg(&mut self) -> PResult<Command> {
-        let mut t = self.expect_token("'SYN' or '[' after #MSG")?;
-        let mut sync = false;
-        if t.kind == TokenKind::Ident("SYN".to_string()) {
-            sync = true;
-            t = self.expect_token("'[' after #MSG SYN")?;
-        }
-        if t.kind != TokenKind::Punct('[') {
-            let expected = if sync { "'['" } else { "'SYN' or '['" };
-            return Err(ParseError::at(
-                t.span,
-                format!(
-                    "expected {expected} after #MSG, found {}",
-                    t.kind.describe()
-                ),
-            ));
-        }
-        let t = self.expect_token("the format string \"…\"")?;
-        let TokenKind::Str(format) = t.kind else {
-            return Err(ParseError::at(
-                t.span,
-                format!(
-                    "expected the format string \"…\" as the first #MSG argument, found {}",
-                    t.kind.describe()
-                ),
-            ));
-        };
-        let mut args = Vec::new();
-        loop {
-            let t = self.expect_token("',' or ']' in #MSG")?;
-            match t.kind {
-                TokenKind::Punct(',') => args.push(self.expr(1)?.0),
-                TokenKind::Punct(']') => break,
-                other => {
-                    return Err(ParseError::at(
-                        t.span,
-                        format!(
-                            "expected an operator, ',' or ']' in #MSG, found {}",
-                            other.describe()
-                        ),
-                    ))
-                }
-            }
-        }
-        Ok(Command::Msg { sync, format, args })
     }
 }

@@ -148,3 +148,101 @@ pub fn trigger_mode_from_text(text: &str) -> Option<TriggerSourceMode> {
         _ => None,
     }
 }
+
+/// Measurement configuration of one axis, from its parameter list (seed 004 §3, §8.2.2), in
+/// mm, mm/s, mm/s².
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxisMeasConfig {
+    /// P-AXIS-00118 `kenngr.messachse`: the axis may take part in measurement runs.
+    pub enabled: bool,
+    /// P-AXIS-00516 `kenngr.measure.signal`.
+    pub signal: SignalSource,
+    /// P-AXIS-00517 `kenngr.measure.input`.
+    pub input: u8,
+    /// P-AXIS-00518 `kenngr.measure.edge`.
+    pub edge: ProbeEdge,
+    /// P-AXIS-00702 `antr.canopen.probing_trigger_source`.
+    pub trigger_mode: TriggerSourceMode,
+    /// P-AXIS-00086 `kenngr.hub_messtaster`: probe stroke (types 2 and 4).
+    pub stroke: f64,
+    /// P-AXIS-00215 `kenngr.vb_messen`: measuring feed of type 2.
+    pub feed_type2: f64,
+    /// P-AXIS-00467 `kenngr.probing_offset`: permitted travel past the target.
+    pub overtravel: f64,
+    /// P-AXIS-00053 `a_feedh` (0 → P-AXIS-00004): feedhold deceleration.
+    pub a_feedhold: f64,
+    /// P-AXIS-00168 `getriebe[i].slep_max`: CNC position lag limit; 0 = off.
+    pub lag_limit: f64,
+    /// The drive is a SERCOS drive (measurement type 6 needs one).
+    pub sercos: bool,
+}
+
+impl Default for AxisMeasConfig {
+    fn default() -> Self {
+        AxisMeasConfig {
+            enabled: false,
+            signal: SignalSource::DriveTypeDefault,
+            input: 1,
+            edge: ProbeEdge::Positive,
+            trigger_mode: TriggerSourceMode::Default,
+            stroke: 5.0,
+            feed_type2: 16.666,
+            overtravel: 0.0,
+            a_feedhold: 1000.0,
+            lag_limit: 10.0,
+            sercos: false,
+        }
+    }
+}
+
+/// Channel-wide measurement settings (seed 004 §8.2.1, seed 000 §6.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChannelMeasConfig {
+    /// P-CHAN-00057 `messtyp`: default measurement type.
+    pub default_type: MeasType,
+    /// P-CHAN-00097 `use_drive_curr_limit`: feedhold uses the parameterised deceleration.
+    pub feedhold_param_decel: bool,
+    /// P-CHAN-00214 `meas_deceleration_mode`: brake with rapid deceleration on the signal.
+    pub rapid_decel_on_signal: bool,
+    /// P-CHAN-00296 `meas_use_std_dynamic`: plan the measuring block with G01 dynamics.
+    pub std_dynamics: bool,
+    /// P-CHAN-00176 `meas_error_no_signal`: type 1 without signal is an error.
+    pub error_no_signal_type1: bool,
+    /// P-CHAN-00266 `meas_fixed_stop_no_error`: type 7 without fixed stop is no error.
+    pub fixed_stop_no_error: bool,
+    /// P-CHAN-00268 `meas_soft_limit_move_path`: limit measuring paths at the SLS (50706).
+    pub limit_at_sls: bool,
+    /// P-CHAN-00311 `meas_pcs_value_no_probe_radius`: leave the ball radius out of the PCS value.
+    pub pcs_without_radius: bool,
+}
+
+impl Default for ChannelMeasConfig {
+    fn default() -> Self {
+        ChannelMeasConfig {
+            default_type: MeasType::Type1,
+            feedhold_param_decel: false,
+            rapid_decel_on_signal: false,
+            std_dynamics: false,
+            error_no_signal_type1: false,
+            fixed_stop_no_error: false,
+            limit_at_sls: false,
+            pcs_without_radius: false,
+        }
+    }
+}
+
+/// What a finished measuring block reports to the executor (ACS values; the executor converts
+/// them with its frames into `V.A.MESS` & co.).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementOutcome {
+    /// Measurement type of the run.
+    pub mtype: MeasType,
+    /// Latched ACS position per channel axis; `None` where the axis did not latch.
+    pub latched: Vec<Option<f64>>,
+    /// Per axis: the latch arrived before the programmed target was reached (`V.A.MERF`).
+    pub merf: Vec<bool>,
+    /// Per axis: the axis took part in the run (values of other axes are retained).
+    pub involved: Vec<bool>,
+    /// The programmed target point was reached (no event, or type 3).
+    pub target_reached: bool,
+}

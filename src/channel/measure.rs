@@ -1,0 +1,446 @@
+//! Measurement runs in the channel (seed 004): a G100 / G210 / G310 block is a linear motion
+//! that arms the probing-signal sources of its axes, collects their latches every cycle, brakes
+//! when the probing signal is complete and publishes a [`MeasurementOutcome`].
+//!
+//! Phases of one measuring block:
+//!
+//! ```text
+//! arming ──(every source confirmed: drive 0x60B9 enabled, PLC acknowledged)──► measuring
+//! measuring ──(all required axes latched)──► braking (type 3: goes on to the target)
+//!           ──(target / overtravel end reached)──► done without signal
+//! braking ──(standstill)──► done
+//! ```
+//!
+//! Which axes must latch (seed 004 §4): in 2.5D every measurement axis the block moves; with
+//! `#CS` all three main axes. Braking uses the deceleration of the §2.1 table ("measurement
+//! signal active" column) for the non-linear slope parameter set our interpolator uses.
+
+use super::Channel;
+use crate::core::measure::{MeasType, MeasurementOutcome, SignalSource};
+use crate::core::path::Segment;
+use crate::drive::{ProbeEdge, ProbeRequest, ProbeState, ProbeTrigger, TriggerSourceMode};
+use crate::messages::{ids, CncMessage};
+use crate::units::Nanos;
+
+/// Cycles a measuring block may wait for its sources to confirm the arming (1 s at 1 ms).
+pub const ARMING_TIMEOUT_CYCLES: u32 = 1000;
+
+/// The measuring part of a motion request, as the executor states it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasureRequest {
+    /// Active measurement type.
+    pub mtype: MeasType,
+    /// The G code of the block: 100, 210 or 310.
+    pub gcode: u32,
+    /// `#CS` is active: the three main axes must all latch (seed 004 §4).
+    pub cs_active: bool,
+    /// Per-axis signal overrides from `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`.
+    pub overrides: Vec<SignalOverride>,
+}
+
+/// A `#MEAS [AXNR=..]` override of one axis's signal settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SignalOverride {
+    /// Channel axis index.
+    pub axis: usize,
+    /// Signal source.
+    pub signal: Option<SignalSource>,
+    /// Probing input.
+    pub input: Option<u8>,
+    /// Edge.
+    pub edge: Option<ProbeEdge>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Arming { cycles: u32 },
+    Measuring,
+    Done,
+}
+
+#[derive(Debug, Clone)]
+pub(super) struct MeasAxis {
+    axis: usize,
+    signal: SignalSource,
+    required: bool,
+    edge: ProbeEdge,
+    input: u8,
+    latched: Option<(f64, Nanos)>,
+    /// Latched before the programmed target was reached.
+    before_target: bool,
+}
+
+/// State of one measuring block.
+#[derive(Debug, Clone)]
+pub(super) struct MeasRun {
+    mtype: MeasType,
+    phase: Phase,
+    axes: Vec<MeasAxis>,
+    /// Path length up to the programmed target (the segment may extend beyond: overtravel).
+    pub(super) target_len: f64,
+    /// The path was cut at a software limit switch (P-CHAN-00268).
+    pub(super) limited_at_sls: bool,
+    /// Per-axis braking deceleration (mm/s²) of the §2.1 table.
+    brake: Vec<f64>,
+    /// Path position where the signal became complete.
+    event_s: Option<f64>,
+}
+
+impl MeasRun {
+    /// All required axes latched.
+    fn complete(&self) -> bool {
+        self.axes.iter().filter(|a| a.required).all(|a| a.latched.is_some())
+            && self.axes.iter().any(|a| a.latched.is_some())
+    }
+
+    /// Measurement type.
+    pub(super) fn mtype(&self) -> MeasType {
+        self.mtype
+    }
+}
+
+impl Channel {
+    /// Set up the measurement of a motion block (called from block preparation once the path
+    /// is known). Returns an error message when the block may not run as a measurement.
+    pub(super) fn prepare_measurement(
+        &mut self,
+        req: &MeasureRequest,
+        segment: &Segment,
+        target_len: f64,
+    ) -> Result<MeasRun, CncMessage> {
+        let n = self.axes.len();
+        let start = segment.start();
+        let end = segment.end();
+        let moved: Vec<bool> = (0..n).map(|i| (end[i] - start[i]).abs() > 1e-9).collect();
+        let mtype = req.mtype;
+        // G code and type must belong together (seed 004 §3 table).
+        let ok_gcode = match mtype {
+            MeasType::Type5 => req.gcode == 210,
+            MeasType::Type6 => req.gcode == 310,
+            _ => req.gcode == 100,
+        };
+        if !ok_gcode {
+            return Err(CncMessage::error(
+                ids::MEAS_CONFIG,
+                format!(
+                    "G{} does not belong to measurement type {} (types 1–4 and 7 measure with G100, 5 with G210, 6 with G310)",
+                    req.gcode,
+                    mtype.number()
+                ),
+            ));
+        }
+        let main = self.main_axes();
+        let moved_count = moved.iter().filter(|m| **m).count();
+        match mtype {
+            MeasType::Type2 if moved_count != 1 => {
+                return Err(CncMessage::error(
+                    ids::MEAS_CONFIG,
+                    format!("measurement type 2 moves exactly one axis; this block moves {moved_count}"),
+                ))
+            }
+            MeasType::Type4 => {
+                if let Some(i) = (0..n).find(|i| moved[*i] && !main.contains(&Some(*i))) {
+                    return Err(CncMessage::error(
+                        ids::MEAS_CONFIG,
+                        format!(
+                            "measurement type 4 measures with at most the 3 main axes; axis {} is not one",
+                            self.axes[i].name()
+                        ),
+                    ));
+                }
+            }
+            MeasType::Type6 if !self.cfg.axes.iter().any(|a| a.meas.sercos) => {
+                return Err(CncMessage::error(
+                    ids::MEAS_CONFIG,
+                    "measurement type 6 (G310) needs at least one SERCOS axis; this channel has none",
+                ))
+            }
+            _ => {}
+        }
+        // Which axes take part and which must latch (seed 004 §4).
+        let mut axes = Vec::new();
+        for i in 0..n {
+            let c = &self.cfg.axes[i].meas;
+            let in_cs = req.cs_active && main.contains(&Some(i));
+            let required = moved[i] || in_cs;
+            if required && !c.enabled {
+                return Err(CncMessage::error(
+                    ids::MEAS_CONFIG,
+                    format!(
+                        "axis {} is not enabled as a measurement axis (P-AXIS-00118 kenngr.messachse = 0){}",
+                        self.axes[i].name(),
+                        if in_cs { "; with #CS all three main axes must be" } else { "" }
+                    ),
+                )
+                .on_axis(self.axes[i].name()));
+            }
+            if !c.enabled {
+                continue;
+            }
+            let ov = req.overrides.iter().rev().find(|o| o.axis == i);
+            let mut signal = ov.and_then(|o| o.signal).unwrap_or(c.signal);
+            if mtype == MeasType::Type7 {
+                signal = SignalSource::FixedStop;
+            }
+            axes.push(MeasAxis {
+                axis: i,
+                signal,
+                required,
+                edge: ov.and_then(|o| o.edge).unwrap_or(c.edge),
+                input: ov.and_then(|o| o.input).unwrap_or(c.input),
+                latched: None,
+                before_target: false,
+            });
+        }
+        if !axes.iter().any(|a| a.required) {
+            return Err(CncMessage::error(
+                ids::MEAS_CONFIG,
+                "measuring block without a moved measurement axis",
+            ));
+        }
+        let brake = (0..n).map(|i| self.measurement_brake_decel(i)).collect();
+        let mut run = MeasRun {
+            mtype,
+            phase: Phase::Arming { cycles: 0 },
+            axes,
+            target_len,
+            limited_at_sls: false,
+            brake,
+            event_s: None,
+        };
+        self.arm_sources(&mut run)?;
+        Ok(run)
+    }
+
+    /// Braking deceleration of axis `i` after the probing signal, seed 004 §2.1 table
+    /// ("non-linear slope", column "measurement signal active").
+    fn measurement_brake_decel(&self, i: usize) -> f64 {
+        let m = &self.cfg.meas;
+        let a = &self.cfg.axes[i];
+        if m.std_dynamics {
+            a.meas.a_feedhold
+        } else if m.rapid_decel_on_signal {
+            a.a_rapid
+        } else if m.feedhold_param_decel {
+            a.meas.a_feedhold
+        } else {
+            a.a_rapid
+        }
+    }
+
+    /// [`measurement_brake_decel`](Self::measurement_brake_decel) for block preparation.
+    pub(super) fn measurement_brake_decel_pub(&self, i: usize) -> f64 {
+        self.measurement_brake_decel(i)
+    }
+
+    /// Arm every source of the run (drive latch units now; confirmation is polled per cycle).
+    fn arm_sources(&mut self, run: &mut MeasRun) -> Result<(), CncMessage> {
+        for m in &run.axes {
+            if !m.signal.uses_drive_latch() {
+                continue;
+            }
+            let c = &self.cfg.axes[m.axis].meas;
+            let probe = if c.trigger_mode == TriggerSourceMode::Default { m.input.clamp(1, 2) } else { 1 };
+            let trigger = match c.trigger_mode {
+                TriggerSourceMode::Default => ProbeTrigger::Input,
+                _ => ProbeTrigger::SourceObject,
+            };
+            let req = ProbeRequest {
+                probe,
+                edge: m.edge,
+                trigger,
+                continuous: false,
+                source_mode: c.trigger_mode,
+                input: m.input,
+            };
+            let name = self.axes[m.axis].name().to_string();
+            self.axes[m.axis].arm_probe(&req).map_err(|e| {
+                CncMessage::error(ids::MEAS_LATCH, format!("axis {name}: cannot arm the drive latch: {e}")).on_axis(&name)
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Disarm every source of the run.
+    pub(super) fn disarm_sources(&mut self, run: &MeasRun) {
+        for m in &run.axes {
+            if m.signal.uses_drive_latch() {
+                self.axes[m.axis].disarm_probe();
+            }
+        }
+    }
+
+    /// Per cycle, before interpolation: arming progress and latch collection. `s` is the path
+    /// position last commanded. Returns what the interpolator must do.
+    pub(super) fn measurement_step(&mut self, run: &mut MeasRun, now: Nanos, s: f64) -> MeasStep {
+        match run.phase {
+            Phase::Arming { cycles } => {
+                let mut all = true;
+                for m in &run.axes {
+                    if !m.signal.uses_drive_latch() {
+                        continue;
+                    }
+                    match self.axes[m.axis].probe_state() {
+                        ProbeState::Armed => {}
+                        ProbeState::Failed(why) => {
+                            let name = self.axes[m.axis].name().to_string();
+                            return MeasStep::Fail(
+                                CncMessage::error(ids::MEAS_LATCH, format!("axis {name}: drive latch failed while arming: {why}"))
+                                    .on_axis(&name),
+                            );
+                        }
+                        _ => all = false,
+                    }
+                }
+                if all {
+                    run.phase = Phase::Measuring;
+                    MeasStep::Go
+                } else if cycles >= ARMING_TIMEOUT_CYCLES {
+                    MeasStep::Fail(CncMessage::error(
+                        ids::MEAS_LATCH,
+                        format!("the probing-signal sources did not confirm arming within {ARMING_TIMEOUT_CYCLES} cycles"),
+                    ))
+                } else {
+                    run.phase = Phase::Arming { cycles: cycles + 1 };
+                    MeasStep::Hold
+                }
+            }
+            Phase::Measuring => {
+                let was_complete = run.complete();
+                for k in 0..run.axes.len() {
+                    let (axis, signal) = (run.axes[k].axis, run.axes[k].signal);
+                    let event = if signal.uses_drive_latch() {
+                        if let ProbeState::Failed(why) = self.axes[axis].probe_state() {
+                            let name = self.axes[axis].name().to_string();
+                            return MeasStep::Fail(
+                                CncMessage::error(ids::MEAS_LATCH, format!("axis {name}: drive latch failed: {why}")).on_axis(&name),
+                            );
+                        }
+                        self.axes[axis].take_latch()
+                    } else {
+                        None
+                    };
+                    if let Some(pos) = event {
+                        let m = &mut run.axes[k];
+                        if m.latched.is_none() {
+                            m.latched = Some((pos, now));
+                            m.before_target = s < run.target_len - 1e-9;
+                        }
+                    }
+                }
+                if !was_complete && run.complete() {
+                    run.event_s = Some(s);
+                    if run.mtype == MeasType::Type3 {
+                        MeasStep::Go
+                    } else {
+                        MeasStep::Brake
+                    }
+                } else {
+                    MeasStep::Go
+                }
+            }
+            Phase::Done => MeasStep::Go,
+        }
+    }
+
+    /// Path deceleration for braking along `segment` after the signal.
+    pub(super) fn path_brake_decel(&self, run: &MeasRun, segment: &Segment) -> f64 {
+        let mut a = f64::INFINITY;
+        for (i, &d) in run.brake.iter().enumerate() {
+            let f = segment.axis_speed_factor(i);
+            if f > 1e-12 {
+                a = a.min(d / f);
+            }
+        }
+        if a.is_finite() && a > 0.0 {
+            a
+        } else {
+            1.0
+        }
+    }
+
+    /// The block is over (standstill): disarm, decide about errors, publish the outcome. An
+    /// error (missing signal per type) is returned; nothing is published then.
+    pub(super) fn finish_measurement(&mut self, mut run: MeasRun, target_reached: bool) -> Result<(), CncMessage> {
+        run.phase = Phase::Done;
+        self.disarm_sources(&run);
+        let n = self.axes.len();
+        let complete = run.complete();
+        if !complete {
+            let missing: Vec<&str> = run
+                .axes
+                .iter()
+                .filter(|a| a.required && a.latched.is_none())
+                .map(|a| self.axes[a.axis].name())
+                .collect();
+            let list = missing.join(", ");
+            let m = &self.cfg.meas;
+            let error = if run.limited_at_sls {
+                Some(CncMessage::error(
+                    ids::MEAS_PATH_LIMITED,
+                    format!("measurement run stopped at the software limit switch without probing signal (axes {list})"),
+                ))
+            } else {
+                match run.mtype {
+                    MeasType::Type2 => Some(CncMessage::error(
+                        ids::MEAS_NO_SIGNAL,
+                        format!("measurement type 2: probing signal missing (axes {list})"),
+                    )),
+                    MeasType::Type1 if m.error_no_signal_type1 => Some(CncMessage::error(
+                        ids::MEAS_NO_SIGNAL,
+                        format!("probing signal missing (axes {list}; P-CHAN-00176 = 1)"),
+                    )),
+                    MeasType::Type7 if !m.fixed_stop_no_error => Some(CncMessage::error(
+                        ids::MEAS_NO_FIXED_STOP,
+                        format!("measurement type 7: fixed stop not detected (axes {list}; P-CHAN-00266 = 0)"),
+                    )),
+                    _ => None,
+                }
+            };
+            if let Some(e) = error {
+                return Err(e);
+            }
+        }
+        let mut latched = vec![None; n];
+        let mut merf = vec![false; n];
+        let mut involved = vec![false; n];
+        if complete {
+            for a in &run.axes {
+                involved[a.axis] = true;
+                if let Some((p, _)) = a.latched {
+                    latched[a.axis] = Some(p);
+                    merf[a.axis] = a.before_target || run.mtype == MeasType::Type3 && a.before_target;
+                }
+            }
+        } else {
+            for a in &run.axes {
+                involved[a.axis] = a.required;
+            }
+        }
+        self.measurement = Some(MeasurementOutcome { mtype: run.mtype, latched, merf, involved, target_reached });
+        Ok(())
+    }
+
+    /// The outcome of the last measuring block, taken once.
+    pub fn take_measurement(&mut self) -> Option<MeasurementOutcome> {
+        self.measurement.take()
+    }
+
+    /// Indices of the main axes X, Y, Z.
+    pub fn main_axes(&self) -> [Option<usize>; 3] {
+        [self.axis_index("X"), self.axis_index("Y"), self.axis_index("Z")]
+    }
+}
+
+/// What the interpolator does after [`Channel::measurement_step`].
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum MeasStep {
+    /// Hold the set-points (arming).
+    Hold,
+    /// Interpolate as planned.
+    Go,
+    /// The probing signal is complete: brake along the path.
+    Brake,
+    /// Abort the block with this error.
+    Fail(CncMessage),
+}
