@@ -141,7 +141,9 @@ impl Machine {
                 source,
             })?;
             let model = Ds402Model::new(&def);
-            let axis = Axis::new(a.name.clone(), Box::new(adapter), def.scaling, a.referenced);
+            let scaling = def.scaling;
+            let axis = Axis::new(a.name.clone(), Box::new(adapter), scaling, a.referenced)
+                .with_definition(std::sync::Arc::new(def));
             images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
             axes.push(axis);
             models.push(model);

@@ -132,7 +132,8 @@ fn show(b: &Block) -> String {
             Item::Centre { letter, value, .. } => format!("{letter}{}", show_expr(value)),
             Item::D { value, .. } => format!("D{}", show_expr(value)),
             Item::Independent { axis, motion, .. } => {
-                let mut parts = vec![if motion.sync { "INDP_SYN" } else { "INDP_ASYN" }.to_string()];
+                let mut parts =
+                    vec![if motion.sync { "INDP_SYN" } else { "INDP_ASYN" }.to_string()];
                 parts.extend(motion.gcodes.iter().map(|g| format!("G{g}")));
                 parts.push(format!("POS{}", show_expr(&motion.pos)));
                 if let Some(f) = &motion.feed {

@@ -4,6 +4,7 @@
 //! [`Scaling`](crate::units::Scaling) from the drive file. It does not know wire formats: the
 //! adapter encodes and decodes the process image, the link moves it.
 
+use crate::drive::catalogue::DriveDefinition;
 use crate::drive::{DriveAdapter, DriveCommand, DriveError, DriveFeedback, ProbeRequest, ProbeState};
 use crate::units::{Nanos, Scaling};
 
@@ -46,6 +47,8 @@ pub struct Axis {
     feedback: Option<DriveFeedback>,
     /// The command has been aligned with the actual position (before enabling).
     aligned: bool,
+    /// The drive definition (function table, IDN map), when known.
+    definition: Option<std::sync::Arc<DriveDefinition>>,
 }
 
 impl Axis {
@@ -68,7 +71,19 @@ impl Axis {
             lag: 0.0,
             feedback: None,
             aligned: false,
+            definition: None,
         }
+    }
+
+    /// Attach the drive definition (function table for `#DRIVE`, IDN map for `#IDENT`).
+    pub fn with_definition(mut self, definition: std::sync::Arc<DriveDefinition>) -> Self {
+        self.definition = Some(definition);
+        self
+    }
+
+    /// The drive definition, when known.
+    pub fn definition(&self) -> Option<&DriveDefinition> {
+        self.definition.as_deref()
     }
 
     /// Axis name (`X`, `Y2`, …).

@@ -93,8 +93,15 @@ impl Channel {
         let mut finished: Option<ChannelState> = None;
         if matches!(self.mode, Mode::Moving(_)) {
             if let Mode::Moving(m) = std::mem::replace(&mut self.mode, Mode::Idle) {
-                self.mode = self.step_motion(m, now, dt);
+                match self.step_motion(m, now, dt, None) {
+                    MotionStep::Running(m) => self.mode = Mode::Moving(m),
+                    MotionStep::Done => self.mode = Mode::Idle,
+                    MotionStep::Fail => self.begin_stop(ChannelState::Aborted),
+                }
             }
+        }
+        if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+            self.step_independent(now, dt);
         }
         match &mut self.mode {
             Mode::Enabling { cycles } => {
@@ -124,7 +131,7 @@ impl Channel {
                     finished = Some(ChannelState::Aborted);
                 }
             }
-            Mode::Idle | Mode::Aborted => {}
+            Mode::Idle | Mode::Aborted | Mode::WaitAcyclic { .. } => {}
             Mode::Moving(_) => {}
             Mode::Manual(state) => {
                 let mut events = Vec::new();
@@ -192,14 +199,19 @@ impl Channel {
     }
 
     /// One cycle of a motion block (path interpolation, measurement, braking after the probing
-    /// signal). Writes the set-points into `self.next` and returns the next mode.
-    fn step_motion(&mut self, mut m: Box<Motion>, now: Nanos, dt: f64) -> Mode {
+    /// signal). Writes the set-points into `self.next` — only axis `only` for an independent-axis
+    /// motion — and says how the motion goes on.
+    pub(super) fn step_motion(&mut self, mut m: Box<Motion>, now: Nanos, dt: f64, only: Option<usize>) -> MotionStep {
         let t_now = m.k as f64 * dt;
         let (s_now, v_now) = match m.braking {
             Some((b, k0)) => {
                 let (sb, vb) = b.sample((m.k - k0) as f64 * dt);
                 let (sp, vp) = m.profile.sample(t_now);
-                if sp < sb { (sp, vp) } else { (sb, vb) }
+                if sp < sb {
+                    (sp, vp)
+                } else {
+                    (sb, vb)
+                }
             }
             None => m.profile.sample(t_now),
         };
@@ -207,7 +219,7 @@ impl Channel {
             match self.measurement_step(&mut run, now, s_now) {
                 MeasStep::Hold => {
                     m.meas = Some(run);
-                    return Mode::Moving(m);
+                    return MotionStep::Running(m);
                 }
                 MeasStep::Go => {}
                 MeasStep::Brake => {
@@ -216,12 +228,23 @@ impl Channel {
                         m.braking = Some((Braking::new(s_now, v_now, a), m.k));
                     }
                 }
+                MeasStep::Settle(positions) => {
+                    // Fixed stop: every axis of the run moves to its latched position at once.
+                    for (i, p) in positions {
+                        if only.is_none() || only == Some(i) {
+                            self.next[i] = p;
+                        }
+                    }
+                    if let Err(msg) = self.finish_measurement(*run, false) {
+                        self.push(msg);
+                        return MotionStep::Fail;
+                    }
+                    return MotionStep::Done;
+                }
                 MeasStep::Fail(msg) => {
                     self.disarm_sources(&run);
                     self.push(msg);
-                    self.mode = Mode::Moving(m);
-                    self.begin_stop(ChannelState::Aborted);
-                    return std::mem::replace(&mut self.mode, Mode::Aborted);
+                    return MotionStep::Fail;
                 }
             }
             m.meas = Some(run);
@@ -241,22 +264,37 @@ impl Channel {
                 (sp, end, end)
             }
         };
-        if at_end {
-            self.next.copy_from_slice(m.segment.end());
-        } else {
-            m.segment.point_at(s, &mut self.next);
+        match only {
+            None => {
+                if at_end {
+                    self.next.copy_from_slice(m.segment.end());
+                } else {
+                    m.segment.point_at(s, &mut self.next);
+                }
+            }
+            Some(i) => {
+                let mut p = std::mem::take(&mut self.scratch);
+                p.resize(self.next.len(), 0.0);
+                if at_end {
+                    p.copy_from_slice(m.segment.end());
+                } else {
+                    m.segment.point_at(s, &mut p);
+                }
+                self.next[i] = p[i];
+                self.scratch = p;
+            }
         }
         if !done {
-            return Mode::Moving(m);
+            return MotionStep::Running(m);
         }
         if let Some(run) = m.meas.take() {
             let reached = m.braking.is_none();
             if let Err(msg) = self.finish_measurement(*run, reached) {
                 self.push(msg);
-                return Mode::Aborted;
+                return MotionStep::Fail;
             }
         }
-        Mode::Idle
+        MotionStep::Done
     }
 
     /// Stop all axes: each decelerates linearly from its current command velocity with
@@ -267,11 +305,14 @@ impl Channel {
             return;
         }
         // A running measurement is abandoned: its sources are disarmed and nothing is published.
+        let mut abandoned = None;
         if let Mode::Moving(m) = &mut self.mode {
-            if let Some(run) = m.meas.take() {
-                self.disarm_sources(&run);
-            }
+            abandoned = m.meas.take();
         }
+        if let Some(run) = abandoned {
+            self.disarm_sources(&run);
+        }
+        self.drop_independent();
         let brakes = self
             .axes
             .iter()
@@ -285,4 +326,14 @@ impl Channel {
             .collect();
         self.mode = Mode::Stopping { brakes, k: 0, then };
     }
+}
+
+/// How a motion goes on after one cycle.
+pub(super) enum MotionStep {
+    /// Still moving.
+    Running(Box<Motion>),
+    /// Finished (at standstill).
+    Done,
+    /// Aborted with an error (already queued).
+    Fail,
 }

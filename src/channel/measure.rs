@@ -162,7 +162,9 @@ impl Channel {
         for i in 0..n {
             let c = &self.cfg.axes[i].meas;
             let in_cs = req.cs_active && main.contains(&Some(i));
-            let required = moved[i] || in_cs;
+            // Gantry slaves move along but the master measures (seed 004 §7.3).
+            let slave = self.is_coupled_slave(i);
+            let required = (moved[i] || in_cs) && !slave;
             if required && !c.enabled {
                 return Err(CncMessage::error(
                     ids::MEAS_CONFIG,
@@ -417,7 +419,12 @@ impl Channel {
                 involved[a.axis] = a.required;
             }
         }
-        self.measurement = Some(MeasurementOutcome { mtype: run.mtype, latched, merf, involved, target_reached });
+        let new = MeasurementOutcome { mtype: run.mtype, latched, merf, involved, target_reached };
+        // Independent axes of one block finish one by one: merge their outcomes until taken.
+        self.measurement = Some(match self.measurement.take() {
+            Some(old) => merge_outcomes(old, new),
+            None => new,
+        });
         Ok(())
     }
 
@@ -441,6 +448,27 @@ pub(super) enum MeasStep {
     Go,
     /// The probing signal is complete: brake along the path.
     Brake,
+    /// Fixed stop detected (type 7): set the axes to these positions and end the block.
+    Settle(Vec<(usize, f64)>),
     /// Abort the block with this error.
     Fail(CncMessage),
+}
+
+/// Combine two outcomes of the same block (independent axes): per axis the one that involved it.
+fn merge_outcomes(old: MeasurementOutcome, new: MeasurementOutcome) -> MeasurementOutcome {
+    let n = old.latched.len().max(new.latched.len());
+    let pick = |i: usize| new.involved.get(i).copied().unwrap_or(false);
+    MeasurementOutcome {
+        mtype: new.mtype,
+        latched: (0..n)
+            .map(|i| if pick(i) { new.latched.get(i).copied().flatten() } else { old.latched.get(i).copied().flatten() })
+            .collect(),
+        merf: (0..n)
+            .map(|i| if pick(i) { new.merf.get(i).copied().unwrap_or(false) } else { old.merf.get(i).copied().unwrap_or(false) })
+            .collect(),
+        involved: (0..n)
+            .map(|i| pick(i) || old.involved.get(i).copied().unwrap_or(false))
+            .collect(),
+        target_reached: old.target_reached && new.target_reached,
+    }
 }

@@ -16,7 +16,10 @@
 //! Motion blocks run rest to rest (exact stop at each block end) with trapezoidal (linear slope)
 //! velocity profiles; look-ahead blending is not part of this build.
 
+pub mod acyclic;
+pub mod coupling;
 mod cycle;
+mod independent;
 pub mod manual;
 pub mod measure;
 mod prep;
@@ -182,6 +185,10 @@ enum Mode {
         k: u64,
         then: ChannelState,
     },
+    /// Waiting for an acyclic answer (`#DRIVE … WAIT`, `#IDENT … SYN`).
+    WaitAcyclic {
+        id: u64,
+    },
     Aborted,
 }
 
@@ -212,6 +219,14 @@ pub struct Channel {
     operation_mode: OperationMode,
     /// Outcome of the last measuring block, until the executor takes it.
     measurement: Option<MeasurementOutcome>,
+    /// Acyclic requests (`#DRIVE`, `#IDENT`).
+    acyclic: acyclic::AcyclicState,
+    /// Axis couplings (gantry).
+    couplings: coupling::Couplings,
+    /// Independent-axis motions, per axis.
+    indp: Vec<Option<independent::IndependentSlot>>,
+    /// Scratch point for independent-axis interpolation.
+    scratch: Vec<f64>,
 }
 
 impl Channel {
@@ -249,6 +264,10 @@ impl Channel {
             cycles: 0,
             operation_mode: OperationMode::Automatic,
             measurement: None,
+            acyclic: Default::default(),
+            couplings: Default::default(),
+            indp: vec![None; n],
+            scratch: vec![0.0; n],
         })
     }
 
@@ -288,11 +307,13 @@ impl Channel {
     pub fn state(&self) -> ChannelState {
         match &self.mode {
             Mode::Enabling { .. } => ChannelState::Enabling,
+            Mode::Idle if self.independent_busy() => ChannelState::Busy,
             Mode::Idle => ChannelState::Idle,
             Mode::Moving(_) => ChannelState::Busy,
             Mode::Manual(m) if m.is_moving() => ChannelState::Busy,
             Mode::Manual(_) => ChannelState::Idle,
             Mode::Stopping { .. } => ChannelState::Stopping,
+            Mode::WaitAcyclic { .. } => ChannelState::Busy,
             Mode::Aborted => ChannelState::Aborted,
         }
     }

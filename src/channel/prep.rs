@@ -33,8 +33,22 @@ impl Channel {
             return Prepared::Rejected;
         }
         let start = self.command_positions();
+        let mut target = req.target.clone();
+        if let Err(msg) = self.couple_target(&mut target) {
+            self.push(msg);
+            self.mode = Mode::Aborted;
+            return Prepared::Rejected;
+        }
+        for (i, t) in target.iter().enumerate() {
+            if self.indp[i].is_some() && (t - start[i]).abs() > 1e-12 {
+                let name = self.axes[i].name().to_string();
+                self.push(CncMessage::error(ids::NC_EVALUATION, format!("axis {name} is moving as an independent axis")).on_axis(&name));
+                self.mode = Mode::Aborted;
+                return Prepared::Rejected;
+            }
+        }
         let segment = match req.kind {
-            MotionKind::Rapid | MotionKind::Linear => Segment::line(start, req.target.clone()),
+            MotionKind::Rapid | MotionKind::Linear => Segment::line(start, target.clone()),
             MotionKind::Arc {
                 a1,
                 a2,
@@ -42,7 +56,7 @@ impl Channel {
                 clockwise,
             } => Segment::arc(
                 start,
-                req.target.clone(),
+                target.clone(),
                 a1,
                 a2,
                 centre_offset,
@@ -239,6 +253,15 @@ impl Channel {
         let end = if (total - len).abs() < 1e-12 { target } else { end };
         let seg = Segment::line(start, end).map_err(|e| CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()))?;
         Ok((seg, target_len, limited))
+    }
+
+    /// [`measuring_path`](Self::measuring_path) for independent-axis motions.
+    pub(super) fn measuring_path_pub(
+        &self,
+        segment: Segment,
+        mreq: &super::measure::MeasureRequest,
+    ) -> Result<(Segment, f64, bool), CncMessage> {
+        self.measuring_path(segment, mreq)
     }
 
     /// Dynamics of a measuring block (seed 004 §2.1): G00 acceleration (P-AXIS-00004) unless

@@ -35,8 +35,19 @@
 //! circle plus a correction that grows linearly from 0 at the start to the full miss at the end,
 //! so the path is continuous and ends exactly on the programmed end point. [`Segment::extent`]
 //! and [`Segment::axis_speed_factor`] include the correction as a conservative bound.
+//!
+//! # Arcs in a general plane
+//!
+//! [`Segment::transformed`] maps a segment through a rigid [`AffineMap`] (a `#CS` rotation and
+//! the frame offsets, seed 004 §4): lines stay lines, and a plane arc becomes an arc in a tilted
+//! plane of the n-space, described by [`Arc::space`] (see [`space`] for the geometry and the
+//! exact extents).
 
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+pub mod space;
+
+pub use space::{AffineMap, SpaceArc};
 
 /// Most axes a path may have.
 pub const MAX_AXES: usize = 32;
@@ -74,8 +85,13 @@ pub struct Line {
 }
 
 /// A circular or helical move (G02/G03). Build it with [`Segment::arc`], which checks the fields
-/// against each other; a hand-built `Arc` with inconsistent fields gives meaningless numbers but
-/// never panics.
+/// against each other, or map one with [`Segment::transformed`]; a hand-built `Arc` with
+/// inconsistent fields gives meaningless numbers but never panics.
+///
+/// `space` is `None` for an arc in the plane of `a1`, `a2`. When it is `Some` (an arc made by
+/// [`Segment::transformed`]) the geometry is the [`SpaceArc`]: `start`, `end`, `radius`,
+/// `start_angle` and `sweep` keep their meaning (the angle is measured in the `u`, `v` frame),
+/// while `a1`, `a2` and `centre` describe the plane arc it was mapped from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arc {
     /// Start point, one entry per axis.
@@ -95,6 +111,9 @@ pub struct Arc {
     /// Signed sweep: positive counter-clockwise (G03), negative clockwise (G02), magnitude in
     /// (0, 2π]; ±2π is a full circle (start and end coincide in the plane).
     pub sweep: f64,
+    /// The geometry of an arc outside the plane of `a1`, `a2` (see above); `None` for a plane
+    /// arc.
+    pub space: Option<SpaceArc>,
 }
 
 /// One path segment.
@@ -171,6 +190,12 @@ pub enum PathError {
         end_radius: f64,
         /// The tolerance that was exceeded.
         tolerance: f64,
+    },
+    /// [`Segment::transformed`] got a map that is not rigid (rotation plus translation).
+    #[error("the map is not rigid: {what}")]
+    NotRigid {
+        /// What was found.
+        what: &'static str,
     },
 }
 
@@ -420,6 +445,7 @@ impl Segment {
             radius,
             start_angle,
             sweep: if clockwise { -magnitude } else { magnitude },
+            space: None,
         }))
     }
 
@@ -445,7 +471,7 @@ impl Segment {
     }
 
     /// Path length: the Euclidean distance for a line; `sqrt((r·|sweep|)² + Σ Δ²)` over the
-    /// linearly moving axes for an arc or helix.
+    /// linearly moving axes for an arc or helix (`Σ helix²` for a mapped arc).
     pub fn length(&self) -> f64 {
         match self {
             Segment::Line(l) => l
@@ -456,6 +482,9 @@ impl Segment {
                 .sum::<f64>()
                 .sqrt(),
             Segment::Arc(arc) => {
+                if let Some(space) = &arc.space {
+                    return arc.space_length(space);
+                }
                 let turn = arc.radius * arc.sweep.abs();
                 let linear: f64 = arc
                     .start
@@ -488,6 +517,13 @@ impl Segment {
             return;
         }
         let u = s / length;
+        if let Segment::Arc(arc) = self {
+            if let Some(space) = &arc.space {
+                let n = out.len().min(start.len());
+                arc.space_point(space, u, &mut out[..n]);
+                return;
+            }
+        }
         for ((o, a), b) in out.iter_mut().zip(start).zip(end) {
             *o = a + u * (b - a);
         }
@@ -503,8 +539,17 @@ impl Segment {
     /// arc that bulges past both end points reports its apex. The extent is never smaller than
     /// the path (a radius mismatch widens it by at most the miss). An axis the segment does not
     /// have gives `(0.0, 0.0)`.
+    ///
+    /// A mapped arc ([`Arc::space`]): the end points plus every angle inside the sweep where the
+    /// axis has a stationary point, including the helix part (exact, see [`space`]).
     pub fn extent(&self, axis: usize) -> (f64, f64) {
         if let Segment::Arc(arc) = self {
+            if let Some(space) = &arc.space {
+                if axis >= arc.start.len() {
+                    return (0.0, 0.0);
+                }
+                return arc.space_extent(space, axis);
+            }
             if axis == arc.a1 {
                 return arc.plane_extent(0);
             }
@@ -524,7 +569,8 @@ impl Segment {
     /// Line and linear axes of a helix: `|Δ| / length`. Arc plane axes: `r·|sweep| / length` if
     /// the axis reaches its largest rate inside the sweep (where the other plane axis is at a
     /// cardinal angle), else the larger rate at the two ends; a radius mismatch adds
-    /// `|miss| / length` and may then exceed 1. Limit the path so that
+    /// `|miss| / length` and may then exceed 1. A mapped arc ([`Arc::space`]): the exact largest
+    /// rate of the axis's wave plus helix part over the sweep. Limit the path so that
     /// `v_path · factor <= v_axis` and `a_path · factor <= a_axis` for every axis.
     pub fn axis_speed_factor(&self, axis: usize) -> f64 {
         let length = self.length();
@@ -532,6 +578,12 @@ impl Segment {
             return 0.0;
         }
         if let Segment::Arc(arc) = self {
+            if let Some(space) = &arc.space {
+                if axis >= arc.start.len() {
+                    return 0.0;
+                }
+                return arc.space_rate(space, axis, length);
+            }
             if arc.is_plane_axis(axis) {
                 let k = usize::from(axis != arc.a1);
                 let miss = arc.end_miss()[k].abs();

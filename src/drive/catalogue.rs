@@ -1,8 +1,9 @@
 //! Drive definition files (`drives/*.toml`).
 //!
 //! A drive definition says which adapter family a drive belongs to, how its process data is laid
-//! out, how increments scale to axis units, how the emulated drive behaves, and which drive
-//! functions (seed 004 §7.3.2, `#DRIVE WR [KEY=TORQUE_LIMIT …]`) map to which objects:
+//! out, how increments scale to axis units, how the emulated drive behaves, which drive functions
+//! (seed 004 §7.3.2, `#DRIVE WR [KEY=TORQUE_LIMIT …]`) and which SERCOS IDNs (seed 004 §7.3.1,
+//! `#IDENT WR [… ID S-0-0092 …]`) map to which objects:
 //!
 //! ```toml
 //! [drive]
@@ -14,12 +15,12 @@
 //! offset = 0.0                            # axis position at increment 0
 //!
 //! [rxpdo]                                 # master -> drive, default = CSP mapping
-//! entries = ["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00", "0x6072:00"]
-//! defaults = { "0x6072:00" = 3000 }       # written by the adapter to objects it does not drive
+//! entries = ["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"]
+//! defaults = { "0x2000:01" = 1 }          # written by the adapter to objects it does not drive
 //!
 //! [txpdo]                                 # drive -> master
 //! entries = ["0x6041:00", "0x6064:00", "0x60F4:00", "0x6061:00", "0x60B9:00",
-//!            "0x60BA:00", "0x60BB:00", "0x60BC:00", "0x60BD:00"]
+//!            "0x60BA:00", "0x60BB:00", "0x60BC:00", "0x60BD:00", "0x6077:00"]
 //!
 //! [model]                                 # drive-model knobs (emulated drive only)
 //! kv = 40.0                               # position loop gain, 1/s
@@ -27,10 +28,20 @@
 //! following_error_timeout_ms = 10         # 0x6066, ms
 //! enable_delay_cycles = 0                 # extra cycles SWITCHED ON -> OPERATION ENABLED
 //! max_velocity = 1000.0                   # units/s; absent = unlimited
+//! zero_pulse_period = 10000               # increments between encoder zero pulses
+//! torque_per_increment = 0.004            # torque demand, per mille of rated per increment of lag
+//!
+//! [probe]                                 # touch probe behaviour (adapter and model)
+//! rearm_requires_zero = false             # drive needs 0x60B8 = 0 before it re-arms
+//! arm_timeout_cycles = 100                # cycles the adapter waits for 0x60B9 to confirm
 //!
 //! [functions]
-//! TORQUE_LIMIT = { object = "0x6072:00", type = "u16", unit = "0.1 %", min = 0, max = 3000 }
+//! TORQUE_LIMIT = { object = "0x6072:00", type = "u16", unit = "0.1 %", scale = 10.0 }
 //! MON_WINDOW = { object = "0x6065:00", type = "u32", unit = "increments" }
+//!
+//! [idn]                                   # SERCOS IDNs on a CoE drive
+//! "S-0-0092" = { object = "0x6072:00", type = "u16" }
+//! "S-0-0159" = { object = "0x6065:00", type = "u32", zero = 4294967295 }
 //! ```
 //!
 //! Every error names the file, the 1-based line (from the TOML spans), the key and what is
@@ -71,6 +82,51 @@ pub struct ModelConfig {
     pub enable_delay_cycles: u32,
     /// Largest speed the position loop moves, units/s (`None` = unlimited).
     pub max_velocity: Option<f64>,
+    /// Distance between two zero pulses (index, C-phase) of the emulated position encoder, in
+    /// increments (default 10000 = one pulse per mm at 10000 inc/mm, i.e. a 1 mm "revolution").
+    /// Zero pulses sit at every integer multiple of the period (0x60B8 source 01b).
+    pub zero_pulse_period: f64,
+    /// Torque demand per increment of following error, in per mille of rated torque (0x6077 =
+    /// 0x60F4 × this, clipped to the torque limit; default 0.004, see
+    /// [`DEFAULT_TORQUE_PER_INCREMENT`]). 0 = the model produces no torque.
+    pub torque_per_increment: f64,
+}
+
+/// Default `[model] torque_per_increment`: 0.004 ‰ per increment. The model's position loop has
+/// no velocity feed-forward, so its lag is v / kv and a torque proportional to the lag is a
+/// viscous load: at the generic drive's largest speed (1000 mm/s, lag 25 mm = 250000 inc at
+/// kv = 40 1/s) the demand is 1000 ‰ = rated torque; at 100 mm/min it is 1.7 ‰. Pressed against
+/// a fixed stop the lag grows with the commanded feed and a 10 % limit (100 ‰) is reached at
+/// 25000 inc = 2.5 mm of lag.
+pub const DEFAULT_TORQUE_PER_INCREMENT: f64 = 0.004;
+
+/// Default `[model] zero_pulse_period` in increments.
+pub const DEFAULT_ZERO_PULSE_PERIOD: f64 = 10_000.0;
+
+/// Default `[probe] arm_timeout_cycles`.
+pub const DEFAULT_ARM_TIMEOUT_CYCLES: u32 = 100;
+
+/// Touch probe behaviour of the drive (`[probe]`); read by the adapter and by the model, which
+/// plays the same drive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProbeConfig {
+    /// The drive re-arms a touch probe only when it sees 0x60B8's enable bit go 0 → 1, so the
+    /// adapter always writes 0 first and waits for 0x60B9 to show the probe disabled (default
+    /// `false`; modelled on drives whose manuals demand 0x60B8 = 0 before a new configuration,
+    /// notes ethercat.md §6.1).
+    pub rearm_requires_zero: bool,
+    /// Cycles the adapter waits for 0x60B9 to confirm a step of the arming sequence before it
+    /// reports the latch as failed (default 100).
+    pub arm_timeout_cycles: u32,
+}
+
+impl Default for ProbeConfig {
+    fn default() -> Self {
+        ProbeConfig {
+            rearm_requires_zero: false,
+            arm_timeout_cycles: DEFAULT_ARM_TIMEOUT_CYCLES,
+        }
+    }
 }
 
 impl Default for ModelConfig {
@@ -82,6 +138,8 @@ impl Default for ModelConfig {
             following_error_timeout_ms: 10,
             enable_delay_cycles: 0,
             max_velocity: None,
+            zero_pulse_period: DEFAULT_ZERO_PULSE_PERIOD,
+            torque_per_increment: DEFAULT_TORQUE_PER_INCREMENT,
         }
     }
 }
@@ -136,6 +194,71 @@ impl DriveFunction {
     }
 }
 
+/// A SERCOS IDN mapped onto a CiA 402 object (`[idn]`), so that `#IDENT WR/RD [… ID S-0-0092 …]`
+/// (seed 004 §7.3.1) works on a CoE / CANopen drive.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IdnMapping {
+    /// Normalised IDN (`S-0-0092`, see [`normalize_idn`]).
+    pub idn: String,
+    /// Object index.
+    pub index: u16,
+    /// Sub-index.
+    pub sub: u8,
+    /// Data type of the object.
+    pub ty: DataType,
+    /// Object value that stands for the SERCOS value 0, when the two profiles spell a special
+    /// meaning differently: S-0-0159 "monitoring window 0 = monitoring off" is CiA 402 0x6065
+    /// = 0xFFFFFFFF.
+    pub zero: Option<i64>,
+}
+
+impl IdnMapping {
+    /// Object value for a SERCOS value: 0 becomes [`zero`](Self::zero) when set, other values
+    /// pass unchanged; `None` when the result does not fit the object's type.
+    pub fn encode(&self, value: i64) -> Option<i64> {
+        let raw = match self.zero {
+            Some(z) if value == 0 => z,
+            _ => value,
+        };
+        self.ty.contains(raw).then_some(raw)
+    }
+
+    /// SERCOS value of an object value: [`zero`](Self::zero) reads back as 0.
+    pub fn decode(&self, raw: i64) -> i64 {
+        if self.zero == Some(raw) {
+            0
+        } else {
+            raw
+        }
+    }
+}
+
+/// Normalise a SERCOS IDN: `S-0-92`, `s-0-0092`, ` S-0-0092 ` → `S-0-0092`. Accepts standard
+/// (`S`) and product-specific (`P`) IDNs with parameter set 0..=7 and number 0..=4095
+/// (IEC 61800-7-204 IDN structure); `None` otherwise.
+pub fn normalize_idn(text: &str) -> Option<String> {
+    let mut parts = text.trim().split('-');
+    let (kind, set, number) = (parts.next()?, parts.next()?, parts.next()?);
+    if parts.next().is_some() {
+        return None;
+    }
+    let kind = match kind.trim() {
+        "S" | "s" => 'S',
+        "P" | "p" => 'P',
+        _ => return None,
+    };
+    let digits = |s: &str, max: u32| -> Option<u32> {
+        let s = s.trim();
+        if s.is_empty() || s.len() > 6 || !s.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        s.parse::<u32>().ok().filter(|v| *v <= max)
+    };
+    let set = digits(set, 7)?;
+    let number = digits(number, 4095)?;
+    Some(format!("{kind}-{set}-{number:04}"))
+}
+
 /// A parsed drive definition file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriveDefinition {
@@ -157,12 +280,23 @@ pub struct DriveDefinition {
     pub model: ModelConfig,
     /// `[functions]`, in file order.
     pub functions: Vec<DriveFunction>,
+    /// `[probe]`.
+    pub probe: ProbeConfig,
+    /// `[idn]`, in file order.
+    pub idns: Vec<IdnMapping>,
 }
 
 impl DriveDefinition {
     /// The drive function with this key.
     pub fn function(&self, key: &str) -> Option<&DriveFunction> {
         self.functions.iter().find(|f| f.key == key)
+    }
+
+    /// The object a SERCOS IDN maps to (`[idn]`); the name is normalised first, so `s-0-92`
+    /// finds `S-0-0092`.
+    pub fn idn(&self, idn: &str) -> Option<&IdnMapping> {
+        let n = normalize_idn(idn)?;
+        self.idns.iter().find(|m| m.idn == n)
     }
 }
 
@@ -212,7 +346,16 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
     cx.check_keys(
         root,
         "",
-        &["drive", "scaling", "rxpdo", "txpdo", "model", "functions"],
+        &[
+            "drive",
+            "scaling",
+            "rxpdo",
+            "txpdo",
+            "model",
+            "probe",
+            "functions",
+            "idn",
+        ],
     )?;
 
     let drive = cx.table(root, "drive", None)?;
@@ -274,7 +417,9 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
     }
 
     let model = cx.model(root)?;
+    let probe = cx.probe(root)?;
     let functions = cx.functions(root)?;
+    let idns = cx.idns(root)?;
     Ok(DriveDefinition {
         name,
         profile,
@@ -285,6 +430,8 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
         txpdo,
         model,
         functions,
+        probe,
+        idns,
     })
 }
 
@@ -527,6 +674,8 @@ impl Cx<'_> {
                 "following_error_timeout_ms",
                 "enable_delay_cycles",
                 "max_velocity",
+                "zero_pulse_period",
+                "torque_per_increment",
             ],
         )?;
         if let Some(kv) = self.float(t.1, w, "kv")? {
@@ -556,7 +705,126 @@ impl Cx<'_> {
             }
             m.max_velocity = Some(v);
         }
+        if let Some(v) = self.float(t.1, w, "zero_pulse_period")? {
+            if v <= 0.0 {
+                return Err(self.err(
+                    self.value_span(t.1, "zero_pulse_period"),
+                    format!("{w} zero_pulse_period: must be > 0 (increments), got {v}"),
+                ));
+            }
+            m.zero_pulse_period = v;
+        }
+        if let Some(v) = self.float(t.1, w, "torque_per_increment")? {
+            if v < 0.0 {
+                return Err(self.err(
+                    self.value_span(t.1, "torque_per_increment"),
+                    format!(
+                        "{w} torque_per_increment: must be >= 0 (per mille per increment), got {v}"
+                    ),
+                ));
+            }
+            m.torque_per_increment = v;
+        }
         Ok(m)
+    }
+
+    fn probe(&self, root: &dyn TableLike) -> Result<ProbeConfig, DriveError> {
+        let mut p = ProbeConfig::default();
+        let Some(t) = self.table(root, "probe", None)? else {
+            return Ok(p);
+        };
+        let w = "[probe]";
+        self.check_keys(t.1, w, &["rearm_requires_zero", "arm_timeout_cycles"])?;
+        if let Some(v) = self.bool(t.1, w, "rearm_requires_zero")? {
+            p.rearm_requires_zero = v;
+        }
+        if let Some(v) = self.int(t.1, w, "arm_timeout_cycles", 1, 1_000_000)? {
+            p.arm_timeout_cycles = v as u32;
+        }
+        Ok(p)
+    }
+
+    /// `true` / `false`.
+    fn bool(&self, t: &dyn TableLike, what: &str, key: &str) -> Result<Option<bool>, DriveError> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(Item::Value(Value::Boolean(b))) => Ok(Some(*b.value())),
+            Some(_) => Err(self.err(
+                self.value_span(t, key),
+                format!("{what} {key}: expected true or false"),
+            )),
+        }
+    }
+
+    /// `object` (+ optional `type`) of a `[functions]` / `[idn]` entry.
+    fn object_and_type(
+        &self,
+        f: &dyn TableLike,
+        what: &str,
+        kspan: Option<Range<usize>>,
+    ) -> Result<(u16, u8, DataType), DriveError> {
+        let object = self.opt_str(f, what, "object")?.ok_or_else(|| {
+            self.err(
+                kspan,
+                format!("{what}: `object` is missing (e.g. \"0x6072:00\")"),
+            )
+        })?;
+        let ospan = self.value_span(f, "object");
+        let (index, sub, table_ty) = match pdo::parse_entry(&object) {
+            Ok(o) => (o.0, o.1, Some(o.2)),
+            Err(pdo::PdoError::UnknownObject { index, sub }) => (index, sub, None),
+            Err(e) => return Err(self.err(ospan, format!("{what} object: {e}"))),
+        };
+        let ty = match self.opt_str(f, what, "type")? {
+            Some(s) => DataType::from_name(&s).ok_or_else(|| {
+                self.err(
+                    self.value_span(f, "type"),
+                    format!("{what} type: unknown type \"{s}\"; allowed: bool, u8, i8, u16, i16, u32, i32"),
+                )
+            })?,
+            None => table_ty.ok_or_else(|| {
+                self.err(ospan, format!("{what}: {object} is not a known CiA 402 object; add `type`"))
+            })?,
+        };
+        Ok((index, sub, ty))
+    }
+
+    fn idns(&self, root: &dyn TableLike) -> Result<Vec<IdnMapping>, DriveError> {
+        let mut out: Vec<IdnMapping> = Vec::new();
+        let Some(t) = self.table(root, "idn", None)? else {
+            return Ok(out);
+        };
+        for (key, _) in t.1.iter() {
+            let kspan = self.key_span(t.1, key);
+            let idn = normalize_idn(key).ok_or_else(|| {
+                self.err(
+                    kspan.clone(),
+                    format!("[idn] \"{key}\": not a SERCOS IDN; expected S-x-yyyy or P-x-yyyy (x 0..7, yyyy 0..4095), e.g. \"S-0-0092\""),
+                )
+            })?;
+            if out.iter().any(|m| m.idn == idn) {
+                return Err(self.err(
+                    kspan,
+                    format!("[idn] \"{key}\": {idn} is given twice"),
+                ));
+            }
+            let what = format!("[idn] \"{key}\"");
+            let f = self
+                .table(t.1, key, Some("[idn]"))?
+                .ok_or_else(|| self.err(kspan.clone(), what.clone()))?;
+            self.check_keys(f.1, &what, &["object", "type", "zero"])?;
+            let (index, sub, ty) = self.object_and_type(f.1, &what, kspan)?;
+            let (lo, hi) = ty.range();
+            let zero = self.int(f.1, &what, "zero", lo, hi)?;
+            out.push(IdnMapping {
+                idn,
+                index,
+                sub,
+                ty,
+                zero,
+            });
+        }
+        Ok(out)
     }
 
     fn functions(&self, root: &dyn TableLike) -> Result<Vec<DriveFunction>, DriveError> {
@@ -585,29 +853,7 @@ impl Cx<'_> {
                 &what,
                 &["object", "type", "unit", "scale", "min", "max"],
             )?;
-            let object = self.opt_str(f.1, &what, "object")?.ok_or_else(|| {
-                self.err(
-                    kspan.clone(),
-                    format!("{what}: `object` is missing (e.g. \"0x6072:00\")"),
-                )
-            })?;
-            let ospan = self.value_span(f.1, "object");
-            let (index, sub, table_ty) = match pdo::parse_entry(&object) {
-                Ok(o) => (o.0, o.1, Some(o.2)),
-                Err(pdo::PdoError::UnknownObject { index, sub }) => (index, sub, None),
-                Err(e) => return Err(self.err(ospan, format!("{what} object: {e}"))),
-            };
-            let ty = match self.opt_str(f.1, &what, "type")? {
-                Some(s) => DataType::from_name(&s).ok_or_else(|| {
-                    self.err(
-                        self.value_span(f.1, "type"),
-                        format!("{what} type: unknown type \"{s}\"; allowed: bool, u8, i8, u16, i16, u32, i32"),
-                    )
-                })?,
-                None => table_ty.ok_or_else(|| {
-                    self.err(ospan.clone(), format!("{what}: {object} is not a known CiA 402 object; add `type`"))
-                })?,
-            };
+            let (index, sub, ty) = self.object_and_type(f.1, &what, kspan)?;
             let unit = self.opt_str(f.1, &what, "unit")?;
             let scale = self.float(f.1, &what, "scale")?.unwrap_or(1.0);
             if scale == 0.0 {
@@ -657,23 +903,64 @@ mod tests {
     #[test]
     fn generic_functions_and_defaults() {
         let def = builtin("cia402-generic").unwrap();
+        // seed 004 §7.3.2: antr.function[1] TORQUE_LIMIT, 6072 00, UNS16, LINEAR 10.0.
         let tl = def.function("TORQUE_LIMIT").unwrap();
         assert_eq!(
-            (tl.index, tl.sub, tl.ty, tl.max),
-            (0x6072, 0, DataType::U16, 3000)
+            (tl.index, tl.sub, tl.ty, tl.scale, tl.min, tl.max),
+            (0x6072, 0, DataType::U16, 10.0, 0, 65535)
         );
-        assert_eq!(tl.encode(100.0), Some(100));
-        assert_eq!(tl.encode(3001.0), None);
-        assert_eq!(def.function("MON_WINDOW").unwrap().max, u32::MAX as i64);
+        assert_eq!(tl.encode(10.0), Some(100));
+        assert_eq!(tl.encode(5000.0), Some(50000));
+        assert_eq!(tl.encode(6553.5), Some(65535));
+        assert_eq!(tl.encode(6553.6), None);
+        assert_eq!(tl.encode(-0.1), None);
+        assert_eq!(tl.decode(100), 10.0);
+        // antr.function[0] MON_WINDOW, 6065 00, UNS32, UNSCALED, 0 .. 4294967295.
+        let mw = def.function("MON_WINDOW").unwrap();
         assert_eq!(
-            def.rxpdo_defaults,
-            vec![OutputDefault {
-                index: 0x6072,
-                sub: 0,
-                value: 3000
-            }]
+            (mw.index, mw.ty, mw.scale, mw.min, mw.max),
+            (0x6065, DataType::U32, 1.0, 0, u32::MAX as i64)
         );
+        assert_eq!(mw.encode(4294967295.0), Some(4294967295));
+        assert_eq!(mw.encode(1048575.0), Some(1048575));
+        assert!(def.rxpdo_defaults.is_empty());
+        assert!(!def.rxpdo.contains(0x6072, 0), "torque limits are acyclic");
+        assert!(def.txpdo.contains(0x6077, 0));
         assert_eq!(def.model.max_velocity, Some(1000.0));
+        assert_eq!(def.model.zero_pulse_period, 10_000.0);
+        assert_eq!(def.probe, ProbeConfig::default());
+    }
+
+    #[test]
+    fn idn_names_and_zero_mapping() {
+        for (text, norm) in [
+            ("S-0-0092", Some("S-0-0092")),
+            ("s-0-92", Some("S-0-0092")),
+            (" S-0-0159 ", Some("S-0-0159")),
+            ("P-7-4095", Some("P-7-4095")),
+            ("S-8-0001", None),
+            ("S-0-4096", None),
+            ("S-0-", None),
+            ("S-0-00-1", None),
+            ("X-0-0092", None),
+            ("S-0-+92", None),
+            ("", None),
+        ] {
+            assert_eq!(normalize_idn(text).as_deref(), norm, "{text:?}");
+        }
+        let def = builtin("cia402-generic").unwrap();
+        let tl = def.idn("s-0-92").unwrap();
+        assert_eq!((tl.index, tl.sub, tl.ty), (0x6072, 0, DataType::U16));
+        assert_eq!((tl.encode(100), tl.encode(70_000), tl.decode(100)), (Some(100), None, 100));
+        let mw = def.idn("S-0-0159").unwrap();
+        assert_eq!((mw.index, mw.ty), (0x6065, DataType::U32));
+        // SERCOS "0 = monitoring off" is CiA 402 0xFFFFFFFF, both ways.
+        assert_eq!(mw.encode(0), Some(0xFFFF_FFFF));
+        assert_eq!(mw.decode(0xFFFF_FFFF), 0);
+        assert_eq!((mw.encode(1048575), mw.decode(1048575)), (Some(1048575), 1048575));
+        assert_eq!(mw.encode(-1), None);
+        assert!(def.idn("S-0-0047").is_none());
+        assert!(def.idn("garbage").is_none());
     }
 
     #[test]
@@ -684,8 +971,9 @@ mod tests {
         )
         .unwrap();
         assert_eq!(def.model, ModelConfig::default());
-        assert_eq!(def.rxpdo.len(), 11);
-        assert_eq!(def.txpdo.len(), 29);
-        assert!(def.functions.is_empty());
+        assert_eq!(def.rxpdo.len(), 9);
+        assert_eq!(def.txpdo.len(), 31);
+        assert!(def.functions.is_empty() && def.idns.is_empty());
+        assert_eq!(def.probe, ProbeConfig::default());
     }
 }

@@ -196,6 +196,10 @@ pub const OBJECTS: &[ObjectInfo] = &[
     ),
     obj(0x60D0, 1, DataType::I16, "touch probe 1 source"),
     obj(0x60D0, 2, DataType::I16, "touch probe 2 source"),
+    obj(0x60D5, 0, DataType::U16, "touch probe 1 positive edge counter"),
+    obj(0x60D6, 0, DataType::U16, "touch probe 1 negative edge counter"),
+    obj(0x60D7, 0, DataType::U16, "touch probe 2 positive edge counter"),
+    obj(0x60D8, 0, DataType::U16, "touch probe 2 negative edge counter"),
     obj(0x60E0, 0, DataType::U16, "positive torque limit value"),
     obj(0x60E1, 0, DataType::U16, "negative torque limit value"),
     obj(0x60F4, 0, DataType::I32, "following error actual value"),
@@ -530,17 +534,16 @@ impl PdoLayout {
 }
 
 /// Default CSP RxPDO (master → drive): controlword, target position, modes of operation, touch
-/// probe function, max torque (CiA 402-3 / ETG.6010 "CSP" example mapping plus 0x60B8 / 0x6072).
-pub const DEFAULT_RXPDO: &[&str] = &[
-    "0x6040:00",
-    "0x607A:00",
-    "0x6060:00",
-    "0x60B8:00",
-    "0x6072:00",
-];
+/// probe function (CiA 402-3 / ETG.6010 "CSP" example mapping plus 0x60B8).
+///
+/// 0x6072 max torque is deliberately not mapped: torque limits are written acyclically (seed 004
+/// §7.3.2, `antr.function[1].commu ACYCLIC`), and a cyclic mapping would overwrite every SDO write
+/// in the next cycle. Drive files may still map it.
+pub const DEFAULT_RXPDO: &[&str] = &["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"];
 
 /// Default CSP TxPDO (drive → master): statusword, position actual, following error actual,
-/// modes display, touch probe status and the four touch probe edge positions.
+/// modes display, touch probe status, the four touch probe edge positions and torque actual
+/// value (0x6077, appended last so the offsets of the other entries stay put).
 pub const DEFAULT_TXPDO: &[&str] = &[
     "0x6041:00",
     "0x6064:00",
@@ -551,6 +554,7 @@ pub const DEFAULT_TXPDO: &[&str] = &[
     "0x60BB:00",
     "0x60BC:00",
     "0x60BD:00",
+    "0x6077:00",
 ];
 
 #[cfg(test)]

@@ -453,10 +453,9 @@ impl<'a> Cursor<'a> {
     /// True if the characters at the cursor spell `word` (ASCII letters compared
     /// case-insensitively). Nothing is consumed.
     pub fn at_word(&self, word: &str) -> bool {
-        word.chars().enumerate().all(|(i, w)| {
-            self.peek_at(i)
-                .is_some_and(|c| c.eq_ignore_ascii_case(&w))
-        })
+        word.chars()
+            .enumerate()
+            .all(|(i, w)| self.peek_at(i).is_some_and(|c| c.eq_ignore_ascii_case(&w)))
     }
 
     /// Skip `n` characters (or up to the end of the block).
@@ -476,7 +475,11 @@ impl<'a> Cursor<'a> {
             }
             k
         };
-        let ends_word = |k: usize| !self.peek_at(k).is_some_and(|c| is_ident_char(c) || c == '.');
+        let ends_word = |k: usize| {
+            !self
+                .peek_at(k)
+                .is_some_and(|c| is_ident_char(c) || c == '.')
+        };
         let first = self.peek()?;
         let len = if first.is_ascii_alphabetic() && self.peek_at(1) == Some('-') {
             let a = run(2, &|c| c.is_ascii_digit());

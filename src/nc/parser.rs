@@ -63,7 +63,7 @@ mod commands;
 
 use super::ast::{BinOp, Block, Expr, IndependentMotion, Item, Program, Span};
 use super::expr::{function_arity, FUNCTIONS, MAX_EXPR_HEIGHT};
-use super::lexer::{expression_lines, logical_lines, Cursor, LogicalLine, Token, TokenKind};
+use super::lexer::{expression_lines, logical_lines, Cursor, LogicalLine, TokenKind};
 
 /// Deepest bracket / function / unary-sign nesting accepted in one expression.
 pub const MAX_NESTING: usize = 64;
@@ -162,10 +162,7 @@ pub fn parse_expr(src: &str) -> Result<Expr, ParseError> {
 
 /// Parse one logical line; `next` is the following line if it starts with `[` (it may supply
 /// the bracket of a `#` command). Returns the block and whether `next` was used.
-fn parse_block<'a>(
-    line: &'a LogicalLine,
-    next: Option<&'a LogicalLine>,
-) -> PResult<(Block, bool)> {
+fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PResult<(Block, bool)> {
     let mut p = BlockParser::new(line, next);
     let mut block = Block {
         span: line.start(),

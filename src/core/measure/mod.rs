@@ -12,6 +12,7 @@
 
 pub mod fixed_stop;
 pub mod plc;
+pub mod results;
 pub mod timestamp;
 
 use crate::drive::{ProbeEdge, TriggerSourceMode};
