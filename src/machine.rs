@@ -17,6 +17,7 @@ use crate::drive::ds402::Ds402Adapter;
 use crate::drive::model::ds402::Ds402Model;
 use crate::drive::DriveError;
 use crate::link::sim::SimLink;
+use crate::channel::acyclic::AcyclicOp;
 use crate::link::{Link, ProcessImage};
 use crate::messages::{ids, CncMessage};
 use crate::nc::ast::Program;
@@ -113,6 +114,8 @@ pub struct Machine {
     cycle: Nanos,
     /// Cycle budget of [`run_program`](Self::run_program).
     pub max_cycles: u64,
+    tools: std::collections::BTreeMap<u32, crate::params::ToolData>,
+    zero_offsets: std::collections::BTreeMap<u32, Vec<f64>>,
 }
 
 impl Machine {
@@ -159,6 +162,19 @@ impl Machine {
             meas: channel_meas_config(&cfg.channel),
         };
         let channel = Channel::new(ch_cfg, axes).map_err(MachineError::Config)?;
+        let zero_offsets = cfg
+            .zero_offsets
+            .iter()
+            .map(|(g, list)| {
+                let mut v = vec![0.0; cfg.axes.len()];
+                for (name, off) in list {
+                    if let Some(i) = cfg.axes.iter().position(|a| a.name == *name) {
+                        v[i] = *off;
+                    }
+                }
+                (*g, v)
+            })
+            .collect();
         Ok(Machine {
             channel,
             link: SimLink::new(models, cycle),
@@ -166,6 +182,8 @@ impl Machine {
             now: Nanos::ZERO,
             cycle,
             max_cycles: DEFAULT_MAX_CYCLES,
+            tools: cfg.tools.clone(),
+            zero_offsets,
         })
     }
 
@@ -195,6 +213,14 @@ impl Machine {
         match self.link.exchange(self.now, &mut self.images) {
             Ok(()) => self.channel.cycle(self.now, &mut self.images),
             Err(e) => self.channel.link_lost(&e),
+        }
+        // Acyclic requests (#DRIVE, #IDENT) go over the link's mailbox.
+        for req in self.channel.take_acyclic_requests() {
+            let result = match req.op {
+                AcyclicOp::Read => self.link.read_object(req.axis, req.index, req.sub),
+                AcyclicOp::Write(v) => self.link.write_object(req.axis, req.index, req.sub, v).map(|()| v),
+            };
+            self.channel.acyclic_done(req.id, result.map_err(|e| e.to_string()));
         }
     }
 
@@ -235,6 +261,8 @@ impl Machine {
             .map(|a| a.name().to_string())
             .collect();
         let mut exec = Executor::new(program.clone(), names);
+        exec.set_tools(self.tools.clone());
+        exec.set_zero_offsets(self.zero_offsets.clone());
         exec.sync(&self.channel);
         let mut out = Vec::new();
         let mut ended = false;

@@ -4,6 +4,8 @@
 //! must parse to the blocks written in the documents.
 
 use std::collections::HashMap;
+use std::path::Path;
+use std::sync::OnceLock;
 
 use fieldprobe::nc::ast::{
     AxLink, BinOp, Block, Command, Expr, IndependentMotion, Item, KeyArg, Program, Span, VarRef,
@@ -411,6 +413,956 @@ fn seed_000_4_indexed_axes() {
 }
 
 // ---------------------------------------------------------------------------------------------
+// seed 004 programs, read verbatim from the seed document
+
+/// The text of seed 004 (read once).
+fn seed_004() -> &'static str {
+    static TEXT: OnceLock<String> = OnceLock::new();
+    TEXT.get_or_init(|| {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/seeds/004_7eddc17f286cb1c8.txt");
+        std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("cannot read seed 004 at {}: {e}", path.display()))
+    })
+}
+
+/// The `nth` (from 0) program of seed 004 whose first line is `%<name>`, up to the closing code
+/// fence, with the seed's lines unchanged.
+fn seed_program(name: &str, nth: usize) -> String {
+    let header = format!("%{name}");
+    let lines: Vec<&str> = seed_004().lines().collect();
+    let start = lines
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.trim() == header)
+        .map(|(i, _)| i)
+        .nth(nth)
+        .unwrap_or_else(|| panic!("program {header} #{nth} not found in seed 004"));
+    let len = lines[start..]
+        .iter()
+        .position(|l| l.trim_start().starts_with("```"))
+        .unwrap_or_else(|| panic!("program {header} has no closing code fence"));
+    let mut text = lines[start..start + len].join("\n");
+    text.push('\n');
+    text
+}
+
+/// Drop the document's result annotations (`-> V.A.MESS.Z = 100.0`, `\rightarrow …`) of the
+/// seed 004 §5 examples.
+fn without_annotations(src: &str) -> String {
+    src.lines()
+        .filter(|l| {
+            let t = l.trim_start();
+            !(t.starts_with("->") || t.starts_with("\\rightarrow"))
+        })
+        .map(|l| format!("{l}\n"))
+        .collect()
+}
+
+fn command_of(item: &Item) -> &Command {
+    match item {
+        Item::Command { command, .. } => command,
+        other => panic!("expected a command, found {other:?}"),
+    }
+}
+
+fn key(k: &str, value: Option<Expr>, span: Span) -> KeyArg {
+    KeyArg {
+        key: k.to_string(),
+        value,
+        span,
+    }
+}
+
+fn word(s: &str) -> Option<Expr> {
+    Some(Expr::Str(s.to_string()))
+}
+
+fn n(x: f64) -> Option<Expr> {
+    Some(Expr::Num(x))
+}
+
+/// Seed 004 §2: measurement with G100, read from the seed.
+#[test]
+fn seed_004_2_meas_run_from_seed() {
+    let p = ok(&seed_program("Meas_run", 0));
+    assert_eq!(p.name.as_deref(), Some("Meas_run"));
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 G0 X0 Y0 Z0",
+            "N20 X5",
+            "N30 G100 X10 Y10 F500",
+            "N40 G1 X7",
+            "N50 M30"
+        ]
+    );
+}
+
+/// Seed 004 §2: independent axes, two independent words of one block joined by `\`.
+#[test]
+fn seed_004_2_independent_measurement_path() {
+    let src = seed_program("Independent_measurement_path", 0);
+    assert!(src.contains("FEED500] \\\n"), "{src}");
+    let p = ok(&src);
+    assert_eq!(p.name.as_deref(), Some("Independent_measurement_path"));
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 G0 X0 Y0",
+            "N20 X[INDP_SYN G100 G90 POS100 FEED500] Y[INDP_SYN G100 G90 POS100 FEED1000]",
+            "N30 M30"
+        ]
+    );
+    assert_eq!(
+        p.blocks[1].items,
+        [
+            Item::Independent {
+                axis: "X".into(),
+                motion: IndependentMotion {
+                    sync: true,
+                    gcodes: vec![100, 90],
+                    pos: Expr::Num(100.0),
+                    feed: Some(Expr::Num(500.0)),
+                },
+                span: sp(3, 5),
+            },
+            Item::Independent {
+                axis: "Y".into(),
+                motion: IndependentMotion {
+                    sync: true,
+                    gcodes: vec![100, 90],
+                    pos: Expr::Num(100.0),
+                    feed: Some(Expr::Num(1000.0)),
+                },
+                span: sp(4, 9),
+            },
+        ]
+    );
+}
+
+/// Seed 004 §4: the 2.5D example, only the NC program (not the `kopf.achs nr …` lines).
+#[test]
+fn seed_004_4_measurement_run_standard_from_seed() {
+    let p = ok(&seed_program("Measurement run standard", 0));
+    assert_eq!(p.name.as_deref(), Some("Measurement run standard"));
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 G0 X0 Y1 Z0",
+            "N20 X5",
+            "N30 G100 X10 F500",
+            "N40 G1 Y3",
+            "N50 G100 Y10 F500",
+            "N60 G1 X10 Y5",
+            "N70 G100 X15 Y10 F500",
+            "N100 M30"
+        ]
+    );
+}
+
+/// Seed 004 §4: measurement with `#CS`, including the stray `\` of `N50 \#CS ON[…]`.
+#[test]
+fn seed_004_4_measurement_run_cs() {
+    let src = seed_program("Measurement run CS", 0);
+    assert!(src.contains("N50 \\#CS ON[0,0,0,0,0,90]"), "{src}");
+    let p = ok(&src);
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 G0 X0 Y1 Z0",
+            "N20 #CS ON[0, 0, 0, 0, 45]",
+            "N30 G100 X10 F500",
+            "N40 #CS OFF",
+            "N50 #CS ON[0, 0, 0, 0, 0, 90]",
+            "N60 G100 X10 F500",
+            "N70 #CS OFF",
+            "N100 M30"
+        ]
+    );
+    // The command's position is the '#', not the stray '\'.
+    let Item::Command { span, .. } = &p.blocks[4].items[0] else {
+        panic!()
+    };
+    assert_eq!(*span, sp(6, 6));
+    assert_eq!(
+        *command_of(&p.blocks[1].items[0]),
+        Command::Cs {
+            on: Some(vec![
+                Expr::Num(0.0),
+                Expr::Num(0.0),
+                Expr::Num(0.0),
+                Expr::Num(0.0),
+                Expr::Num(45.0)
+            ])
+        }
+    );
+}
+
+/// Seed 004 §5 meas1 from the seed (annotation lines removed).
+#[test]
+fn seed_004_5_meas1_from_seed() {
+    let p = ok(&without_annotations(&seed_program("meas1", 0)));
+    assert_eq!(
+        shows(&p),
+        [
+            "N5 #MEAS MODE[1]",
+            "N10 G1 G90 Z200 F2000",
+            "N20 G100 Z20 F2000",
+            "N30 #MSG SYN[\"V.A.MESS.Z=%f\", V.A.MESS.Z]",
+            "N31 #MSG SYN[\"V.A.MEAS.ACS.VALUE.Z=%f\", V.A.MEAS.ACS.VALUE.Z]",
+            "N32 #MSG SYN[\"V.A.MEAS.PCS.VALUE.Z=%f\", V.A.MEAS.PCS.VALUE.Z]",
+            "N40 #MSG SYN[\"V.A.MOFFS.Z=%f\", V.A.MOFFS.Z]",
+            "N50 #MSG SYN[\"V.A.MEIN.Z=%f\", V.A.MEIN.Z]",
+            "N60 G101 Z1",
+            "N70 #MSG SYN[\"V.A.MEIN.Z=%f\", V.A.MEIN.Z]",
+            "N80 G1 Z100 F1000",
+            "N90 #MSG SYN[\"V.A.ABS.Z=%f\", V.A.ABS.Z]",
+            "N100 G102 Z1",
+            "N110 #MSG SYN[\"V.A.MEIN.Z=%f\", V.A.MEIN.Z]",
+            "N120 G1 Z100 F1000",
+            "N130 #MSG SYN[\"V.A.ABS.Z=%f\", V.A.ABS.Z]",
+            "N140 M30",
+        ]
+    );
+    assert_eq!(
+        p.blocks[0].items,
+        [Item::Command {
+            command: Command::MeasMode {
+                mode: Some(Expr::Num(1.0))
+            },
+            span: sp(2, 5)
+        }]
+    );
+}
+
+/// Seed 004 §5 meas2 (G92) and meas3 / meas4 (`#CS ON[…]`, `#CS OFF`) from the seed.
+#[test]
+fn seed_004_5_meas2_to_meas4_from_seed() {
+    let p = ok(&without_annotations(&seed_program("meas2", 0)));
+    let s = shows(&p);
+    assert_eq!(s.len(), 18, "{s:#?}");
+    assert_eq!(s[0], "N5 #MEAS MODE[1]");
+    assert_eq!(s[1], "N10 G92 Z33");
+    // N50 is printed over two lines in the seed.
+    assert_eq!(s[7], "N50 #MSG SYN[\"V.A.MOFFS.Z=%f\", V.A.MOFFS.Z]");
+    assert_eq!(s[17], "N150 M30");
+
+    let p = ok(&without_annotations(&seed_program("meas3", 0)));
+    let s = shows(&p);
+    assert_eq!(s.len(), 19, "{s:#?}");
+    assert_eq!(
+        &s[..4],
+        [
+            "N5 #MEAS MODE[1]",
+            "N10 #CS ON[0, 0, 33, 0, 0, 0]",
+            "N20 G1 G90 Z200 F2000",
+            "N30 G100 Z20 F2000"
+        ]
+    );
+    assert_eq!(&s[17..], ["N150 #CS OFF", "N160 M30"]);
+
+    let p = ok(&without_annotations(&seed_program("meas4", 0)));
+    let s = shows(&p);
+    assert_eq!(s.len(), 19, "{s:#?}");
+    assert_eq!(
+        &s[..4],
+        [
+            "N5 #MEAS MODE[1]",
+            "N10 #CS ON[0, 0, 75, 0, 15, 0]",
+            "N20 G1 G90 X150 Z100 F2000",
+            "N30 G100 Z-10 F1000"
+        ]
+    );
+    assert_eq!(s[13], "N110 G102 Z1");
+    assert_eq!(&s[17..], ["N150 #CS OFF", "N160 M30"]);
+}
+
+/// Seed 004 §5 %meas_example: `:` placeholder lines, comments and `D1`.
+#[test]
+fn seed_004_5_meas_example_from_seed() {
+    let p = ok(&seed_program("meas_example", 0));
+    assert_eq!(shows(&p), ["D1", "G0 X150 Z200", "G100 Z20", "M30"]);
+    assert_eq!(
+        p.blocks[0].items,
+        [Item::D {
+            value: Expr::Num(1.0),
+            span: sp(5, 1)
+        }]
+    );
+}
+
+/// Seed 004 §7.3.1 (SERCOS fixed stop with Soft Gantry). The PDF extraction displaced three
+/// lines: the command text of N040, N050 and N100 was printed after the first line of its own
+/// bracket. Verbatim, the first displaced bracket is a clear error; after swapping each of those
+/// command lines with the line above it (nothing else changed), the program parses — N040/N060
+/// with the bracket on the next line(s), `NO80` as block 80.
+#[test]
+fn seed_004_7_3_1_fixed_stop_sercos() {
+    let verbatim = seed_program("Meas fixed stop", 0);
+    let e = fail(&verbatim);
+    assert_eq!((e.line, e.col), (7, 20), "{e}");
+    assert!(e.message.contains("unexpected character '['"), "{e}");
+
+    let mut lines: Vec<&str> = verbatim.lines().collect();
+    for (command, displaced) in [
+        ("N040 #IDENT RD", "[AXNR 1 ID S-0-0092 P=P1092"),
+        (
+            "N050 #IDENT RD",
+            "[AXNR 1 ID S-0-0159 P=P1159 TYP 4 DEC 0 SERC]",
+        ),
+        (
+            "N100 #IDENT WR SYN [AXNR 1 ID S-0-0159 VAL=0",
+            "TYP 4 DEC 0 SERC]",
+        ),
+    ] {
+        let i = lines
+            .iter()
+            .position(|l| l.trim() == command)
+            .unwrap_or_else(|| panic!("{command} not found"));
+        assert_eq!(lines[i - 1].trim(), displaced);
+        lines.swap(i - 1, i);
+    }
+    let repaired: String = lines.iter().map(|l| format!("{l}\n")).collect();
+    let p = ok(&repaired);
+    assert_eq!(p.name.as_deref(), Some("Meas fixed stop"));
+    let ident = |n: u32, rw: &str, p: u32, id: &str, val: &str, typ: u32| {
+        format!("N{n} #IDENT {rw}[AXNR={p} ID=\"{id}\" {val} TYP={typ} DEC=0 SERC]")
+    };
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 G0 X100 X20".to_string(),
+            "N20 #SET AX LINK[1, [X2=X, G, 15, 20]]".to_string(),
+            "N30 #ENABLE AX LINK[1]".to_string(),
+            ident(40, "RD", 1, "S-0-0092", "P=P1092", 2),
+            ident(50, "RD", 1, "S-0-0159", "P=P1159", 4),
+            ident(60, "RD", 4, "S-0-0092", "P=P2092", 2),
+            ident(70, "RD", 4, "S-0-0159", "P=P2159", 4),
+            ident(80, "WR SYN", 1, "S-0-0092", "VAL=100", 2),
+            ident(90, "WR SYN", 4, "S-0-0092", "VAL=100", 2),
+            ident(100, "WR SYN", 1, "S-0-0159", "VAL=0", 4),
+            ident(110, "WR SYN", 4, "S-0-0159", "VAL=0", 4),
+            "N120 G100 X1000 Y1000 Z1000 Z21000 F1000".to_string(),
+            "N130 G1 X100 F1000".to_string(),
+            ident(140, "WR SYN", 1, "S-0-0159", "VAL=P1159", 4),
+            ident(150, "WR SYN", 4, "S-0-0159", "VAL=P2159", 4),
+            ident(160, "WR SYN", 1, "S-0-0092", "VAL=P1092", 2),
+            ident(170, "WR SYN", 4, "S-0-0092", "VAL=P2092", 2),
+            "N180 M30".to_string(),
+        ]
+    );
+    // Exact ASTs of the gantry coupling and of N060, whose bracket starts on the next line and
+    // continues on the line after it.
+    assert_eq!(
+        *command_of(&p.blocks[1].items[0]),
+        Command::SetAxLink {
+            group: Expr::Num(1.0),
+            links: vec![AxLink {
+                slave: "X2".into(),
+                master: "X".into(),
+                kind: "G".into(),
+                params: vec![Expr::Num(15.0), Expr::Num(20.0)],
+            }],
+        }
+    );
+    assert_eq!(
+        *command_of(&p.blocks[2].items[0]),
+        Command::EnableAxLink {
+            enable: true,
+            group: Some(Expr::Num(1.0))
+        }
+    );
+    let n060 = &p.blocks[5];
+    assert_eq!((n060.number, n060.span), (Some(60), sp(12, 1)));
+    assert_eq!(
+        *command_of(&n060.items[0]),
+        Command::Ident {
+            write: false,
+            sync: false,
+            args: vec![
+                key("AXNR", n(4.0), sp(13, 20)),
+                key("ID", word("S-0-0092"), sp(13, 27)),
+                key("P", Some(Expr::Param(2092, sp(13, 41))), sp(13, 39)),
+                key("TYP", n(2.0), sp(14, 49)),
+                key("DEC", n(0.0), sp(14, 55)),
+                key("SERC", None, sp(14, 61)),
+            ],
+        }
+    );
+    // NO80: the letter O of the seed is read as a block number.
+    assert_eq!(p.blocks[7].number, Some(80));
+}
+
+/// Seed 004 §7.3.2 (CANopen fixed stop with `#DRIVE`): `NO30`/`NO40`/`NO80` and the lost
+/// underscores of `KEY=TORQUE LIMIT` / `KEY=MON WINDOW`.
+#[test]
+fn seed_004_7_3_2_fixed_stop_canopen() {
+    let src = seed_program("Meas fixed stop", 1);
+    assert!(src.contains("NO30 #DRIVE WR SYN [AX=Z KEY=TORQUE LIMIT VAL=10 WAIT]"));
+    let p = ok(&src);
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 #MEAS MODE[7]",
+            "N20 G0 Z100",
+            "N30 #DRIVE WR SYN[AX=\"Z\" KEY=\"TORQUE_LIMIT\" VAL=10 WAIT]",
+            "N40 #DRIVE WR SYN[AX=\"Z\" KEY=\"MON_WINDOW\" VAL=4294967295 WAIT]",
+            "N50 G100 Z1000 F100",
+            "N60 G1 Z100 F1000",
+            "N70 #DRIVE WR SYN[AX=\"Z\" KEY=\"MON_WINDOW\" VAL=1048575 WAIT]",
+            "N80 #DRIVE WR SYN[AX=\"Z\" KEY=\"TORQUE_LIMIT\" VAL=5000 WAIT]",
+            "N90 M30",
+        ]
+    );
+    assert_eq!(
+        p.blocks[2].items,
+        [Item::Command {
+            command: Command::Drive {
+                write: true,
+                sync: true,
+                args: vec![
+                    key("AX", word("Z"), sp(5, 21)),
+                    key("KEY", word("TORQUE_LIMIT"), sp(5, 26)),
+                    key("VAL", n(10.0), sp(5, 43)),
+                    key("WAIT", None, sp(5, 50)),
+                ],
+            },
+            span: sp(5, 6),
+        }]
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// measurement syntax, one construct at a time
+
+#[test]
+fn meas_commands() {
+    assert_eq!(
+        shows(&ok(
+            "#MEAS MODE [2]\n#MEAS MODE[2]\n#meas mode\n#MEAS MODE [P1+1]"
+        )),
+        [
+            "#MEAS MODE[2]",
+            "#MEAS MODE[2]",
+            "#MEAS MODE",
+            "#MEAS MODE[(P1 + 1)]"
+        ]
+    );
+    let p = ok("N10 #MEAS [AXNR=2 SIGNAL=PLC_TIMESTAMP]");
+    assert_eq!(
+        *command_of(&p.blocks[0].items[0]),
+        Command::MeasConfig {
+            args: vec![
+                key("AXNR", n(2.0), sp(1, 12)),
+                key("SIGNAL", word("PLC_TIMESTAMP"), sp(1, 19)),
+            ]
+        }
+    );
+    assert_eq!(
+        shows(&ok("#MEAS [ AXNR = 1 INPUT=2 EDGE=neg SIGNAL DRIVE]")),
+        ["#MEAS[AXNR=1 INPUT=2 EDGE=\"NEG\" SIGNAL=\"DRIVE\"]"]
+    );
+    assert_eq!(
+        shows(&ok("#MEAS PREPARE [AXNR=1]\n#MEAS PREPARE [AXNR=1 AXNR=2]")),
+        ["#MEAS PREPARE[AXNR=1]", "#MEAS PREPARE[AXNR=1 AXNR=2]"]
+    );
+}
+
+#[test]
+fn cs_and_trafo_commands() {
+    assert_eq!(
+        shows(&ok(
+            "#CS ON [0,0,33,0,0,0]\n#CS ON[0,0,0,0,45]\n#cs on[1]\n#CS OFF\n#TRAFO ON\n#TRAFO OFF"
+        )),
+        [
+            "#CS ON[0, 0, 33, 0, 0, 0]",
+            "#CS ON[0, 0, 0, 0, 45]",
+            "#CS ON[1]",
+            "#CS OFF",
+            "#TRAFO ON",
+            "#TRAFO OFF"
+        ]
+    );
+    assert_eq!(
+        shows(&ok("#CS ON[V.A.ABS.X, -P2, 2*3]")),
+        ["#CS ON[V.A.ABS.X, -(P2), (2 * 3)]"]
+    );
+}
+
+#[test]
+fn drive_and_ident_commands() {
+    assert_eq!(
+        shows(&ok("#DRIVE WR SYN [AX=Z KEY=TORQUE_LIMIT VAL=10 WAIT]\n\
+             #DRIVE WR [AX=Z KEY=MON_WINDOW VAL=4294967295]\n\
+             #DRIVE RD SYN [AX=Z KEY=MON_WINDOW P=P10]\n\
+             #drive rd [ax x key mon_window p p11 wait]")),
+        [
+            "#DRIVE WR SYN[AX=\"Z\" KEY=\"TORQUE_LIMIT\" VAL=10 WAIT]",
+            "#DRIVE WR[AX=\"Z\" KEY=\"MON_WINDOW\" VAL=4294967295]",
+            "#DRIVE RD SYN[AX=\"Z\" KEY=\"MON_WINDOW\" P=P10]",
+            "#DRIVE RD[AX=\"X\" KEY=\"MON_WINDOW\" P=P11 WAIT]",
+        ]
+    );
+    // The two-word KEY leniency joins only a second word that is not a keyword.
+    assert_eq!(
+        shows(&ok("#DRIVE WR [KEY=TORQUE LIMIT AX=Z VAL=1]")),
+        ["#DRIVE WR[KEY=\"TORQUE_LIMIT\" AX=\"Z\" VAL=1]"]
+    );
+    assert_eq!(
+        shows(&ok("#DRIVE WR [AX=Z KEY=TORQUE WAIT VAL=1]")),
+        ["#DRIVE WR[AX=\"Z\" KEY=\"TORQUE\" WAIT VAL=1]"]
+    );
+    assert_eq!(
+        shows(&ok(
+            "#IDENT RD [AXNR 1 ID S-0-0092 P=P1092 TYP 2 DEC 0 SERC]\n\
+             #IDENT WR SYN [AXNR 4 ID S-0-0159 VAL=0 TYP 4 DEC 0 SERC]\n\
+             #IDENT WR SYN [AXNR=1 ID=P-0-0270 VAL=P1159 TYP=4 DEC=0 SERC]\n\
+             #IDENT WR [AX X ID s-0-0104 VAL 655.35 TYP 4 DEC 2 SERC]\n\
+             #IDENT RD [AX X ID 0x6072_00 P=P1 TYP 4 DEC 2 CAN]"
+        )),
+        [
+            "#IDENT RD[AXNR=1 ID=\"S-0-0092\" P=P1092 TYP=2 DEC=0 SERC]",
+            "#IDENT WR SYN[AXNR=4 ID=\"S-0-0159\" VAL=0 TYP=4 DEC=0 SERC]",
+            "#IDENT WR SYN[AXNR=1 ID=\"P-0-0270\" VAL=P1159 TYP=4 DEC=0 SERC]",
+            "#IDENT WR[AX=\"X\" ID=\"S-0-0104\" VAL=655.35 TYP=4 DEC=2 SERC]",
+            "#IDENT RD[AX=\"X\" ID=\"0x6072_00\" P=P1 TYP=4 DEC=2 CAN]",
+        ]
+    );
+}
+
+#[test]
+fn ax_link_commands() {
+    assert_eq!(
+        shows(&ok(
+            "#SET AX LINK[1, [X2=X,G,15,20]]\n#SET AX LINK [2, [Y2=Y, G], [Z2 = Z, G, 1+1]]\n\
+             #ENABLE AX LINK[1]\n#ENABLE AX LINK\n#DISABLE AX LINK[1]\n#disable ax link"
+        )),
+        [
+            "#SET AX LINK[1, [X2=X, G, 15, 20]]",
+            "#SET AX LINK[2, [Y2=Y, G], [Z2=Z, G, (1 + 1)]]",
+            "#ENABLE AX LINK[1]",
+            "#ENABLE AX LINK",
+            "#DISABLE AX LINK[1]",
+            "#DISABLE AX LINK",
+        ]
+    );
+}
+
+#[test]
+fn independent_axes() {
+    assert_eq!(
+        shows(&ok("N20 Y[INDP_ASYN G01 G91 POS=-5 FEED=1000]")),
+        ["N20 Y[INDP_ASYN G1 G91 POS-5 FEED1000]"]
+    );
+    assert_eq!(
+        shows(&ok(
+            "X2[ INDP_SYN POS[10+2] ]\nx[indp_syn feed = 5 pos V.A.ABS.X g90]\nZ[INDP_SYN POSP1]"
+        )),
+        [
+            "X2[INDP_SYN POS(10 + 2)]",
+            "X[INDP_SYN G90 POSV.A.ABS.X FEED5]",
+            "Z[INDP_SYN POSP1]"
+        ]
+    );
+    // Independent words mix with path words; a plain bracket is still an expression.
+    assert_eq!(
+        shows(&ok("N10 G100 Z10 F500 X[INDP_SYN G100 POS100] Y[10]")),
+        ["N10 G100 Z10 F500 X[INDP_SYN G100 POS100] Y10"]
+    );
+    err_at(
+        "X[INDP_SYN G90 FEED5]",
+        1,
+        2,
+        "X[INDP_SYN …] needs a target position POS<value>",
+    );
+    err_at("X[INDP_SYN POS1 POS2]", 1, 17, "POS is given twice");
+    err_at(
+        "X[INDP_SYN POS1 Q]",
+        1,
+        17,
+        "expected G<code>, POS<value>, FEED<value> or ']' in X[INDP_SYN …], found 'Q'",
+    );
+    err_at("X[INDP_SYN POSITION1]", 1, 12, "found 'P'");
+    err_at(
+        "X[INDP_ASYN POS1",
+        1,
+        17,
+        "expected ']' to close X[INDP_ASYN … at line 1, column 2",
+    );
+    err_at("X[INDP_SYNC POS1]", 1, 3, "unknown name 'INDP_SYNC'");
+}
+
+#[test]
+fn parameters() {
+    let p = ok("N10 P1 = 5\nP2=V.A.ABS.X + P1 * 2 P3 = -1\nX=P1 Y[P2/2] ZP3\n#MSG[\"%f\", P1]");
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 P1=5",
+            "P2=(V.A.ABS.X + (P1 * 2)) P3=-1",
+            "XP1 Y(P2 / 2) ZP3",
+            "#MSG[\"%f\", P1]"
+        ]
+    );
+    assert_eq!(
+        p.blocks[0].items,
+        [Item::Assign {
+            param: 1,
+            value: Expr::Num(5.0),
+            span: sp(1, 5)
+        }]
+    );
+    let Item::Axis { value, .. } = &p.blocks[2].items[0] else {
+        panic!()
+    };
+    assert_eq!(*value, Expr::Param(1, sp(3, 3)));
+    assert_eq!(
+        parse_expr("p7 + 1").unwrap(),
+        Expr::Bin(
+            BinOp::Add,
+            Box::new(Expr::Param(7, sp(1, 1))),
+            Box::new(Expr::Num(1.0))
+        )
+    );
+
+    // Evaluation goes through VarSource::param; the default has no parameters.
+    struct Params;
+    impl VarSource for Params {
+        fn var(&self, var: &VarRef) -> Result<Value, String> {
+            Err(format!("unknown variable {}", var.name()))
+        }
+        fn param(&self, n: u32) -> Result<f64, String> {
+            if n == 7 {
+                Ok(2.5)
+            } else {
+                Err(format!("P{n} has no value"))
+            }
+        }
+    }
+    assert_eq!(eval_num(&parse_expr("P7 * 2").unwrap(), &Params), Ok(5.0));
+    let e = eval(&parse_expr("1 + P8").unwrap(), &Params).unwrap_err();
+    assert_eq!((e.span, e.message.as_str()), (sp(1, 5), "P8 has no value"));
+    let e = eval(&parse_expr("P7").unwrap(), &Vars::new(&[])).unwrap_err();
+    assert_eq!(e.message, "P7 has no value");
+
+    err_at(
+        "N10 G04 P5",
+        1,
+        9,
+        "'P' is not an address letter: expected '=' after P5",
+    );
+    err_at("N10 P=5", 1, 6, "expected a parameter number after 'P'");
+    err_at(
+        "N10 X10 P1=2",
+        1,
+        9,
+        "a parameter assignment must be a block of its own",
+    );
+    err_at(
+        "N10 P1=2 X10",
+        1,
+        10,
+        "a parameter assignment must be a block of its own",
+    );
+    err_at("N10 P1=", 1, 8, "found end of block");
+    err_at("P99999999999=1", 1, 1, "parameter number is too large");
+    err_at("X[P99999999999]", 1, 3, "parameter number is too large");
+}
+
+#[test]
+fn seed_leniencies() {
+    // NO<digits> only as the first word in front of a # command.
+    assert_eq!(shows(&ok("NO80 #CS OFF")), ["N80 #CS OFF"]);
+    assert_eq!(shows(&ok("no30 \\#TRAFO OFF")), ["N30 #TRAFO OFF"]);
+    err_at("NO80 X1", 1, 2, "found the letter 'O'");
+    err_at("NO80#CS OFF", 1, 2, "found the letter 'O'");
+    err_at("NO #CS OFF", 1, 2, "found the letter 'O'");
+    // '\#' only directly in front of a command.
+    assert_eq!(shows(&ok("N50 \\#CS OFF")), ["N50 #CS OFF"]);
+    err_at("N50 \\ #CS OFF", 1, 5, "unexpected character '\\'");
+    err_at("N50 \\X1", 1, 5, "unexpected character '\\'");
+    // A bracket on the next line(s) when the command line ends after the keywords.
+    let p = ok("N10 #MEAS PREPARE\n   [AXNR=1\n    AXNR=2]\nN20 #ENABLE AX LINK\n\n  [2]\nN30 M30");
+    assert_eq!(
+        shows(&p),
+        [
+            "N10 #MEAS PREPARE[AXNR=1 AXNR=2]",
+            "N20 #ENABLE AX LINK[2]",
+            "N30 M30"
+        ]
+    );
+    assert_eq!(p.blocks[2].span, sp(7, 1));
+    assert_eq!(shows(&ok("#MSG SYN\n[\"a\"]")), ["#MSG SYN[\"a\"]"]);
+    // Not after a complete command, and not after other words.
+    err_at("N10 #CS OFF\n[1]", 2, 1, "unexpected character '['");
+    err_at("N10 #CS ON[1]\n[1]", 2, 1, "unexpected character '['");
+    err_at("N10 X1\n[1]", 2, 1, "unexpected character '['");
+    err_at(
+        "N10 #IDENT RD X\n[AXNR 1]",
+        1,
+        15,
+        "expected '[' with the keywords",
+    );
+    // The KEY leniency joins at most two words.
+    err_at(
+        "#DRIVE WR [AX=Z KEY=TORQUE LIMIT VALUE VAL=1]",
+        1,
+        34,
+        "unknown keyword VALUE in #DRIVE WR",
+    );
+}
+
+#[test]
+fn measurement_syntax_errors() {
+    err_at(
+        "N10 #MEAS",
+        1,
+        10,
+        "expected MODE, PREPARE or '[' after #MEAS, found end of block",
+    );
+    err_at(
+        "N10 #MEAS FOO",
+        1,
+        11,
+        "expected MODE, PREPARE or '[' after #MEAS, found 'FOO'",
+    );
+    err_at("N10 #MEAS MODE []", 1, 17, "expected the measurement type");
+    err_at(
+        "N10 #MEAS MODE [1",
+        1,
+        18,
+        "expected ']' to close the bracket at line 1, column 16",
+    );
+    err_at(
+        "N10 #MEAS [SIGNAL=PLC]",
+        1,
+        11,
+        "#MEAS [...] needs the axis number AXNR",
+    );
+    err_at(
+        "N10 #MEAS [AXNR=1 FOO=2]",
+        1,
+        19,
+        "unknown keyword FOO in #MEAS [...] (expected one of AXNR, SIGNAL, INPUT, EDGE)",
+    );
+    err_at("N10 #MEAS [AXNR=1 AXNR=2]", 1, 19, "AXNR is given twice");
+    err_at(
+        "N10 #MEAS [AXNR=1",
+        1,
+        18,
+        "expected ']' to close #MEAS [ at line 1, column 11",
+    );
+    err_at(
+        "N10 #MEAS [AXNR=]",
+        1,
+        17,
+        "expected a value after AXNR in #MEAS [...], found ']'",
+    );
+    err_at(
+        "N10 #MEAS [AXNR=1, SIGNAL=PLC]",
+        1,
+        18,
+        "expected a keyword (AXNR, SIGNAL, INPUT, EDGE) or ']'",
+    );
+    err_at(
+        "N10 #MEAS PREPARE []",
+        1,
+        19,
+        "needs at least one axis number AXNR",
+    );
+    err_at(
+        "N10 #MEAS PREPARE",
+        1,
+        18,
+        "expected '[' with the keywords (AXNR) after #MEAS PREPARE",
+    );
+    err_at(
+        "N10 #CS",
+        1,
+        8,
+        "expected ON or OFF after #CS, found end of block",
+    );
+    err_at(
+        "N10 #CS ON",
+        1,
+        11,
+        "expected '[' with the offsets after #CS ON, found end of block",
+    );
+    err_at(
+        "N10 #CS ON[]",
+        1,
+        11,
+        "#CS ON [...] takes 1 to 6 values (x, y, z, a, b, c), found 0",
+    );
+    err_at("N10 #CS ON[1,2,3,4,5,6,7]", 1, 11, "found 7");
+    err_at(
+        "N10 #CS ON[1 2]",
+        1,
+        14,
+        "expected an operator, ',' or ']' in #CS ON[…], found number 2",
+    );
+    err_at("N10 #TRAFO", 1, 11, "expected ON or OFF after #TRAFO");
+    err_at(
+        "N10 #TRAFO 1",
+        1,
+        12,
+        "expected ON or OFF after #TRAFO, found number 1",
+    );
+    err_at(
+        "N10 #DRIVE SYN [AX=Z]",
+        1,
+        12,
+        "expected WR or RD after #DRIVE, found 'SYN'",
+    );
+    err_at(
+        "N10 #DRIVE WR [AX=Z VAL=1]",
+        1,
+        15,
+        "#DRIVE WR [...] needs KEY=<value>",
+    );
+    err_at(
+        "N10 #DRIVE WR [AX=Z KEY=K]",
+        1,
+        15,
+        "#DRIVE WR [...] needs VAL=<value to write>",
+    );
+    err_at(
+        "N10 #DRIVE RD [AX=Z KEY=K VAL=1]",
+        1,
+        27,
+        "#DRIVE RD [...] does not take VAL",
+    );
+    err_at(
+        "N10 #DRIVE WR [AX=Z KEY=K VAL=1 P=P1]",
+        1,
+        33,
+        "#DRIVE WR [...] does not take P",
+    );
+    err_at(
+        "N10 #DRIVE WR [AX=Z KEY=K VAL=1 WAIT=1]",
+        1,
+        37,
+        "WAIT is a flag in #DRIVE WR [...] and takes no value",
+    );
+    err_at(
+        "N10 #DRIVE WR [AX=Z KEY=K VAL=1 AXNR=1]",
+        1,
+        33,
+        "unknown keyword AXNR in #DRIVE WR",
+    );
+    err_at(
+        "N10 #IDENT RD [ID S-0-0092 P=P1]",
+        1,
+        15,
+        "needs the axis: AX <name> or AXNR <number>",
+    );
+    err_at(
+        "N10 #IDENT RD [AX X AXNR 1 ID S-0-0092 P=P1]",
+        1,
+        21,
+        "either AX or AXNR, not both",
+    );
+    err_at(
+        "N10 #IDENT RD [AXNR 1 P=P1]",
+        1,
+        15,
+        "needs the parameter ident ID",
+    );
+    err_at(
+        "N10 #IDENT RD [AXNR ID S-0-0092 P=P1]",
+        1,
+        21,
+        "expected a value after AXNR in #IDENT RD [...], found the keyword ID",
+    );
+    err_at(
+        "N10 #IDENT RD [AXNR 1 ID S-0-0092 P=P1 SERC CAN]",
+        1,
+        45,
+        "one drive type (SERC or CAN)",
+    );
+    err_at(
+        "N10 #IDENT RD [AXNR 1 ID S-0-0092]",
+        1,
+        15,
+        "#IDENT RD [...] needs P=<parameter that receives the value>",
+    );
+    err_at(
+        "N10 #IDENT WR [AXNR 1 ID S-0-0092 SERC]",
+        1,
+        15,
+        "#IDENT WR [...] needs VAL=",
+    );
+    err_at(
+        "N10 #IDENT RD [AXNR 1 ID S-0-0092 P=P1 TYP 4 DEC 0 SERC",
+        1,
+        56,
+        "expected ']' to close #IDENT RD [ at line 1, column 15",
+    );
+    err_at(
+        "N10 #SET AX [1, [X2=X, G]]",
+        1,
+        13,
+        "expected 'AX LINK' after #SET, found '['",
+    );
+    err_at(
+        "N10 #SET FOO",
+        1,
+        10,
+        "expected 'AX LINK' after #SET, found 'FOO'",
+    );
+    err_at(
+        "N10 #SET AX LINK[1]",
+        1,
+        19,
+        "expected an operator or ',' and a coupling",
+    );
+    err_at(
+        "N10 #SET AX LINK[1, [X2, G]]",
+        1,
+        24,
+        "expected '=' after the slave axis X2",
+    );
+    err_at(
+        "N10 #SET AX LINK[1, [X2=Q, G]]",
+        1,
+        25,
+        "expected the master axis name",
+    );
+    err_at(
+        "N10 #SET AX LINK[1, [X2=X G]]",
+        1,
+        27,
+        "expected ',' and the coupling kind",
+    );
+    err_at(
+        "N10 #SET AX LINK[1, [X2=X, 5]]",
+        1,
+        28,
+        "expected the coupling kind (e.g. G)",
+    );
+    err_at(
+        "N10 #SET AX LINK[1, [X2=X, G, 1]",
+        1,
+        33,
+        "expected ',' or ']' to close #SET AX LINK[ at line 1, column 17",
+    );
+    err_at(
+        "N10 #ENABLE AX LINK[1",
+        1,
+        22,
+        "expected ']' to close the bracket at line 1, column 20",
+    );
+    err_at(
+        "N10 #ENABLE LINK",
+        1,
+        13,
+        "expected 'AX LINK' after #ENABLE",
+    );
+    err_at("N10 D", 1, 6, "after 'D'");
+}
+
+// ---------------------------------------------------------------------------------------------
 // words and lexical rules
 
 #[test]
@@ -714,7 +1666,7 @@ fn error_positions_and_messages() {
         "N10 X",
         1,
         6,
-        "expected a number, '[' or a variable after 'X', found end of block",
+        "expected a number, '[', a variable or a parameter P<n> after 'X', found end of block",
     );
     err_at("N10 X2=", 1, 8, "after 'X2'");
     err_at("N10 X Y1", 1, 7, "after 'X', found 'Y'");
@@ -1034,12 +1986,114 @@ const VALID: &[&str] = &[
     "%Meas_run\nN10 G00 X0 Y0 Z0\nN20 X5\nN30 G100 X10 Y10 F500\nN40 G01 X7\nN50 M30\n",
     "N30 #MSG SYN[\"V.A.MESS.Z=%f\", V.A.MESS.Z]\nN31 #MSG SYN[\"x=%f\",\n V.A.MEAS.ACS.VALUE.Z]\n",
     "N20 X[ABS[-1]*SIN[30]+ATAN2[1,2]/[V.A.-SWE.X-2]] \\\n Y2=100 F=V.G.F\n",
+    "N20 X[INDP_SYN G100 G90 POS100 FEED500] \\\n Y[INDP_ASYN G01 G91 POS=-5 FEED=1000]\nD1\n",
+    "N10 P1 = 5\nP2=V.A.ABS.X + P1 * 2\nX=P1 Y[P2/2]\n#MEAS MODE [2]\n#MEAS MODE\n",
+    "#MEAS [AXNR=2 SIGNAL=PLC_TIMESTAMP EDGE=POS]\n#MEAS PREPARE [AXNR=1 AXNR=2]\n#CS ON[0,0,0,0,45]\n\\#CS OFF\n#TRAFO ON\n",
+    "NO30 #DRIVE WR SYN [AX=Z KEY=TORQUE LIMIT VAL=10 WAIT]\n#DRIVE RD [AX=Z KEY=MON_WINDOW P=P10]\n",
+    "N060 #IDENT RD\n  [AXNR 4 ID S-0-0092 P=P2092\n    TYP 2 DEC 0 SERC]\nN070 #IDENT WR SYN [AX X ID 0x6072_00 VAL=P1 CAN]\n",
+    "N020 #SET AX LINK[1, [X2=X,G,15,20]]\nN030 #ENABLE AX LINK[1]\n#DISABLE AX LINK\n",
 ];
 
 const ALPHABET: &[char] = &[
     'N', 'G', 'X', 'Y', 'V', '.', 'A', '-', '+', '[', ']', '(', ')', ';', '"', '\\', '\n', ' ',
-    '1', '0', '5', '=', '#', 'M', 'S', 'Y', '%', ',', '*', '/', 'ä', '\r', '\t', 'Q', 'E',
+    '1', '0', '5', '=', '#', 'M', 'S', 'Y', '%', ',', '*', '/', 'ä', '\r', '\t', 'Q', 'E', 'P',
+    'D', 'O', 'I', '_', 'K', 'R', 'W', 'C', 'L', 'x',
 ];
+
+/// Programs of seed 004 as the seed tests parse them (annotations removed).
+fn seed_004_programs() -> &'static [String] {
+    static PROGRAMS: OnceLock<Vec<String>> = OnceLock::new();
+    PROGRAMS.get_or_init(|| {
+        [
+            ("Meas_run", 0),
+            ("Independent_measurement_path", 0),
+            ("Measurement run standard", 0),
+            ("Measurement run CS", 0),
+            ("meas1", 0),
+            ("meas2", 0),
+            ("meas3", 0),
+            ("meas4", 0),
+            ("meas_example", 0),
+            ("Meas fixed stop", 0),
+            ("Meas fixed stop", 1),
+        ]
+        .iter()
+        .map(|&(name, nth)| without_annotations(&seed_program(name, nth)))
+        .collect()
+    })
+}
+
+fn mutate(text: &str, edits: Vec<(prop::sample::Index, u8, char)>) -> String {
+    let mut chars: Vec<char> = text.chars().collect();
+    for (idx, kind, c) in edits {
+        let i = if chars.is_empty() {
+            0
+        } else {
+            idx.index(chars.len())
+        };
+        match kind {
+            0 if !chars.is_empty() => {
+                chars.remove(i);
+            }
+            1 => chars.insert(i, c),
+            _ if !chars.is_empty() => chars[i] = c,
+            _ => chars.push(c),
+        }
+    }
+    chars.into_iter().collect()
+}
+
+/// Parse `s`; if it parses, evaluate every expression in it (against no variables) so that the
+/// evaluator sees every shape the parser can produce. Errors must carry a position.
+fn parse_and_eval(s: &str) -> Result<(), TestCaseError> {
+    match parse(s) {
+        Ok(p) => {
+            let vars = Vars::new(&[]);
+            let mut exprs: Vec<&Expr> = Vec::new();
+            for b in &p.blocks {
+                for it in &b.items {
+                    match it {
+                        Item::Axis { value, .. }
+                        | Item::F { value, .. }
+                        | Item::D { value, .. }
+                        | Item::Centre { value, .. }
+                        | Item::Assign { value, .. } => exprs.push(value),
+                        Item::Independent { motion, .. } => {
+                            exprs.push(&motion.pos);
+                            exprs.extend(motion.feed.iter());
+                        }
+                        Item::Command { command, .. } => match command {
+                            Command::Msg { args, .. } => exprs.extend(args),
+                            Command::MeasConfig { args }
+                            | Command::MeasPrepare { args }
+                            | Command::Drive { args, .. }
+                            | Command::Ident { args, .. } => {
+                                exprs.extend(args.iter().filter_map(|a| a.value.as_ref()))
+                            }
+                            Command::Cs { on: Some(v) } => exprs.extend(v),
+                            Command::MeasMode { mode: Some(e) }
+                            | Command::EnableAxLink { group: Some(e), .. } => exprs.push(e),
+                            Command::SetAxLink { group, links } => {
+                                exprs.push(group);
+                                exprs.extend(links.iter().flat_map(|l| &l.params));
+                            }
+                            _ => {}
+                        },
+                        Item::G { .. } | Item::M { .. } => {}
+                    }
+                }
+            }
+            for e in exprs {
+                let _ = eval(e, &vars);
+            }
+        }
+        Err(e) => {
+            prop_assert!(e.line >= 1 && e.col >= 1, "{e}");
+            prop_assert!(!e.message.is_empty());
+        }
+    }
+    Ok(())
+}
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(2000))]
@@ -1055,17 +2109,7 @@ proptest! {
         v in proptest::collection::vec(proptest::sample::select(ALPHABET), 0..200)
     ) {
         let s: String = v.into_iter().collect();
-        if let Ok(p) = parse(&s) {
-            // Whatever parses must evaluate without panicking too.
-            let vars = Vars::new(&[]);
-            for b in &p.blocks {
-                for it in &b.items {
-                    if let Item::Axis { value, .. } | Item::F { value, .. } = it {
-                        let _ = eval(value, &vars);
-                    }
-                }
-            }
-        }
+        parse_and_eval(&s)?;
     }
 
     #[test]
@@ -1074,24 +2118,17 @@ proptest! {
         edits in proptest::collection::vec(
             (any::<prop::sample::Index>(), 0u8..3, proptest::sample::select(ALPHABET)), 1..8)
     ) {
-        let mut chars: Vec<char> = VALID[which].chars().collect();
-        for (idx, kind, c) in edits {
-            let i = if chars.is_empty() { 0 } else { idx.index(chars.len()) };
-            match kind {
-                0 if !chars.is_empty() => { chars.remove(i); }
-                1 => chars.insert(i, c),
-                _ if !chars.is_empty() => chars[i] = c,
-                _ => chars.push(c),
-            }
-        }
-        let s: String = chars.into_iter().collect();
-        match parse(&s) {
-            Ok(_) => {}
-            Err(e) => {
-                prop_assert!(e.line >= 1 && e.col >= 1, "{e}");
-                prop_assert!(!e.message.is_empty());
-            }
-        }
+        parse_and_eval(&mutate(VALID[which], edits))?;
+    }
+
+    #[test]
+    fn mutated_seed_004_programs_never_panic(
+        which in any::<prop::sample::Index>(),
+        edits in proptest::collection::vec(
+            (any::<prop::sample::Index>(), 0u8..3, proptest::sample::select(ALPHABET)), 1..12)
+    ) {
+        let programs = seed_004_programs();
+        parse_and_eval(&mutate(&programs[which.index(programs.len())], edits))?;
     }
 
     #[test]

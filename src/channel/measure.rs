@@ -472,3 +472,15 @@ fn merge_outcomes(old: MeasurementOutcome, new: MeasurementOutcome) -> Measureme
         target_reached: old.target_reached && new.target_reached,
     }
 }
+
+impl Channel {
+    /// `#MEAS PREPARE [AXNR=..]` (seed 004 §7.2): ask the PLC to prepare the switchable probe of
+    /// axis `axis` ahead of the measuring block.
+    pub fn prepare_probe(&mut self, axis: usize) -> Result<(), CncMessage> {
+        if axis >= self.axes.len() {
+            return Err(CncMessage::error(ids::MEAS_CONFIG, "#MEAS PREPARE: no such axis"));
+        }
+        self.prepared[axis] = true;
+        Ok(())
+    }
+}

@@ -76,7 +76,7 @@ pub struct ChannelConfig {
 }
 
 /// Kind of a motion block.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum MotionKind {
     /// G00: rapid, each axis at most P-AXIS-00212, acceleration P-AXIS-00004.
     Rapid,
@@ -94,6 +94,9 @@ pub enum MotionKind {
         /// G02.
         clockwise: bool,
     },
+    /// A path already built by the executor (an arc in a plane tilted by a rotating `#CS`); it
+    /// must start at the current command position.
+    Path(Segment),
 }
 
 /// A motion block after the executor resolved it to axis coordinates (ACS).
@@ -227,6 +230,8 @@ pub struct Channel {
     indp: Vec<Option<independent::IndependentSlot>>,
     /// Scratch point for independent-axis interpolation.
     scratch: Vec<f64>,
+    /// Axes whose switchable probe was prepared (`#MEAS PREPARE`).
+    prepared: Vec<bool>,
 }
 
 impl Channel {
@@ -268,6 +273,7 @@ impl Channel {
             couplings: Default::default(),
             indp: vec![None; n],
             scratch: vec![0.0; n],
+            prepared: vec![false; n],
         })
     }
 

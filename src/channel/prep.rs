@@ -47,7 +47,16 @@ impl Channel {
                 return Prepared::Rejected;
             }
         }
-        let segment = match req.kind {
+        let segment = match &req.kind {
+            MotionKind::Path(seg) => {
+                let off = seg.start().iter().zip(&start).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                if seg.dims() != n || off > 1e-6 {
+                    self.push(CncMessage::error(ids::NC_ARC_GEOMETRY, "path does not start at the current position"));
+                    self.mode = Mode::Aborted;
+                    return Prepared::Rejected;
+                }
+                Ok(seg.clone())
+            }
             MotionKind::Rapid | MotionKind::Linear => Segment::line(start, target.clone()),
             MotionKind::Arc {
                 a1,
@@ -57,10 +66,10 @@ impl Channel {
             } => Segment::arc(
                 start,
                 target.clone(),
-                a1,
-                a2,
-                centre_offset,
-                clockwise,
+                *a1,
+                *a2,
+                *centre_offset,
+                *clockwise,
                 ARC_RADIUS_TOLERANCE,
             ),
         };

@@ -158,6 +158,21 @@ impl Frames {
         })
     }
 
+    /// A frame set without axes (for callers that must hold one even when [`Frames::new`]
+    /// refused the channel).
+    pub fn empty() -> Self {
+        Frames {
+            axes: 0,
+            main: [None; 3],
+            g92: Vec::new(),
+            zero_offset: Vec::new(),
+            mein: Vec::new(),
+            tool_axis: None,
+            tool_length: 0.0,
+            cs: None,
+        }
+    }
+
     /// Number of channel axes.
     pub fn axes(&self) -> usize {
         self.axes
@@ -216,7 +231,7 @@ impl Frames {
     }
 
     /// Set the measurement offset MEIN of `axis` (`V.A.MEIN`, seed 004 §5; G101 / G102 in
-    /// [`measure::results`](crate::core::measure)).
+    /// [`g101`](crate::core::measure::results::g101), [`g102`](crate::core::measure::results::g102)).
     pub fn set_mein(&mut self, axis: usize, value: f64) -> Result<(), FrameError> {
         self.check_axis(axis)?;
         self.mein[axis] = check_value(value, "measurement offset")?;

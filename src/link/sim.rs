@@ -5,12 +5,29 @@
 //! link's cycle time. The images are laid out as the drives' PDO mappings
 //! ([`Ds402Model::rx_len`] / [`Ds402Model::tx_len`]).
 //!
+//! # One exchange at `now`
+//!
+//! The exchange covers the cycle `[now − cycle, now]` (see the drive model's "Time"):
+//!
+//! 1. the [`Plant`]'s fixed stops are applied to the models when they changed;
+//! 2. every model runs [`Ds402Model::begin_step`] (RxPDO decoded, position loop advanced,
+//!    trajectory recorded);
+//! 3. the plant finds the probe-surface edges inside the cycle from the probed devices'
+//!    trajectories ([`Plant::advance`]) and every edge goes to every wired `(device, input)` with
+//!    [`Ds402Model::input_edge`], in time order;
+//! 4. every model runs [`Ds402Model::finish_step`] (TxPDO written).
+//!
+//! Acyclic access ([`Link::read_object`] / [`Link::write_object`]) goes straight to the model's
+//! object dictionary, as an SDO / CoE mailbox transfer between two cycles would; refusals come
+//! back as [`LinkError::Abort`] with the CiA 301 abort code.
+//!
 //! Fault knobs (in the spirit of smoltcp's `FaultInjector`): [`SimLink::lose_exchange_at`] makes
 //! chosen exchanges come back as [`LinkError::Lost`] with the input images untouched and the
-//! models not stepped, as a lost EtherCAT frame would.
+//! models and the plant not stepped, as a lost EtherCAT frame would.
 
 use super::{Link, LinkError, ProcessImage};
 use crate::drive::model::ds402::Ds402Model;
+use crate::sim::plant::Plant;
 use crate::units::Nanos;
 use std::collections::BTreeSet;
 
@@ -21,17 +38,33 @@ pub struct SimLink {
     cycle: Nanos,
     exchanges: u64,
     lose: BTreeSet<u64>,
+    plant: Plant,
+    /// Wall the plant last put into each model (so direct model knobs are not overridden
+    /// every cycle).
+    applied_stops: Vec<Option<f64>>,
 }
 
 impl SimLink {
-    /// A link to `models` (image `i` belongs to model `i`) stepping them by `cycle` per exchange.
+    /// A link to `models` (image `i` belongs to model `i`) stepping them by `cycle` per exchange,
+    /// with an empty plant.
     pub fn new(models: Vec<Ds402Model>, cycle: Nanos) -> Self {
-        SimLink {
+        SimLink::with_plant(models, cycle, Plant::new())
+    }
+
+    /// A link to `models` with `plant` around them (probe surfaces, fixed stops). Fixed stops
+    /// are applied to the models at once.
+    pub fn with_plant(models: Vec<Ds402Model>, cycle: Nanos, plant: Plant) -> Self {
+        let n = models.len();
+        let mut link = SimLink {
             models,
             cycle,
             exchanges: 0,
             lose: BTreeSet::new(),
-        }
+            plant,
+            applied_stops: vec![None; n],
+        };
+        link.apply_fixed_stops();
+        link
     }
 
     /// Lose the `n`-th exchange (0-based, counting every call that got the right number of
@@ -66,12 +99,43 @@ impl SimLink {
         self.models.get_mut(i)
     }
 
+    /// The plant (probe surfaces, fixed stops, the last cycle's probe edges).
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    /// The plant, mutable; changed fixed stops reach the models at the next exchange.
+    pub fn plant_mut(&mut self) -> &mut Plant {
+        &mut self.plant
+    }
+
     /// Zeroed process images sized for every model, in order.
     pub fn images(&self) -> Vec<ProcessImage> {
         self.models
             .iter()
             .map(|m| ProcessImage::new(m.rx_len(), m.tx_len()))
             .collect()
+    }
+
+    /// Put each device's plant wall into its model when it differs from what the plant put
+    /// there last.
+    fn apply_fixed_stops(&mut self) {
+        for (device, model) in self.models.iter_mut().enumerate() {
+            let wanted = self.plant.fixed_stop_for(device);
+            if self.applied_stops.get(device) != Some(&wanted) {
+                model.set_fixed_stop(wanted);
+                if let Some(slot) = self.applied_stops.get_mut(device) {
+                    *slot = wanted;
+                }
+            }
+        }
+    }
+
+    fn device(&mut self, device: usize) -> Result<&mut Ds402Model, LinkError> {
+        let n = self.models.len();
+        self.models
+            .get_mut(device)
+            .ok_or_else(|| LinkError::Other(format!("device {device}: not on the link ({n} devices)")))
     }
 }
 
@@ -92,10 +156,59 @@ impl Link for SimLink {
                 reason: format!("frame lost (injected at exchange {n})"),
             });
         }
+        self.apply_fixed_stops();
         let dt = self.cycle.as_secs_f64();
-        for (model, image) in self.models.iter_mut().zip(images.iter_mut()) {
-            model.step(now, dt, &image.outputs, &mut image.inputs);
+        for (model, image) in self.models.iter_mut().zip(images.iter()) {
+            model.begin_step(now, dt, &image.outputs);
+        }
+        let start = Nanos(now.0.saturating_sub(self.cycle.0));
+        let models = &mut self.models;
+        let edges = {
+            let view: &[Ds402Model] = models;
+            self.plant
+                .advance(start, now, |d| view.get(d).map(Ds402Model::trajectory))
+                .to_vec()
+        };
+        for e in &edges {
+            if let Some(surface) = self.plant.probe_surfaces().get(e.probe) {
+                for &(device, input) in &surface.wired {
+                    if let Some(m) = models.get_mut(device) {
+                        m.input_edge(input, e.rising, e.at);
+                    }
+                }
+            }
+        }
+        for (model, image) in models.iter_mut().zip(images.iter_mut()) {
+            model.finish_step(&mut image.inputs);
         }
         Ok(())
+    }
+
+    fn read_object(&mut self, device: usize, index: u16, sub: u8) -> Result<i64, LinkError> {
+        self.device(device)?
+            .read_object(index, sub)
+            .map_err(|code| LinkError::Abort {
+                device,
+                index,
+                sub,
+                code,
+            })
+    }
+
+    fn write_object(
+        &mut self,
+        device: usize,
+        index: u16,
+        sub: u8,
+        value: i64,
+    ) -> Result<(), LinkError> {
+        self.device(device)?
+            .write_object(index, sub, value)
+            .map_err(|code| LinkError::Abort {
+                device,
+                index,
+                sub,
+                code,
+            })
     }
 }

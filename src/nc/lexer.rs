@@ -18,6 +18,8 @@
 //! character before a comment or the end of the line joins the next line to the block. A line that
 //! ends inside an open `[` is continued as well, because the seed 004 §5 examples (meas1–meas4)
 //! print long `#MSG SYN[…]` blocks over two lines without a `\`.
+//! A `\` followed by more text on its line is not a continuation and stays in the text where it
+//! is; the parser rejects it, except directly in front of `#` (seed 004 §4 `N50 \#CS ON[…]`).
 //!
 //! Documentation placeholders: a line that consists only of `.`, `…` or `:` characters (the
 //! seeds write `...` and `:` for "more blocks here", e.g. seed 001 §3.3, seed 000 §4) is skipped
@@ -100,7 +102,9 @@ fn split(src: &str, base_depth: usize) -> Result<Vec<LogicalLine>, ParseError> {
             col: to_u32(i + 1),
         };
         let mut line_out: Vec<LChar> = Vec::new();
-        let mut pending_backslash: Option<Span> = None;
+        // A `\` not yet known to be a continuation: its position and where it goes in
+        // `line_out` (before any blanks / comments that follow it).
+        let mut pending_backslash: Option<(Span, usize)> = None;
         let mut i = 0;
         while i < chars.len() {
             let c = chars[i];
@@ -136,13 +140,14 @@ fn split(src: &str, base_depth: usize) -> Result<Vec<LogicalLine>, ParseError> {
                 }
             }
             // A real (non-blank, non-comment) character: a `\` seen before it was not a
-            // continuation after all and stays in the text (the parser reports it).
-            if let Some(span) = pending_backslash.take() {
-                line_out.push(LChar { ch: '\\', span });
+            // continuation after all and stays in the text where it was (the parser reports it,
+            // or reads `\#` as `#`).
+            if let Some((span, at_index)) = pending_backslash.take() {
+                line_out.insert(at_index, LChar { ch: '\\', span });
             }
             match c {
                 '\\' => {
-                    pending_backslash = Some(at(i));
+                    pending_backslash = Some((at(i), line_out.len()));
                     i += 1;
                 }
                 '"' => {

@@ -1,3 +1,4 @@
 //! Simulation of the physical world around the drives: probe surfaces, fixed stops, a scripted PLC.
 
 pub mod plant;
+pub mod plc;

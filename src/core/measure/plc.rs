@@ -487,7 +487,11 @@ impl ExtLatchClient {
     /// Start of the measuring block; call every cycle until [`BlockGate::Go`] (see the type
     /// documentation for the rules). Every measuring block writes its own ENABLE; a status left
     /// over from before the block (an old acknowledgement or timeout) does not count.
-    pub fn start_measuring_block(&mut self, iface: &mut ExtLatchInterface, now: Nanos) -> BlockGate {
+    pub fn start_measuring_block(
+        &mut self,
+        iface: &mut ExtLatchInterface,
+        now: Nanos,
+    ) -> BlockGate {
         let status = self.poll(iface, now);
         if let ExtLatchStatus::Waiting { .. } = status {
             self.starting = true;
@@ -880,8 +884,8 @@ pub struct TimestampConfig {
     pub clock: DcClock,
 }
 
-/// Cycles an edge may wait for a fresh timestamp / for the sample after the event.
-const MAX_WAIT_CYCLES: u8 = 2;
+/// Cycles an edge may wait for a fresh timestamp (beyond the wait for the bracketing sample).
+const STALE_WAIT_CYCLES: u32 = 2;
 
 /// `PLC_TIMESTAMP` (seed 004 §7.5): edge of P-AXIS-00518 on `probing_signal`; the event time is
 /// the `timestamp` control unit (DC ns); the position is calculated back from the buffered
@@ -889,10 +893,13 @@ const MAX_WAIT_CYCLES: u8 = 2;
 ///
 /// Every [`update`](SignalEvaluator::update) pushes the cycle's actual value at the cycle's DC
 /// time ([`DcClock::dc_time`] of `now`; [`TimestampEvaluator::update_dc`] takes an explicit DC
-/// time and velocity). If the corrected event time lies after the newest sample, the evaluation
-/// waits one cycle so that it interpolates instead of extrapolating; a timestamp equal to the
-/// one consumed last (or present at arming) is waited for up to two cycles, then
-/// [`SourceError::StaleTimestamp`].
+/// time and velocity). Because actual values arrive late by the sample dead times, the corrected
+/// event time may lie after the newest sample when the edge is seen; the evaluation then waits
+/// for the sample after it (at most ⌈(input shift + drive delay) / cycle⌉ + 2 cycles), so that it
+/// interpolates instead of extrapolating. A timestamp equal to the one consumed last (or present
+/// at arming) is waited for within the same limit, then [`SourceError::StaleTimestamp`]. When
+/// the wait ends without a bracketing sample the buffer extrapolates within one cycle or reports
+/// [`TimestampError::TooNew`].
 #[derive(Debug, Clone)]
 pub struct TimestampEvaluator {
     config: TimestampConfig,
@@ -900,12 +907,16 @@ pub struct TimestampEvaluator {
     armed: bool,
     prev: bool,
     last_ts: Option<i64>,
-    pending: Option<u8>,
+    pending: Option<u32>,
+    max_wait: u32,
 }
 
 impl TimestampEvaluator {
     /// Allocates the buffer once.
     pub fn new(config: TimestampConfig) -> Self {
+        let cycle = config.cycle.0.max(1);
+        let shift = config.dead.sample_shift().max(0) as u64;
+        let bracket = shift.div_ceil(cycle).min(u32::MAX as u64 / 2) as u32;
         TimestampEvaluator {
             buffer: TimestampBuffer::new(config.capacity, config.cycle, config.dead),
             config,
@@ -913,6 +924,7 @@ impl TimestampEvaluator {
             prev: false,
             last_ts: None,
             pending: None,
+            max_wait: bracket + STALE_WAIT_CYCLES,
         }
     }
 
@@ -955,8 +967,9 @@ impl TimestampEvaluator {
             self.pending = None;
             return Err(SourceError::TimestampNotEnabled);
         };
+        let can_wait = waited < self.max_wait;
         if Some(ts) == self.last_ts {
-            if waited >= MAX_WAIT_CYCLES {
+            if !can_wait {
                 self.pending = None;
                 return Err(SourceError::StaleTimestamp);
             }
@@ -964,8 +977,8 @@ impl TimestampEvaluator {
             return Ok(None);
         }
         let query = self.buffer.dead_times().query_time(ts);
-        if waited == 0 && self.buffer.newest_time().is_some_and(|n| query > n) {
-            self.pending = Some(1);
+        if can_wait && self.buffer.newest_time().is_some_and(|n| query > n) {
+            self.pending = Some(waited + 1);
             return Ok(None);
         }
         self.pending = None;
@@ -1042,7 +1055,9 @@ impl SourceEvaluator {
     /// (drive latches, fixed stop).
     pub fn for_source(source: SignalSource, config: &EvaluatorConfig) -> Option<Self> {
         Some(match source {
-            SignalSource::Plc => SourceEvaluator::Plc(PlcEvaluator::new(config.edge, config.latency)),
+            SignalSource::Plc => {
+                SourceEvaluator::Plc(PlcEvaluator::new(config.edge, config.latency))
+            }
             SignalSource::PlcFirstEvent => {
                 SourceEvaluator::FirstEvent(PlcFirstEventEvaluator::new(config.latency))
             }

@@ -282,7 +282,10 @@ pub fn g101(
             .copied()
             .flatten()
             .ok_or(ResultsError::NoMeasuredValue { axis })?;
-        values.push((axis, check_value(factor * result.moffs, "measurement offset")?));
+        values.push((
+            axis,
+            check_value(factor * result.moffs, "measurement offset")?,
+        ));
     }
     for (axis, value) in values {
         frames.set_mein(axis, value)?;

@@ -520,8 +520,14 @@ mod tests {
 
     #[test]
     fn capacity_is_power_of_two_and_at_least_32() {
-        assert_eq!(TimestampBuffer::new(0, Nanos(1), DeadTimes::default()).capacity(), 32);
-        assert_eq!(TimestampBuffer::new(33, Nanos(1), DeadTimes::default()).capacity(), 64);
+        assert_eq!(
+            TimestampBuffer::new(0, Nanos(1), DeadTimes::default()).capacity(),
+            32
+        );
+        assert_eq!(
+            TimestampBuffer::new(33, Nanos(1), DeadTimes::default()).capacity(),
+            64
+        );
         assert_eq!(
             TimestampBuffer::new(usize::MAX, Nanos(1), DeadTimes::default()).capacity(),
             MAX_CAPACITY

@@ -261,8 +261,14 @@ impl Segment {
             check_values(values, what)?;
         }
         let (nu, nv) = (norm(&u), norm(&v));
-        rigid((nu - 1.0).abs() <= RIGID_TOLERANCE, "u is not a unit vector")?;
-        rigid((nv - 1.0).abs() <= RIGID_TOLERANCE, "v is not a unit vector")?;
+        rigid(
+            (nu - 1.0).abs() <= RIGID_TOLERANCE,
+            "u is not a unit vector",
+        )?;
+        rigid(
+            (nv - 1.0).abs() <= RIGID_TOLERANCE,
+            "v is not a unit vector",
+        )?;
         rigid(dot(&u, &v).abs() <= RIGID_TOLERANCE, "u, v not orthogonal")?;
         let hn = norm(&space.helix);
         let h_scale = RIGID_TOLERANCE * hn.max(1.0);

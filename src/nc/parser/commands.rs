@@ -784,10 +784,7 @@ impl BlockParser<'_> {
         }
         let mut look = self.cur.clone();
         look.next_token()?;
-        if matches!(
-            look.peek_token()?.kind,
-            TokenKind::Punct('=') | TokenKind::Punct('[')
-        ) {
+        if matches!(look.peek_token()?.kind, TokenKind::Punct('=' | '[')) {
             return Ok(None);
         }
         self.cur = look;

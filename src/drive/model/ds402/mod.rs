@@ -1,19 +1,31 @@
 //! CiA 402 drive model: the drive side of [`crate::drive::ds402::Ds402Adapter`].
 //!
 //! [`Ds402Model`] plays a servo drive in cyclic synchronous position mode (CSP, 0x6060 = 8). Each
-//! bus cycle the link calls [`Ds402Model::step`] with the master's output image (the drive's
-//! RxPDO) and the drive's input image (TxPDO) to fill. Everything is sans-IO: time is the `dt_s`
-//! argument, nothing reads a clock.
+//! bus cycle the link runs one step with the master's output image (the drive's RxPDO) and the
+//! drive's input image (TxPDO) to fill. Everything is sans-IO: time is the `now` / `dt_s`
+//! arguments, nothing reads a clock.
 //!
 //! # Methods by concern
 //!
-//! - cyclic: [`Ds402Model::step`], [`Ds402Model::rx_len`], [`Ds402Model::tx_len`]
+//! - cyclic: [`Ds402Model::step`] = [`Ds402Model::begin_step`] + [`Ds402Model::finish_step`];
+//!   between the two a link may deliver digital-input edges inside the cycle with
+//!   [`Ds402Model::input_edge`]; [`Ds402Model::rx_len`], [`Ds402Model::tx_len`]
+//! - trajectory of the last step: [`Ds402Model::trajectory`], [`Ds402Model::position_at`]
 //! - object dictionary (for SDO / CoE servers): [`Ds402Model::read_object`],
 //!   [`Ds402Model::write_object`]
 //! - plant and test knobs: [`Ds402Model::set_actual`], [`Ds402Model::actual`],
-//!   [`Ds402Model::set_disturbance`], [`Ds402Model::inject_fault`]
+//!   [`Ds402Model::set_disturbance`], [`Ds402Model::inject_fault`],
+//!   [`Ds402Model::set_input_level`], [`Ds402Model::input_level`],
+//!   [`Ds402Model::set_fixed_stop`], [`Ds402Model::fixed_stop`]
 //! - observation: [`Ds402Model::state`], [`Ds402Model::statusword`],
 //!   [`Ds402Model::last_error_code`], [`Ds402Model::rx_length_errors`]
+//!
+//! # Time
+//!
+//! A step covers the cycle that **ends** at `now`: `[now − dt, now]`. The input image written
+//! by the step is the drive's state at `now`, and the output image it read was written by the
+//! master after the previous exchange and acts over the cycle ending now. (At the very start,
+//! `now < dt`, the cycle's start is clamped to time 0.)
 //!
 //! # Behaviour
 //!
@@ -30,35 +42,47 @@
 //! - **Statusword** (0x6041): state bits per CiA 402 Table "state coding", bit 4 voltage enabled
 //!   (mains are always on, so set in every state after start), bit 5 quick stop (clear = quick stop
 //!   active), bit 9 remote, bit 10 target reached (|0x60F4| ≤ position window 0x6067), bit 11
-//!   internal limit active (the velocity limit cut the motion), bit 12 drive follows the command
-//!   value (CSP), bit 13 following error.
+//!   internal limit active (a speed or torque limit cut the motion, or the torque demand is
+//!   clipped), bit 12 drive follows the command value (CSP), bit 13 following error.
 //! - **Position loop** in OPERATION ENABLED with mode 8: a first-order lag with gain kv
-//!   (`[model] kv`). For a constant set-point one cycle is exactly
-//!   `actual += (target − actual) · (1 − e^(−kv·dt))`. When the set-point moves, the model
-//!   interpolates it linearly over the cycle (as CSP drives interpolate their fine set-points) and
-//!   uses the exact solution of `ẋ = kv·(r − x)` for that ramp, so the steady-state lag at
-//!   constant velocity v is exactly v / kv (the step formula alone would give
-//!   v·dt / (1 − e^(−kv·dt)), 2 % more at kv = 40/s, 1 ms). The actual position is kept as `f64`
-//!   increments and reported rounded in 0x6064; 0x60F4 = 0x607A − 0x6064. `[model] max_velocity`
-//!   limits the speed. In every other state the position holds (brake).
+//!   (`[model] kv`). The set-point is interpolated linearly over the cycle (as CSP drives
+//!   interpolate their fine set-points) and the exact solution of `ẋ = kv·(r − x)` for that ramp
+//!   is used (module [`motion`]), so the steady-state lag at constant velocity v is exactly v / kv
+//!   and a constant set-point gives `actual += (target − actual) · (1 − e^(−kv·dt))` per cycle.
+//!   The solution is recorded at [`motion::SUBSAMPLES`] sub-samples per cycle (the trajectory).
+//!   The actual position is kept as `f64` increments and reported rounded in 0x6064; 0x60F4 =
+//!   0x607A − 0x6064. In every other state the position holds (brake).
+//! - **Speed and torque limits**: `[model] max_velocity` limits the speed. The torque demand is
+//!   the loop's lag × `[model] torque_per_increment` (‰ of rated torque per increment); the
+//!   effective limit is min(0x6072, 0x60E0) for positive and min(0x6072, 0x60E1) for negative
+//!   torque. 0x6077 torque actual value = demand clipped to the limit. With the first-order loop a
+//!   clipped torque is a clipped speed (`kv · limit / torque_per_increment`), so the model moves
+//!   a viscous load.
+//! - **Fixed stop** ([`Ds402Model::set_fixed_stop`]): a rigid wall the axis cannot pass from the
+//!   side it is on. Pressed against it, the actual position stays, the following error grows,
+//!   the torque saturates at the limit (bit 11).
 //! - **Following error monitoring** (CiA 402 0x6065 / 0x6066): when |0x60F4| exceeds the window
 //!   for longer than the time out, statusword bit 13 is set and the drive faults with error code
 //!   0x8611 (0x603F, EMCY "following error"). A window of 0xFFFFFFFF switches monitoring off.
+//! - **Touch probes** (0x60B8, 0x60B9, 0x60BA–0x60BD, 0x60D0, 0x60D5–0x60D8): see
+//!   [`touch_probe`]. Digital inputs 1–4 come from [`Ds402Model::input_edge`] (latched at the
+//!   position interpolated at the edge time, so the latch is exact to the sub-sample
+//!   interpolation) and [`Ds402Model::set_input_level`]; the encoder zero pulse fires when the
+//!   actual position crosses a multiple of `[model] zero_pulse_period` in either direction: a
+//!   positive and a negative edge at the same instant (the index pulse is one encoder line wide,
+//!   below the model's resolution), latched at exactly that multiple.
 //! - **Process data errors**: an RxPDO shorter than the mapping is ignored as a whole (the drive
 //!   keeps the previous set-points; CiA 301 EMCY 0x8210 "PDO not processed due to length
 //!   error"), counted in [`Ds402Model::rx_length_errors`]. A short TxPDO gets every entry that
 //!   fits.
-//!
-//! # Not modelled yet (seams for the next issue)
-//!
-//! - Touch probe (0x60B8 / 0x60B9 / 0x60BA–0x60BD / 0x60D0): 0x60B8 and 0x60D0 are stored and
-//!   read back, but nothing latches: **0x60B9 and 0x60BA–0x60BD always read 0**, in SDO reads and
-//!   in the TxPDO. See `TODO(touch-probe)`.
-//! - Torque limits (0x6072, 0x60E0, 0x60E1) are stored and read back but do not limit anything;
-//!   0x6077 torque actual reads 0. See `TODO(torque)`.
-//! - Fixed stops and probe surfaces belong to the plant; the model has no obstacle yet. See
-//!   `TODO(fixed-stop)`.
 
+pub mod motion;
+pub mod touch_probe;
+#[cfg(test)]
+mod tests;
+
+use self::motion::{Cycle, Wall, SUBSAMPLES};
+use self::touch_probe::{Signal, TouchProbes, NUM_INPUTS};
 use super::abort;
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::{self, PdoLayout};
@@ -78,6 +102,9 @@ const MODE_CSP: i8 = 8;
 const DEFAULT_POSITION_WINDOW: u32 = 10;
 /// Default max torque / torque limits in 0.1 % of rated torque (Leadshine EL7 factory value).
 const DEFAULT_TORQUE_LIMIT: u16 = 3000;
+/// At most this many encoder zero pulses are evaluated per step (a garbage set-point jump must
+/// not make a step loop for long); more in one cycle are dropped.
+const MAX_ZERO_PULSES_PER_STEP: usize = 1024;
 
 /// Controlword command (CiA 402 §6.3 Table "command coding").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,6 +143,10 @@ pub struct Ds402Model {
     /// Velocity limit in increments/s.
     max_velocity_inc: Option<f64>,
     enable_delay_cycles: u32,
+    /// Zero pulse period in increments.
+    zero_pulse_period: f64,
+    /// Torque demand per increment of lag, ‰.
+    torque_per_inc: f64,
 
     state: PowerState,
     controlword: u16,
@@ -132,8 +163,14 @@ pub struct Ds402Model {
     prev_target: f64,
     /// Velocity in increments/s over the last cycle.
     velocity: f64,
-    /// The velocity limit cut the motion in the last cycle.
+    /// A speed / torque limit cut the motion in the last cycle, or the torque is clipped.
     limited: bool,
+    /// Fixed stop in actual-position coordinates (including the disturbance).
+    wall: Option<Wall>,
+    /// Torque actual value 0x6077 in ‰ (demand clipped to the limit).
+    torque: f64,
+    /// Trajectory of the last step: (time, actual position incl. disturbance).
+    trajectory: Vec<(Nanos, f64)>,
 
     fe_window: u32,
     fe_timeout_ms: u16,
@@ -144,8 +181,8 @@ pub struct Ds402Model {
     max_torque: u16,
     torque_limit_pos: u16,
     torque_limit_neg: u16,
-    tp_function: u16,
-    tp_source: [i16; 2],
+    probes: TouchProbes,
+    inputs: [bool; NUM_INPUTS as usize],
 
     error_code: u16,
     pending_fault: Option<u16>,
@@ -154,24 +191,34 @@ pub struct Ds402Model {
 }
 
 impl Ds402Model {
-    /// A drive in NOT READY TO SWITCH ON at increment 0, with the PDO mapping, loop gain and
-    /// monitoring defaults of `def` (`[rxpdo]`, `[txpdo]`, `[model]`).
+    /// A drive in NOT READY TO SWITCH ON at increment 0, with the PDO mapping, loop gain,
+    /// monitoring defaults and probe behaviour of `def` (`[rxpdo]`, `[txpdo]`, `[model]`,
+    /// `[probe]`).
     pub fn new(def: &DriveDefinition) -> Self {
         let m = &def.model;
         let max_velocity_inc = m
             .max_velocity
             .map(|v| (v * def.scaling.increments_per_unit).abs())
             .filter(|v| v.is_finite() && *v > 0.0);
+        let positive_or = |v: f64, default: f64| {
+            if v.is_finite() && v > 0.0 {
+                v
+            } else {
+                default
+            }
+        };
         Ds402Model {
             rx: def.rxpdo.clone(),
             tx: def.txpdo.clone(),
-            kv: if m.kv.is_finite() && m.kv > 0.0 {
-                m.kv
-            } else {
-                40.0
-            },
+            kv: positive_or(m.kv, 40.0),
             max_velocity_inc,
             enable_delay_cycles: m.enable_delay_cycles,
+            zero_pulse_period: positive_or(m.zero_pulse_period, 10_000.0),
+            torque_per_inc: if m.torque_per_increment.is_finite() {
+                m.torque_per_increment.max(0.0)
+            } else {
+                0.0
+            },
             state: PowerState::NotReadyToSwitchOn,
             controlword: 0,
             prev_bit7: false,
@@ -183,6 +230,9 @@ impl Ds402Model {
             prev_target: 0.0,
             velocity: 0.0,
             limited: false,
+            wall: None,
+            torque: 0.0,
+            trajectory: Vec::with_capacity(SUBSAMPLES + 1),
             fe_window: m.following_error_window,
             fe_timeout_ms: m.following_error_timeout_ms,
             position_window: DEFAULT_POSITION_WINDOW,
@@ -191,8 +241,8 @@ impl Ds402Model {
             max_torque: DEFAULT_TORQUE_LIMIT,
             torque_limit_pos: DEFAULT_TORQUE_LIMIT,
             torque_limit_neg: DEFAULT_TORQUE_LIMIT,
-            tp_function: 0,
-            tp_source: [1, 2],
+            probes: TouchProbes::new(def.probe.rearm_requires_zero),
+            inputs: [false; NUM_INPUTS as usize],
             error_code: 0,
             pending_fault: None,
             clock_ns: 0,
@@ -210,12 +260,19 @@ impl Ds402Model {
         self.tx.len()
     }
 
-    /// One bus cycle: take the RxPDO `rx`, advance the drive by `dt_s` seconds, write the TxPDO
-    /// into `tx`. `now` is the bus time of the cycle (kept for latch time stamps, see
-    /// `TODO(touch-probe)`). Never panics: short images, garbage bytes and a negative or
-    /// non-finite `dt_s` (treated as 0) are all handled.
+    /// One bus cycle without input edges: [`begin_step`](Self::begin_step), then
+    /// [`finish_step`](Self::finish_step). Never panics: short images, garbage bytes and a
+    /// negative or non-finite `dt_s` (treated as 0) are all handled.
     pub fn step(&mut self, now: Nanos, dt_s: f64, rx: &[u8], tx: &mut [u8]) {
-        let _ = now; // TODO(touch-probe): time stamps 0x60D1..0x60D4 are taken from `now`.
+        self.begin_step(now, dt_s, rx);
+        self.finish_step(tx);
+    }
+
+    /// First phase of a bus cycle ending at `now`: decode the RxPDO `rx` (controlword, target,
+    /// 0x60B8 …), run the power state machine, advance the position loop over `dt_s` seconds
+    /// and record the trajectory, fire encoder zero pulses, monitor the following error.
+    /// Negative or non-finite `dt_s` counts as 0 (no motion, a one-point trajectory at `now`).
+    pub fn begin_step(&mut self, now: Nanos, dt_s: f64, rx: &[u8]) {
         let dt = if dt_s.is_finite() && dt_s > 0.0 {
             dt_s.min(3600.0)
         } else {
@@ -235,9 +292,89 @@ impl Ds402Model {
             self.enter_fault(code);
         }
         self.apply_controlword();
-        self.move_axis(dt);
+        self.move_axis(now, dt, dt_ns);
+        self.zero_pulses();
         self.monitor_following_error(dt_ns);
+    }
+
+    /// A digital-input edge inside the current cycle: `input` (1..=4) goes to the level
+    /// `rising` at time `at`. Touch probes armed for that input and edge latch the position
+    /// interpolated at `at` ([`position_at`](Self::position_at); `at` outside the last
+    /// trajectory is clamped into it). An edge to the level the input already has is ignored,
+    /// as is an unknown input.
+    pub fn input_edge(&mut self, input: u8, rising: bool, at: Nanos) {
+        let Some(level) = input
+            .checked_sub(1)
+            .and_then(|i| self.inputs.get_mut(usize::from(i)))
+        else {
+            return;
+        };
+        if *level == rising {
+            return;
+        }
+        *level = rising;
+        let pos = round_i32(self.position_clamped(at));
+        self.probes.edge(Signal::Input(input), rising, pos);
+    }
+
+    /// Second phase of a bus cycle: write the TxPDO into `tx`.
+    pub fn finish_step(&mut self, tx: &mut [u8]) {
         self.write_tx(tx);
+    }
+
+    /// Trajectory of the last step: `(time, actual position in increments incl. the
+    /// disturbance)`, [`motion::SUBSAMPLES`] + 1 points from the start to the end of the cycle
+    /// (one point for a zero-length step; empty before the first step).
+    pub fn trajectory(&self) -> &[(Nanos, f64)] {
+        &self.trajectory
+    }
+
+    /// Actual position (increments, incl. the disturbance) at `t` within the last step,
+    /// linearly interpolated between the sub-samples; `None` outside the last step.
+    pub fn position_at(&self, t: Nanos) -> Option<f64> {
+        interpolate(&self.trajectory, t)
+    }
+
+    /// [`position_at`](Self::position_at) with `t` clamped into the last step; the actual
+    /// position when there is no trajectory yet.
+    fn position_clamped(&self, t: Nanos) -> f64 {
+        match (self.trajectory.first(), self.trajectory.last()) {
+            (Some(&(t0, _)), Some(&(t1, _))) => {
+                interpolate(&self.trajectory, t.clamp(t0, t1)).unwrap_or_else(|| self.actual())
+            }
+            _ => self.actual(),
+        }
+    }
+
+    /// Set digital input `input` (1..=4) to a static level without an edge (nothing latches).
+    pub fn set_input_level(&mut self, input: u8, level: bool) {
+        if let Some(l) = input
+            .checked_sub(1)
+            .and_then(|i| self.inputs.get_mut(usize::from(i)))
+        {
+            *l = level;
+        }
+    }
+
+    /// Level of digital input `input` (1..=4).
+    pub fn input_level(&self, input: u8) -> Option<bool> {
+        self.inputs.get(usize::from(input.checked_sub(1)?)).copied()
+    }
+
+    /// Put a rigid wall at `position` increments (actual position, incl. the disturbance), or
+    /// remove it with `None`. The axis cannot pass it from the side it is on now (standing
+    /// exactly at it, the first motion away decides). Non-finite positions are ignored.
+    pub fn set_fixed_stop(&mut self, position: Option<f64>) {
+        match position {
+            None => self.wall = None,
+            Some(p) if p.is_finite() => self.wall = Some(Wall::new(p, self.actual())),
+            Some(_) => {}
+        }
+    }
+
+    /// The wall of [`set_fixed_stop`](Self::set_fixed_stop), in increments.
+    pub fn fixed_stop(&self) -> Option<f64> {
+        self.wall.map(|w| w.at)
     }
 
     fn read_rx(&mut self, rx: &[u8]) {
@@ -306,36 +443,115 @@ impl Ds402Model {
         self.state == PowerState::OperationEnabled && self.mode == MODE_CSP
     }
 
-    fn move_axis(&mut self, dt: f64) {
+    /// Effective torque limits (‰) for positive and negative torque (CiA 402 0x6072, 0x60E0,
+    /// 0x60E1).
+    fn torque_limits(&self) -> (f64, f64) {
+        (
+            f64::from(self.max_torque.min(self.torque_limit_pos)),
+            f64::from(self.max_torque.min(self.torque_limit_neg)),
+        )
+    }
+
+    /// Advance the loop over the cycle `[now − dt, now]` and record the trajectory.
+    fn move_axis(&mut self, now: Nanos, dt: f64, dt_ns: u64) {
+        self.trajectory.clear();
+        let start = now.0.saturating_sub(dt_ns);
+        let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
+        let time = |k: usize| {
+            let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
+            Nanos(now.0.saturating_sub(back as u64).max(start))
+        };
+        let x0 = self.position;
+        self.trajectory.push((time(0), x0 + self.disturbance));
         self.limited = false;
         if !self.following() || dt <= 0.0 {
             // Brake: hold the position.
-            // TODO(fixed-stop): the plant (obstacles, probe surfaces) acts here.
             self.velocity = 0.0;
             self.prev_target = self.position;
+            self.torque = 0.0;
+            for k in 1..=n {
+                self.trajectory.push((time(k), x0 + self.disturbance));
+            }
             return;
         }
-        let r1 = f64::from(self.target);
-        let r0 = self.prev_target;
-        let x0 = self.position;
-        let a = (-self.kv * dt).exp();
-        // Exact solution of dx/dt = kv (r - x) for r ramping r0 -> r1 over dt (e = r - x):
-        // e(dt) = s/kv + (e0 - s/kv) e^(-kv dt), s = (r1 - r0)/dt. With r0 == r1 this is
-        // x += (r1 - x)(1 - e^(-kv dt)).
-        let lag = (r1 - r0) / dt / self.kv;
-        let e1 = lag + ((r0 - x0) - lag) * a;
-        let mut x1 = r1 - e1;
-        // TODO(torque): torque limits 0x6072/0x60E0/0x60E1 and fixed stops cut the motion here.
-        if let Some(vmax) = self.max_velocity_inc {
-            let d = (x1 - x0).clamp(-vmax * dt, vmax * dt);
-            self.limited = d != x1 - x0;
-            x1 = x0 + d;
+        let (t_pos, t_neg) = self.torque_limits();
+        let torque_speed = |limit: f64| {
+            if self.torque_per_inc > 0.0 {
+                self.kv * limit / self.torque_per_inc
+            } else {
+                f64::INFINITY
+            }
+        };
+        let vmax = self.max_velocity_inc.unwrap_or(f64::INFINITY);
+        let cycle = Cycle {
+            x0,
+            r0: self.prev_target,
+            r1: f64::from(self.target),
+            dt,
+            kv: self.kv,
+            v_pos: vmax.min(torque_speed(t_pos)),
+            v_neg: vmax.min(torque_speed(t_neg)),
+        };
+        let d = self.disturbance;
+        // The wall is kept in actual coordinates; the loop runs without the disturbance.
+        let mut wall = self.wall.map(|w| Wall {
+            at: w.at - d,
+            side: w.side,
+        });
+        let mut xs = [0.0; SUBSAMPLES];
+        let outcome = motion::integrate(&cycle, wall.as_mut(), &mut xs);
+        if let (Some(w), Some(moved)) = (self.wall.as_mut(), wall) {
+            w.side = moved.side;
         }
-        if x1.is_finite() {
-            self.velocity = (x1 - x0) / dt;
-            self.position = x1;
+        for (k, x) in xs.iter().enumerate() {
+            self.trajectory.push((time(k + 1), x + d));
         }
-        self.prev_target = r1;
+        let x1 = xs[SUBSAMPLES - 1];
+        self.velocity = (x1 - x0) / dt;
+        self.position = x1;
+        self.prev_target = cycle.r1;
+        // Torque demand from the loop's lag, clipped to the limit of its sign.
+        let demand = (cycle.r1 - x1) * self.torque_per_inc;
+        let clipped = demand.clamp(-t_neg, t_pos);
+        self.torque = if clipped.is_finite() { clipped } else { 0.0 };
+        self.limited = outcome.limited || clipped != demand;
+    }
+
+    /// Encoder zero pulses crossed in the last trajectory: a positive and a negative edge at
+    /// each multiple of the period, latched at exactly that multiple.
+    fn zero_pulses(&mut self) {
+        if !self.probes.listens(Signal::ZeroPulse) {
+            return;
+        }
+        let p = self.zero_pulse_period;
+        let mut fired = 0;
+        for w in self.trajectory.windows(2) {
+            let (xa, xb) = (w[0].1, w[1].1);
+            let (na, nb) = ((xa / p).floor(), (xb / p).floor());
+            if !(na.is_finite() && nb.is_finite()) || na == nb {
+                continue;
+            }
+            // Multiples crossed, in the order the axis passes them.
+            let (first, last, step) = if nb > na {
+                (na + 1.0, nb, 1.0)
+            } else {
+                (na, nb + 1.0, -1.0)
+            };
+            let mut k = first;
+            loop {
+                if fired >= MAX_ZERO_PULSES_PER_STEP {
+                    return;
+                }
+                fired += 1;
+                let at = round_i32(k * p);
+                self.probes.edge(Signal::ZeroPulse, true, at);
+                self.probes.edge(Signal::ZeroPulse, false, at);
+                if k == last {
+                    break;
+                }
+                k += step;
+            }
+        }
     }
 
     fn monitor_following_error(&mut self, dt_ns: u64) {
@@ -359,6 +575,7 @@ impl Ds402Model {
         self.state = PowerState::FaultReactionActive;
         self.enable_count = 0;
         self.velocity = 0.0;
+        self.torque = 0.0;
     }
 
     fn write_tx(&self, tx: &mut [u8]) {
@@ -428,14 +645,22 @@ impl Ds402Model {
             (0x6067, 0) => self.position_window.into(),
             (0x606C, 0) => round_i32(self.velocity).into(),
             (0x6072, 0) => self.max_torque.into(),
-            (0x6077, 0) => 0, // TODO(torque): torque actual value.
+            (0x6077, 0) => (self.torque.round() as i16).into(),
             (0x607A, 0) => self.target.into(),
-            (0x60B8, 0) => self.tp_function.into(),
-            // TODO(touch-probe): latch status and edge positions; zeros until latching exists.
-            (0x60B9, 0) | (0x60BA..=0x60BD, 0) => 0,
+            (0x60B8, 0) => self.probes.function().into(),
+            (0x60B9, 0) => self.probes.status().into(),
+            (0x60BA..=0x60BD, 0) => self
+                .probes
+                .value(usize::from(index - 0x60BA))
+                .unwrap_or(0)
+                .into(),
             (0x60D0, 0) => 2,
-            (0x60D0, 1) => self.tp_source[0].into(),
-            (0x60D0, 2) => self.tp_source[1].into(),
+            (0x60D0, 1 | 2) => self.probes.source(sub).unwrap_or(0).into(),
+            (0x60D5..=0x60D8, 0) => self
+                .probes
+                .counter(usize::from(index - 0x60D5))
+                .unwrap_or(0)
+                .into(),
             (0x60E0, 0) => self.torque_limit_pos.into(),
             (0x60E1, 0) => self.torque_limit_neg.into(),
             (0x60F4, 0) => self.following_error().into(),
@@ -454,6 +679,7 @@ impl Ds402Model {
                 0x603F | 0x6041 | 0x6061 | 0x6064 | 0x606C | 0x6077 | 0x60B9 | 0x60F4 | 0x6502,
                 0
             ) | (0x60BA..=0x60BD, 0)
+                | (0x60D5..=0x60D8, 0)
                 | (0x60D0, 0)
         ) {
             return Err(abort::READ_ONLY);
@@ -475,10 +701,8 @@ impl Ds402Model {
             (0x6067, 0) => self.position_window = value as u32,
             (0x6072, 0) => self.max_torque = value as u16,
             (0x607A, 0) => self.target = value as i32,
-            // TODO(touch-probe): arming / disarming on changes of 0x60B8.
-            (0x60B8, 0) => self.tp_function = value as u16,
-            (0x60D0, 1) => self.tp_source[0] = value as i16,
-            (0x60D0, 2) => self.tp_source[1] = value as i16,
+            (0x60B8, 0) => self.probes.write_function(value as u16),
+            (0x60D0, 1 | 2) => self.probes.set_source(sub, value as i16),
             (0x60E0, 0) => self.torque_limit_pos = value as u16,
             (0x60E1, 0) => self.torque_limit_neg = value as u16,
             _ => return Err(abort::NO_OBJECT),
@@ -486,7 +710,7 @@ impl Ds402Model {
         Ok(())
     }
 
-    /// Power state now (NOT READY TO SWITCH ON until the first [`Ds402Model::step`]).
+    /// Power state now (NOT READY TO SWITCH ON until the first step).
     pub fn state(&self) -> PowerState {
         self.state
     }
@@ -508,18 +732,22 @@ impl Ds402Model {
     }
 
     /// Put the axis at `inc` increments (actual position including the disturbance), e.g. for a
-    /// referenced start position. Non-finite values are ignored.
+    /// referenced start position. A fixed stop takes the side of the new position. Non-finite
+    /// values are ignored.
     pub fn set_actual(&mut self, inc: f64) {
         if inc.is_finite() {
             self.position = inc - self.disturbance;
             self.prev_target = self.position;
+            if let Some(w) = self.wall {
+                self.wall = Some(Wall::new(w.at, inc));
+            }
         }
     }
 
     /// Add a constant offset of `offset_inc` increments to the actual position, outside the
     /// position loop: the loop does not correct it, so it shows in 0x6064 and 0x60F4 until set
-    /// back to 0 (an overshoot or a deflected axis, for monitoring tests). Non-finite values are
-    /// ignored.
+    /// back to 0 (an overshoot or a deflected axis, for monitoring tests). The torque follows
+    /// the loop's own lag and does not see it. Non-finite values are ignored.
     pub fn set_disturbance(&mut self, offset_inc: f64) {
         if offset_inc.is_finite() {
             self.disturbance = offset_inc;
@@ -533,6 +761,26 @@ impl Ds402Model {
     }
 }
 
+/// Linear interpolation in a time-sorted trajectory; `None` outside it.
+fn interpolate(traj: &[(Nanos, f64)], t: Nanos) -> Option<f64> {
+    let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
+    if t < t0 || t > t1 {
+        return None;
+    }
+    if t == t1 {
+        return Some(x1);
+    }
+    // First sample after t: exists because t < t1.
+    let i = traj.partition_point(|&(ti, _)| ti <= t);
+    let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
+    let (tb, xb) = *traj.get(i)?;
+    if tb <= ta {
+        return Some(xb);
+    }
+    let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
+    Some(xa + (xb - xa) * f)
+}
+
 fn missing(index: u16) -> u32 {
     if pdo::OBJECTS.iter().any(|o| o.index == index) {
         abort::NO_SUB_INDEX
@@ -544,66 +792,4 @@ fn missing(index: u16) -> u32 {
 fn round_i32(v: f64) -> i32 {
     // `as` saturates and maps NaN to 0.
     v.round() as i32
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::drive::catalogue;
-
-    fn model() -> Ds402Model {
-        Ds402Model::new(&catalogue::builtin("cia402-generic").unwrap())
-    }
-
-    #[test]
-    fn command_decode() {
-        assert_eq!(decode_command(0x06), Command::Shutdown);
-        assert_eq!(decode_command(0x07), Command::SwitchOn);
-        assert_eq!(decode_command(0x0F), Command::EnableOperation);
-        assert_eq!(decode_command(0x00), Command::DisableVoltage);
-        assert_eq!(decode_command(0x02), Command::QuickStop);
-        assert_eq!(decode_command(0x80), Command::DisableVoltage);
-        assert_eq!(decode_command(0x86), Command::None);
-    }
-
-    #[test]
-    fn object_access_abort_codes() {
-        let mut m = model();
-        assert_eq!(m.read_object(0x1000, 0), Err(abort::NO_OBJECT));
-        assert_eq!(m.read_object(0x6041, 1), Err(abort::NO_SUB_INDEX));
-        assert_eq!(m.write_object(0x6064, 0, 5), Err(abort::READ_ONLY));
-        assert_eq!(m.write_object(0x60D0, 0, 2), Err(abort::READ_ONLY));
-        assert_eq!(m.write_object(0x6066, 0, 70_000), Err(abort::VALUE_RANGE));
-        assert_eq!(m.write_object(0x6060, 0, 1), Err(abort::VALUE_RANGE));
-        assert_eq!(m.write_object(0x6065, 0, 1234), Ok(()));
-        assert_eq!(m.read_object(0x6065, 0), Ok(1234));
-        assert_eq!(m.write_object(0x60D0, 2, -1), Ok(()));
-        assert_eq!(m.read_object(0x60D0, 2), Ok(-1));
-        assert_eq!(m.read_object(0x60B9, 0), Ok(0));
-    }
-
-    #[test]
-    fn first_step_leaves_not_ready() {
-        let mut m = model();
-        assert_eq!(m.state(), PowerState::NotReadyToSwitchOn);
-        assert_eq!(m.statusword(), 0);
-        let (rx, mut tx) = (vec![0; m.rx_len()], vec![0; m.tx_len()]);
-        m.step(Nanos::ZERO, 0.001, &rx, &mut tx);
-        assert_eq!(m.state(), PowerState::SwitchOnDisabled);
-        // 0x0250: switch on disabled, voltage enabled, remote.
-        assert_eq!(&tx[..2], &[0x50, 0x02]);
-    }
-
-    #[test]
-    fn constant_set_point_is_the_step_formula() {
-        let mut m = model();
-        m.state = PowerState::OperationEnabled;
-        m.mode = MODE_CSP;
-        m.max_velocity_inc = None;
-        m.target = 1000;
-        m.prev_target = 1000.0;
-        m.move_axis(0.001);
-        let expect = 1000.0 * (1.0 - (-40.0f64 * 0.001).exp());
-        assert!((m.position - expect).abs() < 1e-9, "{}", m.position);
-    }
 }

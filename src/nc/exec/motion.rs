@@ -1,0 +1,202 @@
+//! Motion blocks: PCS targets through the frames to the ACS, arcs (mapped exactly under a
+//! rotating `#CS`), measuring blocks (G100 / G210 / G310) and independent-axis motions.
+
+use super::{err, Executor, Fail, MotionMode, PendingMeasurement, Plane};
+use crate::channel::{Channel, MeasureRequest, MotionKind, MotionRequest, Prepared};
+use crate::core::path::Segment;
+use crate::messages::ids;
+use crate::nc::ast::{IndependentMotion, Span};
+
+impl Executor {
+    /// The path motion of a block, if it has one. Returns whether a motion started.
+    pub(super) fn motion_block(
+        &mut self,
+        axes: &[(usize, f64)],
+        centre: &[Option<f64>; 3],
+        meas_g: Option<u32>,
+        ch: &mut Channel,
+        measured: &mut [bool],
+    ) -> Result<bool, Fail> {
+        let is_arc = matches!(self.modal.motion, MotionMode::G2 | MotionMode::G3) && meas_g.is_none();
+        if axes.is_empty() && !(is_arc && centre.iter().any(Option::is_some)) {
+            if meas_g.is_some() && axes.is_empty() {
+                // G100 with only independent axes: nothing for the path.
+                return Ok(false);
+            }
+            return Ok(false);
+        }
+        let n = self.prog.len();
+        let mut prog = self.prog.clone();
+        for &(i, v) in axes {
+            prog[i] = if self.modal.absolute { v } else { prog[i] + v };
+        }
+        let mut target = vec![0.0; n];
+        self.frames.pcs_to_acs(&prog, &mut target);
+        let mut programmed = vec![false; n];
+        for &(i, _) in axes {
+            programmed[i] = true;
+        }
+        let feed = match (self.modal.motion, meas_g) {
+            (MotionMode::G0, None) => 0.0,
+            _ => self.modal.feed.ok_or_else(|| {
+                err(ids::NC_NO_FEED, "no feed programmed (F) for a G01/G02/G03/G100 block")
+            })?,
+        };
+        let (kind, measure) = match meas_g {
+            Some(g) => {
+                let m = MeasureRequest {
+                    mtype: self.modal.meas_type,
+                    gcode: g,
+                    cs_active: self.frames.cs().is_some(),
+                    overrides: self.overrides.clone(),
+                };
+                (MotionKind::Linear, Some(m))
+            }
+            None => match self.modal.motion {
+                MotionMode::G0 => (MotionKind::Rapid, None),
+                MotionMode::G1 => (MotionKind::Linear, None),
+                MotionMode::G2 | MotionMode::G3 => (self.arc_kind(centre, &prog)?, None),
+            },
+        };
+        let start_pcs = self.prog.clone();
+        let is_meas = measure.is_some();
+        let req = MotionRequest { kind, target, feed, measure };
+        match ch.start_motion(&req) {
+            Prepared::Started => {
+                if is_meas {
+                    for (m, p) in measured.iter_mut().zip(&programmed) {
+                        *m |= *p;
+                    }
+                    self.pending_meas = Some(PendingMeasurement {
+                        direction_pcs: crate::core::measure::results::motion_direction(&self.frames, &start_pcs, &prog),
+                        target_pcs: prog.clone(),
+                        programmed,
+                    });
+                }
+                self.prog = prog;
+                Ok(true)
+            }
+            Prepared::Empty => {
+                self.prog = prog;
+                Ok(false)
+            }
+            Prepared::Rejected => Err(Fail::Queued),
+        }
+    }
+
+    /// G02 / G03 in the active plane. Without a rotating `#CS` the arc lies in an axis plane of
+    /// the ACS; with one, it is built in the PCS and mapped exactly into a tilted plane.
+    fn arc_kind(&self, centre: &[Option<f64>; 3], prog: &[f64]) -> Result<MotionKind, Fail> {
+        // (a1, a2) and which of I/J/K belong to them, per plane (DIN 66025).
+        let (a1, a2, c1, c2) = match self.modal.plane {
+            Plane::G17 => (self.main[0], self.main[1], 0, 1),
+            Plane::G18 => (self.main[2], self.main[0], 2, 0),
+            Plane::G19 => (self.main[1], self.main[2], 1, 2),
+        };
+        let (Some(a1), Some(a2)) = (a1, a2) else {
+            return Err(err(ids::NC_ARC_GEOMETRY, "G02/G03: the channel lacks a main axis of the active plane"));
+        };
+        let o1 = centre[c1].unwrap_or(0.0);
+        let o2 = centre[c2].unwrap_or(0.0);
+        let centre_offset = if self.modal.centre_absolute {
+            // G161: absolute PCS centre → offset from the start point.
+            [o1 - self.prog[a1], o2 - self.prog[a2]]
+        } else {
+            [o1, o2]
+        };
+        let clockwise = self.modal.motion == MotionMode::G2;
+        let rotating = self.frames.cs().is_some_and(|c| c.has_rotation());
+        if !rotating {
+            return Ok(MotionKind::Arc { a1, a2, centre_offset, clockwise });
+        }
+        let arc = Segment::arc(
+            self.prog.clone(),
+            prog.to_vec(),
+            a1,
+            a2,
+            centre_offset,
+            clockwise,
+            crate::channel::ARC_RADIUS_TOLERANCE,
+        )
+        .map_err(|e| err(ids::NC_ARC_GEOMETRY, e.to_string()))?;
+        let mapped = arc
+            .transformed(&self.frames.pcs_to_acs_map())
+            .map_err(|e| err(ids::NC_ARC_GEOMETRY, format!("#CS: {e}")))?;
+        Ok(MotionKind::Path(mapped))
+    }
+
+    /// `X[INDP_SYN G100 G90 POS100 FEED500]` (seed 004 §2).
+    pub(super) fn independent(
+        &mut self,
+        name: &str,
+        motion: &IndependentMotion,
+        span: Span,
+        block_meas: Option<u32>,
+        ch: &mut Channel,
+        measured: &mut [bool],
+    ) -> Result<(), Fail> {
+        let i = self
+            .axis(name)
+            .ok_or_else(|| err(ids::NC_EVALUATION, format!("unknown axis '{name}'")))?;
+        if self.frames.cs().is_some_and(|c| c.has_rotation()) {
+            return Err(err(
+                ids::NC_UNSUPPORTED,
+                format!("independent axis {name} under a rotating #CS is not supported"),
+            ));
+        }
+        let mut absolute = self.modal.absolute;
+        let mut meas = false;
+        for g in &motion.gcodes {
+            match g {
+                90 => absolute = true,
+                91 => absolute = false,
+                100 => meas = true,
+                0 | 1 => {}
+                other => {
+                    return Err(err(
+                        ids::NC_UNSUPPORTED,
+                        format!("G{other} is not allowed in an independent-axis motion (G00 G01 G90 G91 G100)"),
+                    ))
+                }
+            }
+        }
+        let _ = block_meas;
+        let pos = self.num(&motion.pos, span, ch)?;
+        let feed = match &motion.feed {
+            Some(f) => self.num(f, span, ch)?,
+            None => self.modal.feed.ok_or_else(|| err(ids::NC_NO_FEED, format!("independent axis {name}: no FEED")))?,
+        };
+        if feed.is_nan() || feed <= 0.0 {
+            return Err(err(ids::NC_NO_FEED, format!("independent axis {name}: FEED{feed} must be > 0")));
+        }
+        let target_pcs = if absolute { pos } else { self.prog[i] + pos };
+        let mut prog = self.prog.clone();
+        prog[i] = target_pcs;
+        let mut acs = vec![0.0; prog.len()];
+        self.frames.pcs_to_acs(&prog, &mut acs);
+        let measure = meas.then(|| MeasureRequest {
+            mtype: self.modal.meas_type,
+            gcode: 100,
+            cs_active: false,
+            overrides: self.overrides.clone(),
+        });
+        let start_pcs = self.prog.clone();
+        match ch.start_independent(i, acs[i], feed, motion.sync, measure) {
+            Prepared::Started | Prepared::Empty => {
+                if meas {
+                    measured[i] = true;
+                    let pm = self.pending_meas.get_or_insert_with(|| PendingMeasurement {
+                        target_pcs: start_pcs.clone(),
+                        programmed: vec![false; start_pcs.len()],
+                        direction_pcs: [0.0; 3],
+                    });
+                    pm.target_pcs[i] = target_pcs;
+                    pm.programmed[i] = true;
+                }
+                self.prog[i] = target_pcs;
+                Ok(())
+            }
+            Prepared::Rejected => Err(Fail::Queued),
+        }
+    }
+}
