@@ -6,23 +6,29 @@
 //! safely on errors.
 
 use crate::axis::Axis;
+use crate::channel::acyclic::AcyclicOp;
 use crate::channel::{Channel, ChannelAxisConfig, ChannelConfig, ChannelState};
+use crate::core::measure::timestamp::DcClock;
 use crate::core::measure::{
-    edge_from_text, trigger_mode_from_text, AxisMeasConfig, ChannelMeasConfig, MeasType, SignalSource,
+    edge_from_text, trigger_mode_from_text, AxisMeasConfig, ChannelMeasConfig, MeasType,
+    SignalSource,
 };
 use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
-use crate::drive::ProbeEdge;
 use crate::drive::catalogue;
 use crate::drive::ds402::Ds402Adapter;
 use crate::drive::model::ds402::Ds402Model;
 use crate::drive::DriveError;
+use crate::drive::ProbeEdge;
 use crate::link::sim::SimLink;
-use crate::channel::acyclic::AcyclicOp;
 use crate::link::{Link, ProcessImage};
 use crate::messages::{ids, CncMessage};
 use crate::nc::ast::Program;
 use crate::nc::exec::{Event, Executor, Step};
 use crate::params::{AxisConfig, MachineConfig, ParamSet};
+use crate::sim::plant::{FixedStop, ProbeSurface};
+use crate::sim::plc::{
+    InputEdge, ProbeInputs, ScriptedPlc, SimPlcConfig, SimPlcMode, TimestampOutput,
+};
 use crate::units::{param_pos_to_mm, param_vel_to_mm_s, Nanos};
 
 /// Errors building a machine.
@@ -116,6 +122,10 @@ pub struct Machine {
     pub max_cycles: u64,
     tools: std::collections::BTreeMap<u32, crate::params::ToolData>,
     zero_offsets: std::collections::BTreeMap<u32, Vec<f64>>,
+    /// Simulated PLC per axis (PLC-family signal sources), fed by the plant's probes.
+    plcs: Vec<Option<ScriptedPlc>>,
+    /// Warnings of the configuration, reported at the first run (e.g. 110757).
+    startup: Vec<CncMessage>,
 }
 
 impl Machine {
@@ -150,7 +160,7 @@ impl Machine {
             images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
             axes.push(axis);
             models.push(model);
-            axis_cfgs.push(channel_axis_config(a));
+            axis_cfgs.push(channel_axis_config(a, cycle));
         }
         let ch_cfg = ChannelConfig {
             cycle,
@@ -161,6 +171,13 @@ impl Machine {
             enable_timeout_cycles: 1000,
             meas: channel_meas_config(&cfg.channel),
         };
+        // P-AXIS-00777 > 1000: warning 110757 at controller start (seed 004 §8.2.2).
+        let startup: Vec<CncMessage> = ch_cfg
+            .axes
+            .iter()
+            .zip(&cfg.axes)
+            .filter_map(|(c, a)| c.meas.fixed_stop.and_then(|f| f.startup_warning(&a.name)))
+            .collect();
         let channel = Channel::new(ch_cfg, axes).map_err(MachineError::Config)?;
         let zero_offsets = cfg
             .zero_offsets
@@ -184,6 +201,8 @@ impl Machine {
             max_cycles: DEFAULT_MAX_CYCLES,
             tools: cfg.tools.clone(),
             zero_offsets,
+            plcs: (0..cfg.axes.len()).map(|_| None).collect(),
+            startup,
         })
     }
 
@@ -207,20 +226,125 @@ impl Machine {
         self.now
     }
 
-    /// One interpolation cycle: exchange the process data, then run the channel.
+    /// A simulated touch probe (`--probe-at AXIS=POS`): it switches every time `axis`'s actual
+    /// (ACS) position crosses `position` (mm). Its signal is wired to input P-AXIS-00517 of every
+    /// measurement axis (P-AXIS-00118), polarity per P-AXIS-00518 of `axis`, and fed to the
+    /// simulated PLC of the axes that measure through the PLC. Returns the probe index.
+    pub fn add_probe(&mut self, axis: &str, position: f64) -> Result<usize, MachineError> {
+        let i = self.axis_index(axis)?;
+        let inc = self.increments(i, position)?;
+        let cfg = self.channel.config();
+        let wired: Vec<(usize, u8)> = cfg
+            .axes
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.meas.enabled)
+            .map(|(j, c)| (j, c.meas.input.clamp(1, 2)))
+            .collect();
+        let mut surface = ProbeSurface::new(i, inc, wired);
+        surface.active_high = cfg.axes[i].meas.edge == ProbeEdge::Positive;
+        let probe = self.link.plant_mut().add_probe_surface(surface);
+        let cycle = self.cycle;
+        for (j, c) in cfg.axes.iter().enumerate() {
+            let mode = match c.meas.signal {
+                SignalSource::Plc
+                | SignalSource::PlcTimestamp
+                | SignalSource::ExtProbeWithDrive => SimPlcMode::Signal,
+                SignalSource::PlcFirstEvent => SimPlcMode::FirstEventLatch { edge: c.meas.edge },
+                SignalSource::PlcExtLatchControl => SimPlcMode::ExtLatchControl,
+                _ => continue,
+            };
+            if self.plcs[j].is_some() {
+                continue;
+            }
+            let mut pc = SimPlcConfig::new(cycle);
+            pc.probe = probe;
+            pc.mode = mode;
+            if c.meas.signal == SignalSource::PlcTimestamp {
+                pc.timestamp = Some(TimestampOutput {
+                    clock: DcClock::default(),
+                    terminal_delay_ns: 0,
+                    edge: c.meas.edge,
+                });
+            }
+            self.plcs[j] = Some(ScriptedPlc::new(pc));
+        }
+        Ok(probe)
+    }
+
+    /// A mechanical stop (`--fixed-stop-at AXIS=POS`): `axis` cannot pass ACS `position` (mm).
+    pub fn add_fixed_stop(&mut self, axis: &str, position: f64) -> Result<(), MachineError> {
+        let i = self.axis_index(axis)?;
+        let inc = self.increments(i, position)?;
+        self.link.plant_mut().add_fixed_stop(FixedStop {
+            device: i,
+            position: inc,
+        });
+        if let Some(m) = self.link.model_mut(i) {
+            m.set_fixed_stop(Some(inc));
+        }
+        Ok(())
+    }
+
+    /// The simulated PLC of axis `i`, if it has one (test knobs: acknowledge script, period).
+    pub fn sim_plc_mut(&mut self, i: usize) -> Option<&mut ScriptedPlc> {
+        self.plcs.get_mut(i).and_then(Option::as_mut)
+    }
+
+    fn axis_index(&self, axis: &str) -> Result<usize, MachineError> {
+        self.channel.axis_index(axis).ok_or_else(|| {
+            let names: Vec<&str> = self.channel.axes().iter().map(|a| a.name()).collect();
+            MachineError::Config(format!(
+                "unknown axis '{axis}'; the machine has {}",
+                names.join(", ")
+            ))
+        })
+    }
+
+    fn increments(&self, i: usize, position: f64) -> Result<f64, MachineError> {
+        let sc = self.channel.axes()[i].scaling();
+        if !position.is_finite() || sc.to_increments(position).is_none() {
+            return Err(MachineError::Config(format!(
+                "position {position} is outside the drive's range"
+            )));
+        }
+        Ok((position - sc.offset) * sc.increments_per_unit)
+    }
+
+    /// One interpolation cycle: exchange the process data, run the simulated PLCs, then the
+    /// channel.
     pub fn step(&mut self) {
         self.now = self.now.saturating_add(self.cycle);
         match self.link.exchange(self.now, &mut self.images) {
-            Ok(()) => self.channel.cycle(self.now, &mut self.images),
+            Ok(()) => {
+                for i in 0..self.plcs.len() {
+                    if let Some(plc) = self.plcs[i].as_mut() {
+                        let sc = self.channel.axes()[i].scaling();
+                        let inputs = AxisInputs {
+                            link: &self.link,
+                            device: i,
+                            scaling: sc,
+                        };
+                        if let Some(p) = self.channel.plc_mut(i) {
+                            plc.step(self.now, &inputs, p);
+                        }
+                    }
+                }
+                self.channel.cycle(self.now, &mut self.images)
+            }
             Err(e) => self.channel.link_lost(&e),
         }
         // Acyclic requests (#DRIVE, #IDENT) go over the link's mailbox.
         for req in self.channel.take_acyclic_requests() {
             let result = match req.op {
                 AcyclicOp::Read => self.link.read_object(req.axis, req.index, req.sub),
-                AcyclicOp::Write(v) => self.link.write_object(req.axis, req.index, req.sub, v).map(|()| v),
+                AcyclicOp::Write(v) => self
+                    .link
+                    .write_object(req.axis, req.index, req.sub, v)
+                    .map(|()| v),
             };
-            self.channel.acyclic_done(req.id, result.map_err(|e| e.to_string()));
+            self.channel
+                .acyclic_done(req.id, result.map_err(|e| e.to_string()));
         }
     }
 
@@ -249,6 +373,9 @@ impl Machine {
             events.push(e);
         };
         let start_cycles = self.channel.cycles();
+        for m in std::mem::take(&mut self.startup) {
+            emit(RunEvent::Message(m), &mut events);
+        }
         // Program start: configured SLS again (seed 001 §3.3), drives enabled.
         if self.channel.state() != ChannelState::Enabling {
             self.channel.reset();
@@ -319,7 +446,7 @@ impl Machine {
 }
 
 /// The channel's view of one axis's parameters (seed units → mm, mm/s, mm/s²).
-pub fn channel_axis_config(a: &AxisConfig) -> ChannelAxisConfig {
+pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
     let p = &a.params;
     let rotary = is_rotary(p);
     let mm_s2 = |id: &str| p.int(id) as f64;
@@ -349,7 +476,8 @@ pub fn channel_axis_config(a: &AxisConfig) -> ChannelAxisConfig {
     let a_rapid = mm_s2("P-AXIS-00004");
     let meas = AxisMeasConfig {
         enabled: p.int("P-AXIS-00118") != 0,
-        signal: SignalSource::from_text(p.text("P-AXIS-00516")).unwrap_or(SignalSource::DriveTypeDefault),
+        signal: SignalSource::from_text(p.text("P-AXIS-00516"))
+            .unwrap_or(SignalSource::DriveTypeDefault),
         input: u8::try_from(p.int("P-AXIS-00517")).unwrap_or(1).max(1),
         edge: edge_from_text(p.text("P-AXIS-00518")).unwrap_or(ProbeEdge::Positive),
         trigger_mode: trigger_mode_from_text(p.text("P-AXIS-00702")).unwrap_or_default(),
@@ -363,6 +491,7 @@ pub fn channel_axis_config(a: &AxisConfig) -> ChannelAxisConfig {
         },
         lag_limit: param_pos_to_mm(p.int("P-AXIS-00168")),
         sercos: false,
+        fixed_stop: crate::core::measure::fixed_stop::FixedStopParams::from_params(p, cycle).ok(),
     };
     ChannelAxisConfig {
         rotary,
@@ -406,3 +535,26 @@ fn is_modulo(p: &ParamSet) -> bool {
 pub const AXIS_TYPE_ROTARY: &str = "ACHSTYP_ROTATOR";
 /// P-AXIS-00015 bit ACHSMODE_MODULO (ISG axis parameter docs: 0x00000004).
 pub const ACHSMODE_MODULO: i64 = 0x4;
+
+/// The plant's probe signals as one axis's simulated PLC sees them; the "true" crossing
+/// position it reports for external measuring hardware is that axis's own position at the edge.
+struct AxisInputs<'a> {
+    link: &'a SimLink,
+    device: usize,
+    scaling: crate::units::Scaling,
+}
+
+impl ProbeInputs for AxisInputs<'_> {
+    fn for_each_edge(&self, f: &mut dyn FnMut(InputEdge)) {
+        self.link.plant().for_each_edge(f);
+    }
+
+    fn level(&self, probe: usize, at: Nanos) -> bool {
+        self.link.plant().level(probe, at)
+    }
+
+    fn crossing_position(&self, edge: &InputEdge) -> Option<f64> {
+        let inc = self.link.models().get(self.device)?.position_at(edge.at)?;
+        Some(inc / self.scaling.increments_per_unit + self.scaling.offset)
+    }
+}

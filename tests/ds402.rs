@@ -284,7 +284,7 @@ fn lost_exchange_leaves_inputs_and_models_alone() {
     // The next exchange goes through and the sequence continues where it was.
     cycle!(rig => SwitchedOn, 0x0F);
 
-    let mut two = vec![ProcessImage::new(11, 29); 2];
+    let mut two = vec![ProcessImage::new(9, 31); 2];
     assert_eq!(
         rig.link.exchange(rig.now, &mut two),
         Err(LinkError::Mismatch {
@@ -301,11 +301,11 @@ fn short_images_are_errors_not_panics() {
     assert_eq!(
         adapter.read_inputs(Nanos::ZERO, &[0x37, 0x16, 0]),
         Err(DriveError::ImageTooShort {
-            expected: 29,
+            expected: 31,
             got: 3
         })
     );
-    let mut out = [0xAAu8; 10];
+    let mut out = [0xAAu8; 8];
     let cmd = DriveCommand {
         enable: true,
         ..Default::default()
@@ -313,11 +313,11 @@ fn short_images_are_errors_not_panics() {
     assert_eq!(
         adapter.write_outputs(Nanos::ZERO, &cmd, &mut out),
         Err(DriveError::ImageTooShort {
-            expected: 11,
-            got: 10
+            expected: 9,
+            got: 8
         })
     );
-    assert_eq!(out, [0xAA; 10], "nothing written");
+    assert_eq!(out, [0xAA; 8], "nothing written");
 
     // The drive ignores a short RxPDO (CiA 301 EMCY 0x8210) and keeps its set-points.
     let mut m = Ds402Model::new(&def);
@@ -339,6 +339,7 @@ fn default_pdo_layout_bytes() {
         ty,
         offset,
     };
+    // 0x6072 is not mapped: torque limits are written acyclically (seed 004 §7.3.2).
     assert_eq!(
         def.rxpdo.entries(),
         &[
@@ -346,10 +347,10 @@ fn default_pdo_layout_bytes() {
             entry(0x607A, DataType::I32, 2),
             entry(0x6060, DataType::I8, 6),
             entry(0x60B8, DataType::U16, 7),
-            entry(0x6072, DataType::U16, 9),
         ]
     );
-    assert_eq!(def.rxpdo.len(), 11);
+    assert_eq!(def.rxpdo.len(), 9);
+    assert!(def.rxpdo_defaults.is_empty());
     assert_eq!(
         def.txpdo.entries(),
         &[
@@ -362,9 +363,10 @@ fn default_pdo_layout_bytes() {
             entry(0x60BB, DataType::I32, 17),
             entry(0x60BC, DataType::I32, 21),
             entry(0x60BD, DataType::I32, 25),
+            entry(0x6077, DataType::I16, 29),
         ]
     );
-    assert_eq!(def.txpdo.len(), 29);
+    assert_eq!(def.txpdo.len(), 31);
 
     let mut adapter = Ds402Adapter::new(&def).unwrap();
     #[rustfmt::skip]
@@ -375,6 +377,7 @@ fn default_pdo_layout_bytes() {
         0x08,                   // 6061 8 (CSP)
         0x00, 0x00,             // 60B9 0
         0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, // 60BA..60BD 0
+        0x9C, 0xFF,             // 6077 -100 (-10.0 % of rated torque)
     ];
     let fb = adapter.read_inputs(Nanos::ZERO, &inputs).unwrap();
     assert_eq!(
@@ -383,28 +386,43 @@ fn default_pdo_layout_bytes() {
             fb.position,
             fb.following_error,
             fb.mode_display,
-            fb.operational
+            fb.operational,
+            fb.torque
         ),
         (
             PowerState::OperationEnabled,
             74565,
             Some(25000),
             Some(8),
-            true
+            true,
+            Some(-100)
         )
     );
-    let mut out = [0u8; 11];
+    let mut out = [0u8; 9];
     let cmd = DriveCommand {
         enable: true,
         target: 0x0001_2345,
         ..Default::default()
     };
     adapter.write_outputs(Nanos::ZERO, &cmd, &mut out).unwrap();
-    // cw 0x000F enable operation | 607A 74565 | 6060 8 (CSP) | 60B8 0 | 6072 3000 (300.0 %)
-    assert_eq!(
-        out,
-        [0x0F, 0x00, 0x45, 0x23, 0x01, 0x00, 0x08, 0x00, 0x00, 0xB8, 0x0B]
-    );
+    // cw 0x000F enable operation | 607A 74565 | 6060 8 (CSP) | 60B8 0 (no probe armed)
+    assert_eq!(out, [0x0F, 0x00, 0x45, 0x23, 0x01, 0x00, 0x08, 0x00, 0x00]);
+}
+
+/// A drive file that maps 0x6072 cyclically still works: the adapter writes the default.
+#[test]
+fn max_torque_may_still_be_mapped_cyclically() {
+    let def = catalogue::parse(
+        "[drive]\nname = \"m\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n\
+         [rxpdo]\nentries = [\"0x6040:00\", \"0x607A:00\", \"0x6072:00\"]\n\
+         defaults = { \"0x6072:00\" = 1500 }\n",
+        "m.toml",
+    )
+    .unwrap();
+    let mut rig = Rig::new(def);
+    rig.cycle();
+    rig.cycle();
+    assert_eq!(rig.model().read_object(0x6072, 0), Ok(1500));
 }
 
 /// `(file text, line, fragment of the message)`.
@@ -422,6 +440,16 @@ const BAD_FILES: &[(&str, usize, &str)] = &[
     ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[rxpdo]\ndefaults = { \"0x6073:00\" = 1 }\n", 7, "is not in [rxpdo] entries"),
     ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n\n[scaling]\nincrements_per_unit = 0\n", 6, "non-zero"),
     ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[motor]\n", 4, "unknown key `motor` in the top level"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[probe]\nrearm_requires_zero = 1\n", 7, "rearm_requires_zero: expected true or false"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[probe]\narm_timeout_cycles = 0\n", 7, "arm_timeout_cycles: expected an integer in 1..="),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[probe]\nrearm = true\n", 7, "unknown key `rearm` in [probe]"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[model]\nzero_pulse_period = 0\n", 7, "zero_pulse_period: must be > 0"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[model]\ntorque_per_increment = -1\n", 7, "torque_per_increment: must be >= 0"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[idn]\n\"S-0-0092\" = { object = \"0x6072:00\" }\n\"X-1\" = { object = \"0x6065:00\" }\n", 8, "not a SERCOS IDN"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[idn]\n\"S-0-0092\" = { object = \"0x6072:00\" }\n\"s-0-92\" = { object = \"0x6072:00\" }\n", 8, "S-0-0092 is given twice"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[idn]\n\"S-0-0159\" = { object = \"0x6065:00\", zero = -1 }\n", 7, "zero: expected an integer in 0..=4294967295"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[idn]\n\"S-0-0159\" = { object = \"0x2000:01\" }\n", 7, "is not a known CiA 402 object; add `type`"),
+    ("[drive]\nname = \"x\"\nprofile = \"cia402\"\n[scaling]\nincrements_per_unit = 1\n[idn]\n\"S-0-0159\" = { object = \"0x6065:00\", scale = 2 }\n", 7, "unknown key `scale` in [idn] \"S-0-0159\""),
 ];
 
 #[test]

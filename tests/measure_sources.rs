@@ -246,7 +246,11 @@ fn plant_edges_feed_the_scripted_plc() {
     assert!(e.position >= surface && e.position - surface <= v * ns_to_s(T_NC) + 1e-9);
     let e = got_stamped.expect("timestamp event");
     // The plant rounds the crossing to whole ns: ≤ v·1 ns.
-    assert!((e.position - surface).abs() <= v * 1e-9 + 1e-9, "{}", e.position);
+    assert!(
+        (e.position - surface).abs() <= v * 1e-9 + 1e-9,
+        "{}",
+        e.position
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1542,6 +1546,9 @@ fn scripted_plc_clamps_its_period_and_bounds_far_jumps() {
     plc.step(Nanos(5_500), &inputs, &mut axis);
     assert_eq!(plc.cycles(), 6, "cycles at 0, 1, … 5 µs");
     assert!(axis.probing_signal());
+    plc.config_mut().period = Nanos(0);
+    plc.step(Nanos(9_500), &inputs, &mut axis);
+    assert_eq!(plc.cycles(), 10, "a zero period set later runs as 1 µs");
     plc.step(Nanos(u64::MAX), &inputs, &mut axis);
     assert!(plc.cycles() < 20_000, "older cycles skipped");
     plc.step(Nanos(u64::MAX), &inputs, &mut axis);

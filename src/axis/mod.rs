@@ -5,7 +5,9 @@
 //! adapter encodes and decodes the process image, the link moves it.
 
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::{DriveAdapter, DriveCommand, DriveError, DriveFeedback, ProbeRequest, ProbeState};
+use crate::drive::{
+    DriveAdapter, DriveCommand, DriveError, DriveFeedback, ProbeRequest, ProbeState,
+};
 use crate::units::{Nanos, Scaling};
 
 /// Errors of the axis layer.

@@ -44,11 +44,25 @@ pub(super) struct AcyclicState {
 impl Channel {
     /// Queue an acyclic access to axis `axis`'s drive. With `wait` the channel is busy until the
     /// answer is in. `what` describes the access for messages (`#DRIVE KEY=TORQUE_LIMIT`).
-    pub fn queue_acyclic(&mut self, axis: usize, index: u16, sub: u8, op: AcyclicOp, wait: bool, what: &str) -> u64 {
+    pub fn queue_acyclic(
+        &mut self,
+        axis: usize,
+        index: u16,
+        sub: u8,
+        op: AcyclicOp,
+        wait: bool,
+        what: &str,
+    ) -> u64 {
         let a = &mut self.acyclic;
         a.next_id += 1;
         let id = a.next_id;
-        a.queued.push(AcyclicRequest { id, axis, index, sub, op });
+        a.queued.push(AcyclicRequest {
+            id,
+            axis,
+            index,
+            sub,
+            op,
+        });
         a.pending.push((id, what.to_string()));
         if wait && matches!(self.mode, Mode::Idle) {
             self.mode = Mode::WaitAcyclic { id };
@@ -63,10 +77,15 @@ impl Channel {
 
     /// The machine reports the answer to request `id` (the value read, or the value written).
     pub fn acyclic_done(&mut self, id: u64, result: Result<i64, String>) {
-        let Some(k) = self.acyclic.pending.iter().position(|(i, _)| *i == id) else { return };
+        let Some(k) = self.acyclic.pending.iter().position(|(i, _)| *i == id) else {
+            return;
+        };
         let (_, what) = self.acyclic.pending.remove(k);
         if let Err(e) = &result {
-            self.push(CncMessage::error(ids::ACYCLIC_FAILED, format!("{what}: {e}")));
+            self.push(CncMessage::error(
+                ids::ACYCLIC_FAILED,
+                format!("{what}: {e}"),
+            ));
             if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
                 self.begin_stop(super::ChannelState::Aborted);
             }

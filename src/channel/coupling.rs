@@ -34,31 +34,50 @@ pub(super) struct Couplings {
 impl Couplings {
     /// Enabled (slave, master, offset) triples.
     pub(super) fn active(&self) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
-        self.groups.iter().filter_map(|g| g.offsets.as_ref().map(|o| (g, o))).flat_map(|(g, o)| {
-            g.links.iter().zip(o).map(|(l, off)| (l.slave, l.master, *off))
-        })
+        self.groups
+            .iter()
+            .filter_map(|g| g.offsets.as_ref().map(|o| (g, o)))
+            .flat_map(|(g, o)| {
+                g.links
+                    .iter()
+                    .zip(o)
+                    .map(|(l, off)| (l.slave, l.master, *off))
+            })
     }
 }
 
 impl Channel {
     /// `#SET AX LINK [group, …]`: define (or redefine, while disabled) a coupling group.
-    pub fn define_coupling(&mut self, group: i64, links: Vec<AxisCoupling>) -> Result<(), CncMessage> {
+    pub fn define_coupling(
+        &mut self,
+        group: i64,
+        links: Vec<AxisCoupling>,
+    ) -> Result<(), CncMessage> {
         let n = self.axes.len();
         for l in &links {
             if l.slave >= n || l.master >= n || l.slave == l.master {
-                return Err(CncMessage::error(ids::NC_EVALUATION, format!("#SET AX LINK[{group}]: invalid coupling")));
+                return Err(CncMessage::error(
+                    ids::NC_EVALUATION,
+                    format!("#SET AX LINK[{group}]: invalid coupling"),
+                ));
             }
         }
         if let Some(g) = self.couplings.groups.iter_mut().find(|g| g.number == group) {
             if g.offsets.is_some() {
                 return Err(CncMessage::error(
                     ids::NC_EVALUATION,
-                    format!("#SET AX LINK[{group}]: the group is enabled; disable it before redefining"),
+                    format!(
+                        "#SET AX LINK[{group}]: the group is enabled; disable it before redefining"
+                    ),
                 ));
             }
             g.links = links;
         } else {
-            self.couplings.groups.push(Group { number: group, links, offsets: None });
+            self.couplings.groups.push(Group {
+                number: group,
+                links,
+                offsets: None,
+            });
         }
         Ok(())
     }
@@ -72,12 +91,20 @@ impl Channel {
                 continue;
             }
             found = true;
-            g.offsets = enable.then(|| g.links.iter().map(|l| cmd[l.slave] - cmd[l.master]).collect());
+            g.offsets = enable.then(|| {
+                g.links
+                    .iter()
+                    .map(|l| cmd[l.slave] - cmd[l.master])
+                    .collect()
+            });
         }
         if !found && group.is_some() {
             return Err(CncMessage::error(
                 ids::NC_EVALUATION,
-                format!("AX LINK group {} is not defined (#SET AX LINK first)", group.unwrap_or(0)),
+                format!(
+                    "AX LINK group {} is not defined (#SET AX LINK first)",
+                    group.unwrap_or(0)
+                ),
             ));
         }
         Ok(())

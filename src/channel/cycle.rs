@@ -1,8 +1,8 @@
 //! The interpolation cycle (DESIGN.md "One interpolation cycle") and stopping.
 
 use super::manual;
-use super::profile::Braking;
 use super::measure::MeasStep;
+use super::profile::Braking;
 use super::{AxisBrake, Channel, ChannelState, Mode, Motion};
 use crate::axis::Axis;
 use crate::link::{LinkError, ProcessImage};
@@ -30,7 +30,9 @@ impl Channel {
     #[allow(clippy::needless_range_loop)] // axes, images and set-points are parallel arrays
     pub fn cycle(&mut self, now: Nanos, images: &mut [ProcessImage]) {
         self.cycles += 1;
+        self.now = now;
         let dt = self.cfg.cycle.as_secs_f64();
+        self.poll_handshakes(now);
         if images.len() != self.axes.len() {
             self.push(CncMessage::error(
                 ids::LINK_LOST,
@@ -84,6 +86,30 @@ impl Channel {
                 if error && !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
                     // Interpolation stopped; the axes decelerate linearly.
                     self.begin_stop(ChannelState::Aborted);
+                }
+            }
+        }
+        // 2b. CNC position lag monitoring (P-AXIS-00168), off for the axes of a measuring run to
+        //     a fixed stop (seed 004 §7.3.1 "Disable position lag monitoring in the position
+        //     controller for all axes involved").
+        if !matches!(
+            self.mode,
+            Mode::Stopping { .. } | Mode::Aborted | Mode::Enabling { .. }
+        ) {
+            for i in 0..self.axes.len() {
+                let limit = self.cfg.axes[i].meas.lag_limit;
+                let lag = self.axes[i].lag();
+                if limit > 0.0 && lag.abs() > limit && !self.fixed_stop_run_on(i) {
+                    let name = self.axes[i].name().to_string();
+                    self.push(
+                        CncMessage::error(
+                            ids::LAG_LIMIT,
+                            format!("position lag {lag:.6} of axis {name} exceeds P-AXIS-00168 ({limit:.6}); axes stopped"),
+                        )
+                        .on_axis(&name),
+                    );
+                    self.begin_stop(ChannelState::Aborted);
+                    break;
                 }
             }
         }
@@ -201,7 +227,13 @@ impl Channel {
     /// One cycle of a motion block (path interpolation, measurement, braking after the probing
     /// signal). Writes the set-points into `self.next` — only axis `only` for an independent-axis
     /// motion — and says how the motion goes on.
-    pub(super) fn step_motion(&mut self, mut m: Box<Motion>, now: Nanos, dt: f64, only: Option<usize>) -> MotionStep {
+    pub(super) fn step_motion(
+        &mut self,
+        mut m: Box<Motion>,
+        now: Nanos,
+        dt: f64,
+        only: Option<usize>,
+    ) -> MotionStep {
         let t_now = m.k as f64 * dt;
         let (s_now, v_now) = match m.braking {
             Some((b, k0)) => {

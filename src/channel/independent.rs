@@ -18,6 +18,12 @@ pub(super) struct IndependentSlot {
     pub(super) sync: bool,
 }
 
+impl IndependentSlot {
+    pub(super) fn motion(&self) -> &Motion {
+        &self.motion
+    }
+}
+
 impl Channel {
     /// Start an independent motion of axis `axis` to `target` (ACS) at `feed` mm/min, measuring
     /// when `measure` is given. `sync` = `INDP_SYN`.
@@ -31,7 +37,10 @@ impl Channel {
     ) -> Prepared {
         let n = self.axes.len();
         if axis >= n || !target.is_finite() {
-            self.report(CncMessage::error(ids::NC_EVALUATION, "independent motion: invalid axis or target"));
+            self.report(CncMessage::error(
+                ids::NC_EVALUATION,
+                "independent motion: invalid axis or target",
+            ));
             return Prepared::Rejected;
         }
         let name = self.axes[axis].name().to_string();
@@ -42,14 +51,20 @@ impl Channel {
             }
             Mode::Idle | Mode::WaitAcyclic { .. } => false,
             _ => {
-                self.report(CncMessage::error(ids::NC_UNSUPPORTED, "independent motion while the channel is not ready"));
+                self.report(CncMessage::error(
+                    ids::NC_UNSUPPORTED,
+                    "independent motion while the channel is not ready",
+                ));
                 return Prepared::Rejected;
             }
         };
         if path_moves_axis || self.indp[axis].is_some() || self.is_coupled_slave(axis) {
             self.report(
-                CncMessage::error(ids::NC_EVALUATION, format!("axis {name} is already moving (path, independent motion or coupling)"))
-                    .on_axis(&name),
+                CncMessage::error(
+                    ids::NC_EVALUATION,
+                    format!("axis {name} is already moving (path, independent motion or coupling)"),
+                )
+                .on_axis(&name),
             );
             return Prepared::Rejected;
         }
@@ -69,7 +84,10 @@ impl Channel {
         let mut end = start.clone();
         end[axis] = target;
         let Ok(mut segment) = Segment::line(start, end) else {
-            self.report(CncMessage::error(ids::NC_EVALUATION, "independent motion: invalid path"));
+            self.report(CncMessage::error(
+                ids::NC_EVALUATION,
+                "independent motion: invalid path",
+            ));
             return Prepared::Rejected;
         };
         if segment.is_empty() {
@@ -115,13 +133,24 @@ impl Channel {
             },
             None => None,
         };
-        let req = MotionRequest { kind: MotionKind::Linear, target: segment.end().to_vec(), feed, measure: measure.clone() };
+        let req = MotionRequest {
+            kind: MotionKind::Linear,
+            target: segment.end().to_vec(),
+            feed,
+            measure: measure.clone(),
+        };
         let profile = match &meas {
             Some(run) => self.plan_measuring(&segment, &req, run.mtype()),
             None => self.plan(&segment, &req),
         };
         self.indp[axis] = Some(IndependentSlot {
-            motion: Box::new(Motion { segment, profile, k: 0, braking: None, meas }),
+            motion: Box::new(Motion {
+                segment,
+                profile,
+                k: 0,
+                braking: None,
+                meas,
+            }),
             sync,
         });
         Prepared::Started
@@ -135,9 +164,16 @@ impl Channel {
     /// Step every independent motion by one cycle (after the path interpolation).
     pub(super) fn step_independent(&mut self, now: Nanos, dt: f64) {
         for i in 0..self.indp.len() {
-            let Some(slot) = self.indp[i].take() else { continue };
+            let Some(slot) = self.indp[i].take() else {
+                continue;
+            };
             match self.step_motion(slot.motion, now, dt, Some(i)) {
-                MotionStep::Running(m) => self.indp[i] = Some(IndependentSlot { motion: m, sync: slot.sync }),
+                MotionStep::Running(m) => {
+                    self.indp[i] = Some(IndependentSlot {
+                        motion: m,
+                        sync: slot.sync,
+                    })
+                }
                 MotionStep::Done => {}
                 MotionStep::Fail => {
                     self.begin_stop(ChannelState::Aborted);

@@ -16,6 +16,12 @@
 //! signal active" column) for the non-linear slope parameter set our interpolator uses.
 
 use super::Channel;
+use crate::core::measure::fixed_stop::{FixedStopAxis, FixedStopDetector};
+use crate::core::measure::plc::{
+    BlockGate, EvaluatorConfig, ExtLatchClient, ExtLatchConfig, SignalEvaluator, SourceEvaluator,
+    TimestampConfig,
+};
+use crate::core::measure::timestamp::{DcClock, DeadTimes};
 use crate::core::measure::{MeasType, MeasurementOutcome, SignalSource};
 use crate::core::path::Segment;
 use crate::drive::{ProbeEdge, ProbeRequest, ProbeState, ProbeTrigger, TriggerSourceMode};
@@ -68,6 +74,13 @@ pub(super) struct MeasAxis {
     latched: Option<(f64, Nanos)>,
     /// Latched before the programmed target was reached.
     before_target: bool,
+    /// Evaluator of a PLC signal source.
+    eval: Option<SourceEvaluator>,
+    /// The PLC's external-latch handshake gates this axis (PLC_EXT_LATCH_CONTROL,
+    /// EXT_PROBE_WITH_DRIVE).
+    handshake: bool,
+    /// Position of the axis at the start of the block (fixed-stop start distance).
+    start: f64,
 }
 
 /// State of one measuring block.
@@ -84,18 +97,30 @@ pub(super) struct MeasRun {
     brake: Vec<f64>,
     /// Path position where the signal became complete.
     event_s: Option<f64>,
+    /// Fixed-stop detection (type 7) over the run's axes, in run-axis order.
+    fixed: Option<FixedStopDetector>,
+    /// Sources armed (first arming cycle done).
+    armed_once: bool,
 }
 
 impl MeasRun {
     /// All required axes latched.
     fn complete(&self) -> bool {
-        self.axes.iter().filter(|a| a.required).all(|a| a.latched.is_some())
+        self.axes
+            .iter()
+            .filter(|a| a.required)
+            .all(|a| a.latched.is_some())
             && self.axes.iter().any(|a| a.latched.is_some())
     }
 
     /// Measurement type.
     pub(super) fn mtype(&self) -> MeasType {
         self.mtype
+    }
+
+    /// Axis `i` takes part in this run.
+    fn has_axis(&self, i: usize) -> bool {
+        self.axes.iter().any(|a| a.axis == i)
     }
 }
 
@@ -184,14 +209,52 @@ impl Channel {
             if mtype == MeasType::Type7 {
                 signal = SignalSource::FixedStop;
             }
+            let edge = ov.and_then(|o| o.edge).unwrap_or(c.edge);
+            let input = ov.and_then(|o| o.input).unwrap_or(c.input);
+            let eval = SourceEvaluator::for_source(
+                signal,
+                &EvaluatorConfig {
+                    edge,
+                    latency: self.cfg.cycle,
+                    hardware_bound: 0.0001,
+                    timestamp: TimestampConfig {
+                        edge,
+                        cycle: self.cfg.cycle,
+                        capacity: 64,
+                        dead: DeadTimes::default(),
+                        clock: DcClock::default(),
+                    },
+                },
+            );
+            let handshake = matches!(
+                signal,
+                SignalSource::PlcExtLatchControl | SignalSource::ExtProbeWithDrive
+            );
+            if handshake {
+                let cfg = ExtLatchConfig::new(signal, input, edge, None).map_err(|e| {
+                    CncMessage::error(
+                        ids::MEAS_CONFIG,
+                        format!("axis {}: {e}", self.axes[i].name()),
+                    )
+                })?;
+                let same = self.ext_latch[i]
+                    .as_ref()
+                    .is_some_and(|c| *c.config() == cfg);
+                if !same {
+                    self.ext_latch[i] = Some(ExtLatchClient::new(cfg));
+                }
+            }
             axes.push(MeasAxis {
                 axis: i,
                 signal,
                 required,
-                edge: ov.and_then(|o| o.edge).unwrap_or(c.edge),
-                input: ov.and_then(|o| o.input).unwrap_or(c.input),
+                edge,
+                input,
                 latched: None,
                 before_target: false,
+                eval,
+                handshake,
+                start: start[i],
             });
         }
         if !axes.iter().any(|a| a.required) {
@@ -201,6 +264,34 @@ impl Channel {
             ));
         }
         let brake = (0..n).map(|i| self.measurement_brake_decel(i)).collect();
+        let fixed = if mtype == MeasType::Type7 {
+            let mut fa = Vec::with_capacity(axes.len());
+            for a in &axes {
+                let c = &self.cfg.axes[a.axis].meas;
+                let name = self.axes[a.axis].name();
+                let params = c.fixed_stop.ok_or_else(|| {
+                    CncMessage::error(
+                        ids::MEAS_CONFIG,
+                        format!(
+                            "axis {name}: fixed-stop parameters invalid (P-AXIS-00774 … 00778)"
+                        ),
+                    )
+                })?;
+                params.check_measuring_start(name)?;
+                fa.push(FixedStopAxis {
+                    params,
+                    monitored: !self.is_coupled_slave(a.axis),
+                });
+            }
+            Some(FixedStopDetector::new(&fa, target_len).map_err(|e| {
+                e.message(self.axes[axes[0].axis].name())
+                    .unwrap_or_else(|| {
+                        CncMessage::error(ids::MEAS_CONFIG, format!("fixed stop: {e:?}"))
+                    })
+            })?)
+        } else {
+            None
+        };
         let mut run = MeasRun {
             mtype,
             phase: Phase::Arming { cycles: 0 },
@@ -209,6 +300,8 @@ impl Channel {
             limited_at_sls: false,
             brake,
             event_s: None,
+            fixed,
+            armed_once: false,
         };
         self.arm_sources(&mut run)?;
         Ok(run)
@@ -242,7 +335,11 @@ impl Channel {
                 continue;
             }
             let c = &self.cfg.axes[m.axis].meas;
-            let probe = if c.trigger_mode == TriggerSourceMode::Default { m.input.clamp(1, 2) } else { 1 };
+            let probe = if c.trigger_mode == TriggerSourceMode::Default {
+                m.input.clamp(1, 2)
+            } else {
+                1
+            };
             let trigger = match c.trigger_mode {
                 TriggerSourceMode::Default => ProbeTrigger::Input,
                 _ => ProbeTrigger::SourceObject,
@@ -257,17 +354,29 @@ impl Channel {
             };
             let name = self.axes[m.axis].name().to_string();
             self.axes[m.axis].arm_probe(&req).map_err(|e| {
-                CncMessage::error(ids::MEAS_LATCH, format!("axis {name}: cannot arm the drive latch: {e}")).on_axis(&name)
+                CncMessage::error(
+                    ids::MEAS_LATCH,
+                    format!("axis {name}: cannot arm the drive latch: {e}"),
+                )
+                .on_axis(&name)
             })?;
         }
         Ok(())
     }
 
-    /// Disarm every source of the run.
+    /// Disarm every source of the run; the PLC gets its DISABLE task.
     pub(super) fn disarm_sources(&mut self, run: &MeasRun) {
+        let now = self.now;
         for m in &run.axes {
             if m.signal.uses_drive_latch() {
                 self.axes[m.axis].disarm_probe();
+            }
+            if m.handshake {
+                if let Some(c) = self.ext_latch[m.axis].as_mut() {
+                    // A refused DISABLE (another task still waiting) is owed and written at the
+                    // next block start by the client itself.
+                    let _ = c.end_measuring_block(&mut self.plc[m.axis].ext_latch, now);
+                }
             }
         }
     }
@@ -278,6 +387,33 @@ impl Channel {
         match run.phase {
             Phase::Arming { cycles } => {
                 let mut all = true;
+                if !run.armed_once {
+                    run.armed_once = true;
+                    for m in &mut run.axes {
+                        if let Some(e) = m.eval.as_mut() {
+                            e.arm(now, &self.plc[m.axis]);
+                        }
+                    }
+                }
+                for m in &run.axes {
+                    if m.handshake {
+                        if let Some(c) = self.ext_latch[m.axis].as_mut() {
+                            match c.start_measuring_block(&mut self.plc[m.axis].ext_latch, now) {
+                                BlockGate::Go => {}
+                                BlockGate::Wait => all = false,
+                                BlockGate::Failed(task) => {
+                                    return MeasStep::Fail(CncMessage::error(
+                                        ids::MEAS_LATCH,
+                                        format!(
+                                            "axis {}: the PLC did not acknowledge {task:?}",
+                                            self.axes[m.axis].name()
+                                        ),
+                                    ));
+                                }
+                            }
+                        }
+                    }
+                }
                 for m in &run.axes {
                     if !m.signal.uses_drive_latch() {
                         continue;
@@ -287,8 +423,11 @@ impl Channel {
                         ProbeState::Failed(why) => {
                             let name = self.axes[m.axis].name().to_string();
                             return MeasStep::Fail(
-                                CncMessage::error(ids::MEAS_LATCH, format!("axis {name}: drive latch failed while arming: {why}"))
-                                    .on_axis(&name),
+                                CncMessage::error(
+                                    ids::MEAS_LATCH,
+                                    format!("axis {name}: drive latch failed while arming: {why}"),
+                                )
+                                .on_axis(&name),
                             );
                         }
                         _ => all = false,
@@ -315,10 +454,51 @@ impl Channel {
                         if let ProbeState::Failed(why) = self.axes[axis].probe_state() {
                             let name = self.axes[axis].name().to_string();
                             return MeasStep::Fail(
-                                CncMessage::error(ids::MEAS_LATCH, format!("axis {name}: drive latch failed: {why}")).on_axis(&name),
+                                CncMessage::error(
+                                    ids::MEAS_LATCH,
+                                    format!("axis {name}: drive latch failed: {why}"),
+                                )
+                                .on_axis(&name),
                             );
                         }
                         self.axes[axis].take_latch()
+                    } else if let Some(e) = run.axes[k].eval.as_mut() {
+                        let actual = self.axes[axis].actual();
+                        match e.update(now, actual, &self.plc[axis]) {
+                            Ok(ev) => ev.map(|ev| ev.position),
+                            Err(err) => {
+                                let name = self.axes[axis].name().to_string();
+                                return MeasStep::Fail(
+                                    CncMessage::error(
+                                        ids::MEAS_LATCH,
+                                        format!("axis {name}: {} signal: {err}", signal.name()),
+                                    )
+                                    .on_axis(&name),
+                                );
+                            }
+                        }
+                    } else if signal == SignalSource::FixedStop {
+                        let a = &self.axes[axis];
+                        let travelled = (a.command() - run.axes[k].start).abs();
+                        let detected = run
+                            .fixed
+                            .as_mut()
+                            .and_then(|d| d.update(now, k, travelled, a.lag(), a.actual()));
+                        if detected.is_some() {
+                            // The measuring point is latched for each axis involved (seed 004
+                            // §7.3): every axis of the run takes its actual position, and all move
+                            // there at once ("reduce interpolation to measured value").
+                            let mut settle = Vec::new();
+                            for m in &mut run.axes {
+                                let p = self.axes[m.axis].actual();
+                                m.latched = Some((p, now));
+                                m.before_target = s < run.target_len - 1e-9;
+                                settle.push((m.axis, p));
+                            }
+                            run.event_s = Some(s);
+                            return MeasStep::Settle(settle);
+                        }
+                        None
                     } else {
                         None
                     };
@@ -363,7 +543,11 @@ impl Channel {
 
     /// The block is over (standstill): disarm, decide about errors, publish the outcome. An
     /// error (missing signal per type) is returned; nothing is published then.
-    pub(super) fn finish_measurement(&mut self, mut run: MeasRun, target_reached: bool) -> Result<(), CncMessage> {
+    pub(super) fn finish_measurement(
+        &mut self,
+        mut run: MeasRun,
+        target_reached: bool,
+    ) -> Result<(), CncMessage> {
         run.phase = Phase::Done;
         self.disarm_sources(&run);
         let n = self.axes.len();
@@ -411,7 +595,7 @@ impl Channel {
                 involved[a.axis] = true;
                 if let Some((p, _)) = a.latched {
                     latched[a.axis] = Some(p);
-                    merf[a.axis] = a.before_target || run.mtype == MeasType::Type3 && a.before_target;
+                    merf[a.axis] = a.before_target;
                 }
             }
         } else {
@@ -419,13 +603,34 @@ impl Channel {
                 involved[a.axis] = a.required;
             }
         }
-        let new = MeasurementOutcome { mtype: run.mtype, latched, merf, involved, target_reached };
+        let new = MeasurementOutcome {
+            mtype: run.mtype,
+            latched,
+            merf,
+            involved,
+            target_reached,
+        };
         // Independent axes of one block finish one by one: merge their outcomes until taken.
         self.measurement = Some(match self.measurement.take() {
             Some(old) => merge_outcomes(old, new),
             None => new,
         });
         Ok(())
+    }
+
+    /// Axis `i` is in a running measurement to a fixed stop (type 7).
+    pub(super) fn fixed_stop_run_on(&self, i: usize) -> bool {
+        let run_has = |m: &super::Motion| {
+            m.meas
+                .as_ref()
+                .is_some_and(|r| r.mtype == MeasType::Type7 && r.has_axis(i))
+        };
+        let path = matches!(&self.mode, super::Mode::Moving(m) if run_has(m));
+        path || self
+            .indp
+            .iter()
+            .flatten()
+            .any(|slot| run_has(slot.motion()))
     }
 
     /// The outcome of the last measuring block, taken once.
@@ -435,7 +640,11 @@ impl Channel {
 
     /// Indices of the main axes X, Y, Z.
     pub fn main_axes(&self) -> [Option<usize>; 3] {
-        [self.axis_index("X"), self.axis_index("Y"), self.axis_index("Z")]
+        [
+            self.axis_index("X"),
+            self.axis_index("Y"),
+            self.axis_index("Z"),
+        ]
     }
 }
 
@@ -461,10 +670,22 @@ fn merge_outcomes(old: MeasurementOutcome, new: MeasurementOutcome) -> Measureme
     MeasurementOutcome {
         mtype: new.mtype,
         latched: (0..n)
-            .map(|i| if pick(i) { new.latched.get(i).copied().flatten() } else { old.latched.get(i).copied().flatten() })
+            .map(|i| {
+                if pick(i) {
+                    new.latched.get(i).copied().flatten()
+                } else {
+                    old.latched.get(i).copied().flatten()
+                }
+            })
             .collect(),
         merf: (0..n)
-            .map(|i| if pick(i) { new.merf.get(i).copied().unwrap_or(false) } else { old.merf.get(i).copied().unwrap_or(false) })
+            .map(|i| {
+                if pick(i) {
+                    new.merf.get(i).copied().unwrap_or(false)
+                } else {
+                    old.merf.get(i).copied().unwrap_or(false)
+                }
+            })
             .collect(),
         involved: (0..n)
             .map(|i| pick(i) || old.involved.get(i).copied().unwrap_or(false))
@@ -478,9 +699,54 @@ impl Channel {
     /// axis `axis` ahead of the measuring block.
     pub fn prepare_probe(&mut self, axis: usize) -> Result<(), CncMessage> {
         if axis >= self.axes.len() {
-            return Err(CncMessage::error(ids::MEAS_CONFIG, "#MEAS PREPARE: no such axis"));
+            return Err(CncMessage::error(
+                ids::MEAS_CONFIG,
+                "#MEAS PREPARE: no such axis",
+            ));
         }
+        let c = &self.cfg.axes[axis].meas;
+        let (signal, input, edge) = (c.signal, c.input, c.edge);
+        if !matches!(
+            signal,
+            SignalSource::ExtProbeWithDrive | SignalSource::PlcExtLatchControl
+        ) {
+            return Err(CncMessage::error(
+                ids::MEAS_CONFIG,
+                format!(
+                    "#MEAS PREPARE: axis {} measures with {}; PREPARE needs EXT_PROBE_WITH_DRIVE or PLC_EXT_LATCH_CONTROL (P-AXIS-00516)",
+                    self.axes[axis].name(),
+                    signal.name()
+                ),
+            ));
+        }
+        let cfg = ExtLatchConfig::new(signal, input, edge, None)
+            .map_err(|e| CncMessage::error(ids::MEAS_CONFIG, format!("#MEAS PREPARE: {e}")))?;
+        let now = self.now;
+        let client = self.ext_latch[axis].get_or_insert_with(|| ExtLatchClient::new(cfg));
+        client
+            .prepare(&mut self.plc[axis].ext_latch, now)
+            .map_err(|e| CncMessage::error(ids::MEAS_LATCH, format!("#MEAS PREPARE: {e}")))?;
         self.prepared[axis] = true;
         Ok(())
+    }
+
+    /// The PLC interface of axis `i` (control units and the external-latch handshake) — what a
+    /// machine builder's PLC glue reads and writes between cycles.
+    pub fn plc(&self, i: usize) -> Option<&crate::core::measure::plc::AxisPlc> {
+        self.plc.get(i)
+    }
+
+    /// The PLC interface of axis `i`, mutable.
+    pub fn plc_mut(&mut self, i: usize) -> Option<&mut crate::core::measure::plc::AxisPlc> {
+        self.plc.get_mut(i)
+    }
+
+    /// Per cycle: let the external-latch clients see the PLC's acknowledgements.
+    pub(super) fn poll_handshakes(&mut self, now: Nanos) {
+        for (c, p) in self.ext_latch.iter_mut().zip(self.plc.iter_mut()) {
+            if let Some(c) = c {
+                c.poll(&mut p.ext_latch, now);
+            }
+        }
     }
 }

@@ -232,6 +232,12 @@ pub struct Channel {
     scratch: Vec<f64>,
     /// Axes whose switchable probe was prepared (`#MEAS PREPARE`).
     prepared: Vec<bool>,
+    /// PLC interface per axis (seed 004 §8.2.3 control units, §7.2 / §7.4 handshake).
+    plc: Vec<crate::core::measure::plc::AxisPlc>,
+    /// External-latch handshake clients per axis.
+    ext_latch: Vec<Option<crate::core::measure::plc::ExtLatchClient>>,
+    /// Time of the current cycle.
+    now: Nanos,
 }
 
 impl Channel {
@@ -274,6 +280,9 @@ impl Channel {
             indp: vec![None; n],
             scratch: vec![0.0; n],
             prepared: vec![false; n],
+            plc: vec![Default::default(); n],
+            ext_latch: vec![None; n],
+            now: Nanos::ZERO,
         })
     }
 

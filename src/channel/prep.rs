@@ -42,16 +42,30 @@ impl Channel {
         for (i, t) in target.iter().enumerate() {
             if self.indp[i].is_some() && (t - start[i]).abs() > 1e-12 {
                 let name = self.axes[i].name().to_string();
-                self.push(CncMessage::error(ids::NC_EVALUATION, format!("axis {name} is moving as an independent axis")).on_axis(&name));
+                self.push(
+                    CncMessage::error(
+                        ids::NC_EVALUATION,
+                        format!("axis {name} is moving as an independent axis"),
+                    )
+                    .on_axis(&name),
+                );
                 self.mode = Mode::Aborted;
                 return Prepared::Rejected;
             }
         }
         let segment = match &req.kind {
             MotionKind::Path(seg) => {
-                let off = seg.start().iter().zip(&start).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+                let off = seg
+                    .start()
+                    .iter()
+                    .zip(&start)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
                 if seg.dims() != n || off > 1e-6 {
-                    self.push(CncMessage::error(ids::NC_ARC_GEOMETRY, "path does not start at the current position"));
+                    self.push(CncMessage::error(
+                        ids::NC_ARC_GEOMETRY,
+                        "path does not start at the current position",
+                    ));
                     self.mode = Mode::Aborted;
                     return Prepared::Rejected;
                 }
@@ -211,16 +225,27 @@ impl Channel {
         if !matches!(segment, Segment::Line(_)) {
             return Err(CncMessage::error(
                 ids::MEAS_CONFIG,
-                format!("G{} measures on a straight line only (no G02/G03 in a measuring block)", mreq.gcode),
+                format!(
+                    "G{} measures on a straight line only (no G02/G03 in a measuring block)",
+                    mreq.gcode
+                ),
             ));
         }
         let start = segment.start().to_vec();
         let target = segment.end().to_vec();
         let len = segment.length();
-        let dir: Vec<f64> = start.iter().zip(&target).map(|(a, b)| (b - a) / len).collect();
+        let dir: Vec<f64> = start
+            .iter()
+            .zip(&target)
+            .map(|(a, b)| (b - a) / len)
+            .collect();
         let n = start.len();
         // Overtravel: as far as every moved axis permits (P-AXIS-00467 is per axis).
-        let mut ext = if mreq.mtype == MeasType::Type3 { 0.0 } else { f64::INFINITY };
+        let mut ext = if mreq.mtype == MeasType::Type3 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
         for i in 0..n {
             if dir[i].abs() > 1e-12 {
                 ext = ext.min(self.cfg.axes[i].meas.overtravel / dir[i].abs());
@@ -233,13 +258,18 @@ impl Channel {
         // The software limit switches bound the path: the overtravel silently, the programmed
         // part only with P-CHAN-00268 (otherwise the normal SLS check refuses the block).
         let limit_target = self.cfg.meas.limit_at_sls
-            && matches!(mreq.mtype, MeasType::Type1 | MeasType::Type2 | MeasType::Type3 | MeasType::Type4);
+            && matches!(
+                mreq.mtype,
+                MeasType::Type1 | MeasType::Type2 | MeasType::Type3 | MeasType::Type4
+            );
         let mut limited = false;
         for i in 0..n {
             if !self.sls.is_active(i) || dir[i].abs() <= 1e-12 {
                 continue;
             }
-            let Some((neg, pos)) = self.sls.active_limits(i) else { continue };
+            let Some((neg, pos)) = self.sls.active_limits(i) else {
+                continue;
+            };
             let bound = if dir[i] > 0.0 { pos } else { neg };
             let s_cut = ((bound - start[i]) / dir[i]).max(0.0);
             if s_cut < total {
@@ -259,8 +289,13 @@ impl Channel {
             ));
         }
         let end: Vec<f64> = (0..n).map(|i| start[i] + dir[i] * total).collect();
-        let end = if (total - len).abs() < 1e-12 { target } else { end };
-        let seg = Segment::line(start, end).map_err(|e| CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()))?;
+        let end = if (total - len).abs() < 1e-12 {
+            target
+        } else {
+            end
+        };
+        let seg = Segment::line(start, end)
+            .map_err(|e| CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()))?;
         Ok((seg, target_len, limited))
     }
 
@@ -297,7 +332,11 @@ impl Channel {
             if mtype == MeasType::Type2 {
                 v = c.meas.feed_type2 / f;
             }
-            let (acc, dec) = if std { (c.a_feed, c.d_feed) } else { (c.a_rapid, c.a_rapid) };
+            let (acc, dec) = if std {
+                (c.a_feed, c.d_feed)
+            } else {
+                (c.a_rapid, c.a_rapid)
+            };
             v = v.min(c.v_max / f);
             a_acc = a_acc.min(acc / f);
             a_dec = a_dec.min(dec / f);

@@ -59,23 +59,19 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
     };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
     check_link(&a.link)?;
-    for (opt, list) in [
-        ("--probe-at", &a.probe_at),
-        ("--fixed-stop-at", &a.fixed_stop_at),
-    ] {
-        for s in list {
-            let (ax, _) = parse_axis_pos(opt, s)?;
-            if cfg.axis(&ax).is_none() {
-                anyhow::bail!("{opt} {s}: unknown axis '{ax}'");
-            }
-        }
-        if !list.is_empty() {
-            anyhow::bail!(
-                "{opt}: the simulated probe and fixed-stop plant arrive with the measurement core; not available in this build"
-            );
-        }
-    }
     let mut machine = Machine::new(&cfg)?;
+    for p in &a.probe_at {
+        let (ax, pos) = parse_axis_pos("--probe-at", p)?;
+        machine
+            .add_probe(&ax, pos)
+            .with_context(|| format!("--probe-at {p}"))?;
+    }
+    for p in &a.fixed_stop_at {
+        let (ax, pos) = parse_axis_pos("--fixed-stop-at", p)?;
+        machine
+            .add_fixed_stop(&ax, pos)
+            .with_context(|| format!("--fixed-stop-at {p}"))?;
+    }
     let names = machine
         .channel()
         .axes()

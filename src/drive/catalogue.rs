@@ -803,10 +803,7 @@ impl Cx<'_> {
                 )
             })?;
             if out.iter().any(|m| m.idn == idn) {
-                return Err(self.err(
-                    kspan,
-                    format!("[idn] \"{key}\": {idn} is given twice"),
-                ));
+                return Err(self.err(kspan, format!("[idn] \"{key}\": {idn} is given twice")));
             }
             let what = format!("[idn] \"{key}\"");
             let f = self
@@ -951,13 +948,19 @@ mod tests {
         let def = builtin("cia402-generic").unwrap();
         let tl = def.idn("s-0-92").unwrap();
         assert_eq!((tl.index, tl.sub, tl.ty), (0x6072, 0, DataType::U16));
-        assert_eq!((tl.encode(100), tl.encode(70_000), tl.decode(100)), (Some(100), None, 100));
+        assert_eq!(
+            (tl.encode(100), tl.encode(70_000), tl.decode(100)),
+            (Some(100), None, 100)
+        );
         let mw = def.idn("S-0-0159").unwrap();
         assert_eq!((mw.index, mw.ty), (0x6065, DataType::U32));
         // SERCOS "0 = monitoring off" is CiA 402 0xFFFFFFFF, both ways.
         assert_eq!(mw.encode(0), Some(0xFFFF_FFFF));
         assert_eq!(mw.decode(0xFFFF_FFFF), 0);
-        assert_eq!((mw.encode(1048575), mw.decode(1048575)), (Some(1048575), 1048575));
+        assert_eq!(
+            (mw.encode(1048575), mw.decode(1048575)),
+            (Some(1048575), 1048575)
+        );
         assert_eq!(mw.encode(-1), None);
         assert!(def.idn("S-0-0047").is_none());
         assert!(def.idn("garbage").is_none());

@@ -26,6 +26,9 @@
 //! armed). [`DriveAdapter::arm_probe`] starts a small state machine so that **no stale value is
 //! ever reported as new**:
 //!
+//! A confirmation only counts from an input image read after the phase's word went out in an
+//! output image, so an image still showing the drive's previous state never confirms.
+//!
 //! 1. *Clearing* — when the probe is enabled in the last 0x60B9 (bit 0 / 8), when no 0x60B9 was
 //!    seen yet, when the adapter's last word for that probe was not 0, or when the drive file
 //!    says `[probe] rearm_requires_zero = true`: write 0 to the probe's byte and wait until 0x60B9
@@ -247,6 +250,9 @@ struct Arming {
     request: ProbeRequest,
     byte: u8,
     phase: Phase,
+    /// The current phase's word went out in an output image (a confirmation must come from an
+    /// image after that).
+    sent: bool,
     /// Images seen in the current phase.
     cycles: u32,
     /// The probe's 0x60B9 byte of the previous image (edge detection).
@@ -457,12 +463,14 @@ impl Ds402Adapter {
         match a.phase {
             Phase::Clearing | Phase::Enabling => {
                 a.cycles += 1;
-                let confirmed = match a.phase {
-                    Phase::Clearing => byte & probe_status::ENABLED == 0,
-                    _ => byte & probe_status::ENABLED != 0 && byte & stored == 0,
-                };
+                let confirmed = a.sent
+                    && match a.phase {
+                        Phase::Clearing => byte & probe_status::ENABLED == 0,
+                        _ => byte & probe_status::ENABLED != 0 && byte & stored == 0,
+                    };
                 if confirmed {
                     a.cycles = 0;
+                    a.sent = false;
                     if a.phase == Phase::Clearing {
                         a.phase = Phase::Enabling;
                     } else {
@@ -493,8 +501,9 @@ impl Ds402Adapter {
                 let result = evaluate(a, byte, &self.tx, inputs);
                 for e in result.events {
                     if self.latch.events.len() >= MAX_PENDING_EVENTS {
-                        self.latch
-                            .fail(format!("touch probe {probe}: more than {MAX_PENDING_EVENTS} events not taken"));
+                        self.latch.fail(format!(
+                            "touch probe {probe}: more than {MAX_PENDING_EVENTS} events not taken"
+                        ));
                         return;
                     }
                     self.latch.events.push_back(e);
@@ -629,7 +638,11 @@ impl Latch {
         match &self.arming {
             None => 0,
             Some(a) => {
-                let byte = if a.phase == Phase::Clearing { 0 } else { a.byte };
+                let byte = if a.phase == Phase::Clearing {
+                    0
+                } else {
+                    a.byte
+                };
                 u16::from(byte) << probe_shift(a.request.probe).unwrap_or(0)
             }
         }
@@ -727,10 +740,10 @@ impl DriveAdapter for Ds402Adapter {
         if self.latch.function_mapped {
             self.rx.set_u16(outputs, 0x60B8, 0, word)?;
         }
-        if let Some(a) = &self.latch.arming {
+        if let Some(a) = self.latch.arming.as_mut() {
+            a.sent = true;
             let r = a.request;
-            if r.source_mode == TriggerSourceMode::CncDefined && self.rx.contains(0x60D0, r.probe)
-            {
+            if r.source_mode == TriggerSourceMode::CncDefined && self.rx.contains(0x60D0, r.probe) {
                 self.rx
                     .set_i16(outputs, 0x60D0, r.probe, i16::from(r.input))?;
             }
@@ -759,8 +772,7 @@ impl DriveAdapter for Ds402Adapter {
         })?;
         if !self.latch.function_mapped || !self.latch.status_mapped {
             return Err(DriveError::Unsupported(
-                "touch probe: needs 0x60B8 in [rxpdo] entries and 0x60B9 in [txpdo] entries"
-                    .into(),
+                "touch probe: needs 0x60B8 in [rxpdo] entries and 0x60B9 in [txpdo] entries".into(),
             ));
         }
         let edges: &[ProbeEdge] = if request.source_mode == TriggerSourceMode::DriveDefined {
@@ -795,6 +807,7 @@ impl DriveAdapter for Ds402Adapter {
             request: *request,
             byte: touch_probe_byte(request),
             phase,
+            sent: false,
             cycles: 0,
             prev: 0,
             counters: [None; 2],

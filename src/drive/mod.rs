@@ -202,7 +202,9 @@ pub trait DriveAdapter: Send + fmt::Debug {
     /// Drives without a latch unit refuse.
     fn arm_probe(&mut self, request: &ProbeRequest) -> Result<(), DriveError> {
         let _ = request;
-        Err(DriveError::Unsupported("this drive has no latch unit".into()))
+        Err(DriveError::Unsupported(
+            "this drive has no latch unit".into(),
+        ))
     }
 
     /// Disarm the latch unit; pending events are dropped.

@@ -74,12 +74,22 @@ pub trait Link: Send {
     /// a mailbox refuse.
     fn read_object(&mut self, device: usize, index: u16, sub: u8) -> Result<i64, LinkError> {
         let _ = (device, index, sub);
-        Err(LinkError::Other("this link has no acyclic (mailbox) access".into()))
+        Err(LinkError::Other(
+            "this link has no acyclic (mailbox) access".into(),
+        ))
     }
 
     /// Acyclic write of object `index:sub` of device `device` (SDO download / CoE).
-    fn write_object(&mut self, device: usize, index: u16, sub: u8, value: i64) -> Result<(), LinkError> {
+    fn write_object(
+        &mut self,
+        device: usize,
+        index: u16,
+        sub: u8,
+        value: i64,
+    ) -> Result<(), LinkError> {
         let _ = (device, index, sub, value);
-        Err(LinkError::Other("this link has no acyclic (mailbox) access".into()))
+        Err(LinkError::Other(
+            "this link has no acyclic (mailbox) access".into(),
+        ))
     }
 }

@@ -9,7 +9,8 @@
 //!
 //! The exchange covers the cycle `[now − cycle, now]` (see the drive model's "Time"):
 //!
-//! 1. the [`Plant`]'s fixed stops are applied to the models when they changed;
+//! 1. the [`Plant`]'s fixed stops are applied to the models when they changed, and every wired
+//!    input gets its surface's level at the cycle start as a static level (no edge);
 //! 2. every model runs [`Ds402Model::begin_step`] (RxPDO decoded, position loop advanced,
 //!    trajectory recorded);
 //! 3. the plant finds the probe-surface edges inside the cycle from the probed devices'
@@ -131,11 +132,25 @@ impl SimLink {
         }
     }
 
+    /// Static level of every wired input = its surface's level at the start of the cycle.
+    fn apply_input_levels(&mut self) {
+        for (i, surface) in self.plant.probe_surfaces().iter().enumerate() {
+            let level = self.plant.current_level(i);
+            for &(device, input) in &surface.wired {
+                if let Some(m) = self.models.get_mut(device) {
+                    if m.input_level(input) == Some(!level) {
+                        m.set_input_level(input, level);
+                    }
+                }
+            }
+        }
+    }
+
     fn device(&mut self, device: usize) -> Result<&mut Ds402Model, LinkError> {
         let n = self.models.len();
-        self.models
-            .get_mut(device)
-            .ok_or_else(|| LinkError::Other(format!("device {device}: not on the link ({n} devices)")))
+        self.models.get_mut(device).ok_or_else(|| {
+            LinkError::Other(format!("device {device}: not on the link ({n} devices)"))
+        })
     }
 }
 
@@ -157,6 +172,7 @@ impl Link for SimLink {
             });
         }
         self.apply_fixed_stops();
+        self.apply_input_levels();
         let dt = self.cycle.as_secs_f64();
         for (model, image) in self.models.iter_mut().zip(images.iter()) {
             model.begin_step(now, dt, &image.outputs);

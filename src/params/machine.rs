@@ -204,7 +204,15 @@ impl MachineConfig {
             manual: ParamSet::new(Scope::Manual),
             axes,
             // D1: the measuring probe of seed 004 §5 "%meas_example" (ball radius 2 mm).
-            tools: [(1, ToolData { radius: 2.0, length: 0.0 })].into_iter().collect(),
+            tools: [(
+                1,
+                ToolData {
+                    radius: 2.0,
+                    length: 0.0,
+                },
+            )]
+            .into_iter()
+            .collect(),
             zero_offsets: Default::default(),
         }
     }
@@ -300,12 +308,16 @@ impl MachineConfig {
         })?;
         for (d, t) in table.iter() {
             let l = ctx.key_line(table, d, t, line);
-            let number: u32 = d.parse().ok().filter(|n| (1..=32767).contains(n)).ok_or_else(|| {
-                ParamError::Config {
+            let number: u32 = d
+                .parse()
+                .ok()
+                .filter(|n| (1..=32767).contains(n))
+                .ok_or_else(|| ParamError::Config {
                     origin: ctx.at(l),
-                    message: format!("[tool.{d}]: the tool offset number must be 1 ..= 32767 (D1 → [tool.1])"),
-                }
-            })?;
+                    message: format!(
+                        "[tool.{d}]: the tool offset number must be 1 ..= 32767 (D1 → [tool.1])"
+                    ),
+                })?;
             let fields = t.as_table_like().ok_or_else(|| ParamError::Config {
                 origin: ctx.at(l),
                 message: format!("[tool.{d}] must be a table with radius / length in 0.1 µm"),
@@ -315,7 +327,9 @@ impl MachineConfig {
                 let kl = ctx.key_line(fields, k, v, l);
                 let value = v.as_integer().ok_or_else(|| ParamError::Config {
                     origin: ctx.at(kl),
-                    message: format!("tool.{d}.{k}: expected an integer in 0.1 µm (P-TOOL-00004 unit)"),
+                    message: format!(
+                        "tool.{d}.{k}: expected an integer in 0.1 µm (P-TOOL-00004 unit)"
+                    ),
                 })?;
                 if !(i64::from(i32::MIN)..=i64::from(i32::MAX)).contains(&value) {
                     return Err(ParamError::Config {
@@ -328,14 +342,18 @@ impl MachineConfig {
                     "radius" => {
                         return Err(ParamError::Config {
                             origin: ctx.at(kl),
-                            message: format!("tool.{d}.radius = {value}: a probe ball radius must be ≥ 0"),
+                            message: format!(
+                                "tool.{d}.radius = {value}: a probe ball radius must be ≥ 0"
+                            ),
                         })
                     }
                     "length" => tool.length = crate::units::param_pos_to_mm(value),
                     other => {
                         return Err(ParamError::Config {
                             origin: ctx.at(kl),
-                            message: format!("unknown tool field '{other}'; allowed: radius, length"),
+                            message: format!(
+                                "unknown tool field '{other}'; allowed: radius, length"
+                            ),
                         })
                     }
                 }
@@ -345,10 +363,16 @@ impl MachineConfig {
         Ok(())
     }
 
-    fn parse_zero_offsets(&mut self, ctx: &Ctx<'_>, item: &Item, line: usize) -> Result<(), ParamError> {
+    fn parse_zero_offsets(
+        &mut self,
+        ctx: &Ctx<'_>,
+        item: &Item,
+        line: usize,
+    ) -> Result<(), ParamError> {
         let table = item.as_table_like().ok_or_else(|| ParamError::Config {
             origin: ctx.at(line),
-            message: "'zero_offset' must be a table: write [zero_offset.G54] X = 1000000".to_string(),
+            message: "'zero_offset' must be a table: write [zero_offset.G54] X = 1000000"
+                .to_string(),
         })?;
         for (g, t) in table.iter() {
             let l = ctx.key_line(table, g, t, line);
@@ -370,7 +394,10 @@ impl MachineConfig {
                 if self.axis(ax).is_none() {
                     return Err(ParamError::Config {
                         origin: ctx.at(kl),
-                        message: format!("zero_offset.{g}.{ax}: unknown axis; the machine has {}", self.axis_list()),
+                        message: format!(
+                            "zero_offset.{g}.{ax}: unknown axis; the machine has {}",
+                            self.axis_list()
+                        ),
                     });
                 }
                 let value = v.as_integer().filter(|x| (i64::from(i32::MIN)..=i64::from(i32::MAX)).contains(x)).ok_or_else(|| {
@@ -710,7 +737,8 @@ fn string_value<'a>(
 }
 
 fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
-    let allowed = "allowed tables are [channel], [manual], [[axis]], [tool.<D>] and [zero_offset.G54…G59]";
+    let allowed =
+        "allowed tables are [channel], [manual], [[axis]], [tool.<D>] and [zero_offset.G54…G59]";
     let message = if item.is_value() {
         let hint = if name == "cycle_time_us" {
             "; cycle_time_us belongs in [channel]".to_string()

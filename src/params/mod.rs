@@ -20,8 +20,8 @@ mod machine;
 mod registry;
 
 pub use listfile::{apply_list, parse_list};
-pub use machine::{ToolData, 
-    AxisConfig, MachineConfig, DEFAULT_CYCLE_TIME_US, DEFAULT_DRIVE, MAX_CYCLE_TIME_US,
+pub use machine::{
+    AxisConfig, MachineConfig, ToolData, DEFAULT_CYCLE_TIME_US, DEFAULT_DRIVE, MAX_CYCLE_TIME_US,
     MIN_CYCLE_TIME_US,
 };
 pub use registry::*;

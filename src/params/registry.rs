@@ -609,6 +609,10 @@ registry_table! {
     OFFSETGRENZE_POS = "P-AXIS-00138", "handbetrieb.offsetgrenze_pos", Axis, Sgn32, di(1_000_000),
         ri(0, S32_MAX), "0 ≤ offsetgrenze_pos ≤ MAX(SGN32)", "T: 0.1µm, R: 0.0001°",
         "Relative positive offset limit in manual mode", "seed 001 §4.3";
+    SLEP_MAX = "P-AXIS-00168", "getriebe[i].slep_max", Axis, Sgn32, di(100_000), ri(0, S32_MAX),
+        "0 ≤ slep_max ≤ MAX(SGN32) (0: CNC position lag monitoring off)", "T: 0.1 µm, R,S: 0.0001°",
+        "Maximum position lag (CNC position lag monitoring; off during measurement type 7)",
+        "ISG online parameter docs (not in seeds); needed by seed 004 §7.3.1 'disable position lag monitoring in the position controller'";
     SWE_NEG = "P-AXIS-00177", "kenngr.swe_neg", Axis, Sgn32, di(-100_000_000),
         ri(S32_MIN + 1, S32_MAX), "MIN(SGN32) < swe_neg < P-AXIS-00178", "T: 0.1µm, R: 0.0001°",
         "Negative software limit switch", "seed 001 §4.3, seed 000 §6.2";
@@ -618,10 +622,6 @@ registry_table! {
     SWE_TOLERANZ = "P-AXIS-00179", "kenngr.swe_toleranz", Axis, Uns32, di(1000), ri(0, U32),
         "0 ≤ swe_toleranz ≤ MAX(UNS32)", "T: 0.1µm, R: 0.0001°",
         "Tolerance range for software limit switch", "seed 001 §4.3";
-    SLEP_MAX = "P-AXIS-00168", "getriebe[i].slep_max", Axis, Sgn32, di(100_000), ri(0, S32_MAX),
-        "0 ≤ slep_max ≤ MAX(SGN32) (0: CNC position lag monitoring off)", "T: 0.1 µm, R,S: 0.0001°",
-        "Maximum position lag (CNC position lag monitoring; off during measurement type 7)",
-        "ISG online parameter docs (not in seeds); needed by seed 004 §7.3.1 'disable position lag monitoring in the position controller'";
     VB_MAX = "P-AXIS-00212", "getriebe[i].dynamik.vb_max", Axis, Uns32, di(200_000),
         ri(1, 2_000_000_000), "1 ≤ vb_max ≤ 2000000000", "T: µm/s, R,S: 0.001°/s",
         "Maximum permissible axis velocity", "ISG online parameter docs (not in seeds)";

@@ -26,6 +26,11 @@
 //! armed for the positive edge would never latch. With one pulse per crossing every crossing
 //! gives the armed edge at the crossing time, and the opposite edge `pulse` later.
 //!
+//! Before each cycle the link sets every wired input to its surface's level as a static level
+//! (no edge), so an active-low probe rests high. One surface per input is the intended wiring;
+//! with several, the last surface's level wins at the cycle start and edges are delivered as
+//! they come (an edge to the level an input already has is ignored by the drive).
+//!
 //! Jumps of the position between two cycles (`set_actual`, a changed disturbance) are not
 //! crossings: only motion inside a cycle's trajectory switches a surface.
 
@@ -160,6 +165,14 @@ impl Plant {
         self.state.get(probe).is_some_and(|s| s.active)
     }
 
+    /// Electrical level of surface `probe` now (end of the last cycle): the active level while
+    /// deflected, else the rest level. `false` for an unknown surface.
+    pub fn current_level(&self, probe: usize) -> bool {
+        self.surfaces
+            .get(probe)
+            .is_some_and(|s| self.contact(probe) == s.active_high)
+    }
+
     /// Electrical level of surface `probe` at `at` (edges at `at` included). Known for the last
     /// cycle; earlier times read as the level at its start, later times as the level at its end.
     /// `false` for an unknown surface.
@@ -191,7 +204,8 @@ impl Plant {
         end: Nanos,
         trajectory: impl Fn(usize) -> Option<&'t [(Nanos, f64)]>,
     ) -> &[ProbeEdgeEvent] {
-        self.state.resize(self.surfaces.len(), SurfaceState::default());
+        self.state
+            .resize(self.surfaces.len(), SurfaceState::default());
         self.last_edges.clear();
         self.cycle_start = start;
         let mut crossings = Vec::new();
@@ -271,7 +285,9 @@ mod tests {
         plant.add_probe_surface(s);
         // Up through 10 at t = 50, back down at t = 250.
         let t = traj(&[(0, 0.0), (100, 20.0), (200, 20.0), (300, 0.0)]);
-        let edges = plant.advance(Nanos(0), Nanos(300), |_| Some(&t[..])).to_vec();
+        let edges = plant
+            .advance(Nanos(0), Nanos(300), |_| Some(&t[..]))
+            .to_vec();
         let e = |rising, at| ProbeEdgeEvent {
             probe: 0,
             rising,
@@ -299,7 +315,9 @@ mod tests {
         s.active_high = false;
         plant.add_probe_surface(s);
         let t = traj(&[(0, 0.0), (100, 20.0), (200, 0.0)]);
-        let edges = plant.advance(Nanos(0), Nanos(200), |_| Some(&t[..])).to_vec();
+        let edges = plant
+            .advance(Nanos(0), Nanos(200), |_| Some(&t[..]))
+            .to_vec();
         assert_eq!(
             edges,
             vec![ProbeEdgeEvent {
@@ -308,6 +326,9 @@ mod tests {
                 at: Nanos(50)
             }]
         );
-        assert_eq!(plant.state[0].release_at, Nanos(150).saturating_add(DEFAULT_PULSE));
+        assert_eq!(
+            plant.state[0].release_at,
+            Nanos(150).saturating_add(DEFAULT_PULSE)
+        );
     }
 }

@@ -283,7 +283,8 @@ impl ScriptedPlc {
             }
             queue.push(e);
         });
-        let period = self.config.period.0;
+        // `config_mut` may have lowered the period.
+        let period = self.config.period.0.max(MIN_PERIOD.0);
         if now >= self.next_cycle {
             let behind = (now.0 - self.next_cycle.0) / period;
             if behind > MAX_CATCH_UP {

@@ -176,6 +176,9 @@ pub struct AxisMeasConfig {
     pub lag_limit: f64,
     /// The drive is a SERCOS drive (measurement type 6 needs one).
     pub sercos: bool,
+    /// Fixed-stop detection parameters (P-AXIS-00774 … 00778 with their fallbacks); `None` when
+    /// they are invalid.
+    pub fixed_stop: Option<fixed_stop::FixedStopParams>,
 }
 
 impl Default for AxisMeasConfig {
@@ -192,6 +195,7 @@ impl Default for AxisMeasConfig {
             a_feedhold: 1000.0,
             lag_limit: 10.0,
             sercos: false,
+            fixed_stop: None,
         }
     }
 }

@@ -24,7 +24,12 @@ fn word(e: &Expr) -> Option<String> {
 }
 
 impl Executor {
-    pub(super) fn command(&mut self, command: &Command, span: Span, ch: &mut Channel) -> Result<(), Fail> {
+    pub(super) fn command(
+        &mut self,
+        command: &Command,
+        span: Span,
+        ch: &mut Channel,
+    ) -> Result<(), Fail> {
         match command {
             Command::Msg { .. } => Ok(()),
             Command::MeasMode { mode } => {
@@ -96,12 +101,19 @@ impl Executor {
 
     /// The channel axis of an `AXNR` argument (1-based logical axis number = machine file order).
     fn axnr(&self, a: &KeyArg, span: Span, ch: &Channel) -> Result<usize, Fail> {
-        let e = a.value.as_ref().ok_or_else(|| err(ids::NC_EVALUATION, "AXNR needs a number"))?;
+        let e = a
+            .value
+            .as_ref()
+            .ok_or_else(|| err(ids::NC_EVALUATION, "AXNR needs a number"))?;
         let n = self.num(e, span, ch)?;
         if n.fract() != 0.0 || n < 1.0 || n as usize > self.names.len() {
             return Err(err(
                 ids::NC_EVALUATION,
-                format!("AXNR={n}: axis numbers are 1 … {} ({})", self.names.len(), self.names.join(", ")),
+                format!(
+                    "AXNR={n}: axis numbers are 1 … {} ({})",
+                    self.names.len(),
+                    self.names.join(", ")
+                ),
             ));
         }
         Ok(n as usize - 1)
@@ -109,7 +121,12 @@ impl Executor {
 
     /// `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`.
     fn meas_config(&mut self, args: &[KeyArg], span: Span, ch: &mut Channel) -> Result<(), Fail> {
-        let a = arg(args, "AXNR").ok_or_else(|| err(ids::MEAS_CONFIG, "#MEAS [..]: AXNR=<axis number> is required"))?;
+        let a = arg(args, "AXNR").ok_or_else(|| {
+            err(
+                ids::MEAS_CONFIG,
+                "#MEAS [..]: AXNR=<axis number> is required",
+            )
+        })?;
         let axis = self.axnr(a, span, ch)?;
         let signal = match arg(args, "SIGNAL").and_then(|a| a.value.as_ref()).and_then(word) {
             Some(w) => Some(SignalSource::from_text(&w).ok_or_else(|| {
@@ -131,29 +148,79 @@ impl Executor {
             }
             None => None,
         };
-        let edge = match arg(args, "EDGE").and_then(|a| a.value.as_ref()).and_then(word) {
-            Some(w) => Some(edge_from_text(&w).ok_or_else(|| err(ids::MEAS_CONFIG, format!("#MEAS EDGE={w}: allowed POS / NEG (P-AXIS-00518)")))?),
+        let edge = match arg(args, "EDGE")
+            .and_then(|a| a.value.as_ref())
+            .and_then(word)
+        {
+            Some(w) => Some(edge_from_text(&w).ok_or_else(|| {
+                err(
+                    ids::MEAS_CONFIG,
+                    format!("#MEAS EDGE={w}: allowed POS / NEG (P-AXIS-00518)"),
+                )
+            })?),
             None => None,
         };
-        self.overrides.push(SignalOverride { axis, signal, input, edge });
+        self.overrides.push(SignalOverride {
+            axis,
+            signal,
+            input,
+            edge,
+        });
         Ok(())
     }
 
     /// `#DRIVE WR|RD [SYN] [AX=.. KEY=.. VAL=.. | P=Pn WAIT]` through the drive function table.
-    fn drive(&mut self, write: bool, sync: bool, args: &[KeyArg], span: Span, ch: &mut Channel) -> Result<(), Fail> {
-        let ax = arg(args, "AX").and_then(|a| a.value.as_ref()).and_then(word).ok_or_else(|| err(ids::NC_EVALUATION, "#DRIVE: AX=<axis name> is required"))?;
-        let axis = self.axis(&ax).ok_or_else(|| err(ids::NC_EVALUATION, format!("#DRIVE: unknown axis '{ax}'")))?;
-        let key = arg(args, "KEY").and_then(|a| a.value.as_ref()).and_then(word).ok_or_else(|| err(ids::NC_EVALUATION, "#DRIVE: KEY=<function> is required"))?;
+    fn drive(
+        &mut self,
+        write: bool,
+        sync: bool,
+        args: &[KeyArg],
+        span: Span,
+        ch: &mut Channel,
+    ) -> Result<(), Fail> {
+        let ax = arg(args, "AX")
+            .and_then(|a| a.value.as_ref())
+            .and_then(word)
+            .ok_or_else(|| err(ids::NC_EVALUATION, "#DRIVE: AX=<axis name> is required"))?;
+        let axis = self
+            .axis(&ax)
+            .ok_or_else(|| err(ids::NC_EVALUATION, format!("#DRIVE: unknown axis '{ax}'")))?;
+        let key = arg(args, "KEY")
+            .and_then(|a| a.value.as_ref())
+            .and_then(word)
+            .ok_or_else(|| err(ids::NC_EVALUATION, "#DRIVE: KEY=<function> is required"))?;
         let key = key.to_ascii_uppercase().replace(' ', "_");
-        let def = ch.axes()[axis].definition().ok_or_else(|| err(ids::ACYCLIC_FAILED, format!("#DRIVE: axis {ax} has no drive definition")))?;
-        let f = def.function(&key).ok_or_else(|| {
-            let keys: Vec<&str> = def.functions.iter().map(|f| f.key.as_str()).collect();
-            err(ids::ACYCLIC_FAILED, format!("#DRIVE: drive '{}' of axis {ax} has no function {key}; it has {}", def.name, keys.join(", ")))
-        })?.clone();
+        let def = ch.axes()[axis].definition().ok_or_else(|| {
+            err(
+                ids::ACYCLIC_FAILED,
+                format!("#DRIVE: axis {ax} has no drive definition"),
+            )
+        })?;
+        let f = def
+            .function(&key)
+            .ok_or_else(|| {
+                let keys: Vec<&str> = def.functions.iter().map(|f| f.key.as_str()).collect();
+                err(
+                    ids::ACYCLIC_FAILED,
+                    format!(
+                        "#DRIVE: drive '{}' of axis {ax} has no function {key}; it has {}",
+                        def.name,
+                        keys.join(", ")
+                    ),
+                )
+            })?
+            .clone();
         let wait = sync || arg(args, "WAIT").is_some();
-        let what = format!("#DRIVE {} KEY={key} (axis {ax}, object {:#06x}:{:02x})", if write { "WR" } else { "RD" }, f.index, f.sub);
+        let what = format!(
+            "#DRIVE {} KEY={key} (axis {ax}, object {:#06x}:{:02x})",
+            if write { "WR" } else { "RD" },
+            f.index,
+            f.sub
+        );
         if write {
-            let e = arg(args, "VAL").and_then(|a| a.value.as_ref()).ok_or_else(|| err(ids::NC_EVALUATION, "#DRIVE WR: VAL=<value> is required"))?;
+            let e = arg(args, "VAL")
+                .and_then(|a| a.value.as_ref())
+                .ok_or_else(|| err(ids::NC_EVALUATION, "#DRIVE WR: VAL=<value> is required"))?;
             let v = self.num(e, span, ch)?;
             let raw = f.encode(v).ok_or_else(|| {
                 err(ids::ACYCLIC_FAILED, format!("#DRIVE WR KEY={key} VAL={v}: outside the function's range {} … {} (wire value = VAL × {})", f.min, f.max, f.scale))
@@ -163,7 +230,11 @@ impl Executor {
             let param = self.target_param(args)?;
             let id = ch.queue_acyclic(axis, f.index, f.sub, AcyclicOp::Read, true, &what);
             if let Some(p) = param {
-                self.pending_reads.push(PendingRead { id, param: p, decode: Decode::Scale(if f.scale != 0.0 { f.scale } else { 1.0 }) });
+                self.pending_reads.push(PendingRead {
+                    id,
+                    param: p,
+                    decode: Decode::Scale(if f.scale != 0.0 { f.scale } else { 1.0 }),
+                });
             }
         }
         Ok(())
@@ -171,38 +242,80 @@ impl Executor {
 
     /// `#IDENT WR|RD [SYN] [AXNR n ID S-0-0092 VAL=.. | P=Pn TYP t DEC d SERC]`: a SERCOS IDN,
     /// carried to a CoE drive through the drive file's `[idn]` map.
-    fn ident(&mut self, write: bool, sync: bool, args: &[KeyArg], span: Span, ch: &mut Channel) -> Result<(), Fail> {
-        let a = arg(args, "AXNR").ok_or_else(|| err(ids::NC_EVALUATION, "#IDENT: AXNR <axis number> is required"))?;
+    fn ident(
+        &mut self,
+        write: bool,
+        sync: bool,
+        args: &[KeyArg],
+        span: Span,
+        ch: &mut Channel,
+    ) -> Result<(), Fail> {
+        let a = arg(args, "AXNR")
+            .ok_or_else(|| err(ids::NC_EVALUATION, "#IDENT: AXNR <axis number> is required"))?;
         let axis = self.axnr(a, span, ch)?;
-        let id = arg(args, "ID").and_then(|a| a.value.as_ref()).and_then(word).ok_or_else(|| err(ids::NC_EVALUATION, "#IDENT: ID <IDN> is required"))?;
+        let id = arg(args, "ID")
+            .and_then(|a| a.value.as_ref())
+            .and_then(word)
+            .ok_or_else(|| err(ids::NC_EVALUATION, "#IDENT: ID <IDN> is required"))?;
         let dec = match arg(args, "DEC").and_then(|a| a.value.as_ref()) {
             Some(e) => self.num(e, span, ch)?,
             None => 0.0,
         };
         if dec.fract() != 0.0 || !(0.0..=9.0).contains(&dec) {
-            return Err(err(ids::NC_EVALUATION, format!("#IDENT DEC {dec}: decimal places 0 … 9")));
+            return Err(err(
+                ids::NC_EVALUATION,
+                format!("#IDENT DEC {dec}: decimal places 0 … 9"),
+            ));
         }
         let scale = 10f64.powi(dec as i32);
         let name = ch.axes()[axis].name().to_string();
-        let def = ch.axes()[axis].definition().ok_or_else(|| err(ids::ACYCLIC_FAILED, format!("#IDENT: axis {name} has no drive definition")))?;
+        let def = ch.axes()[axis].definition().ok_or_else(|| {
+            err(
+                ids::ACYCLIC_FAILED,
+                format!("#IDENT: axis {name} has no drive definition"),
+            )
+        })?;
         let m = def.idn(&id).ok_or_else(|| {
             err(ids::ACYCLIC_FAILED, format!("#IDENT ID {id}: drive '{}' of axis {name} has no mapping for this IDN ([idn] in its drive file)", def.name))
         })?.clone();
         let wait = sync;
-        let what = format!("#IDENT {} ID {id} (axis {name}, object {:#06x}:{:02x})", if write { "WR" } else { "RD" }, m.index, m.sub);
+        let what = format!(
+            "#IDENT {} ID {id} (axis {name}, object {:#06x}:{:02x})",
+            if write { "WR" } else { "RD" },
+            m.index,
+            m.sub
+        );
         if write {
-            let e = arg(args, "VAL").and_then(|a| a.value.as_ref()).ok_or_else(|| err(ids::NC_EVALUATION, "#IDENT WR: VAL=<value> is required"))?;
+            let e = arg(args, "VAL")
+                .and_then(|a| a.value.as_ref())
+                .ok_or_else(|| err(ids::NC_EVALUATION, "#IDENT WR: VAL=<value> is required"))?;
             let v = self.num(e, span, ch)?;
             let scaled = (v * scale).round();
-            let raw = (scaled.is_finite() && scaled.abs() < 9.0e15).then_some(scaled as i64).and_then(|x| m.encode(x)).ok_or_else(|| {
-                err(ids::ACYCLIC_FAILED, format!("#IDENT WR ID {id} VAL={v}: does not fit the drive object ({})", m.ty.name()))
-            })?;
+            let raw = (scaled.is_finite() && scaled.abs() < 9.0e15)
+                .then_some(scaled as i64)
+                .and_then(|x| m.encode(x))
+                .ok_or_else(|| {
+                    err(
+                        ids::ACYCLIC_FAILED,
+                        format!(
+                            "#IDENT WR ID {id} VAL={v}: does not fit the drive object ({})",
+                            m.ty.name()
+                        ),
+                    )
+                })?;
             ch.queue_acyclic(axis, m.index, m.sub, AcyclicOp::Write(raw), wait, &what);
         } else {
             let param = self.target_param(args)?;
             let rid = ch.queue_acyclic(axis, m.index, m.sub, AcyclicOp::Read, true, &what);
             if let Some(p) = param {
-                self.pending_reads.push(PendingRead { id: rid, param: p, decode: Decode::Idn { zero: m.zero, scale } });
+                self.pending_reads.push(PendingRead {
+                    id: rid,
+                    param: p,
+                    decode: Decode::Idn {
+                        zero: m.zero,
+                        scale,
+                    },
+                });
             }
         }
         Ok(())
@@ -212,7 +325,10 @@ impl Executor {
     fn target_param(&self, args: &[KeyArg]) -> Result<Option<u32>, Fail> {
         match arg(args, "P").and_then(|a| a.value.as_ref()) {
             Some(Expr::Param(n, _)) => Ok(Some(*n)),
-            Some(other) => Err(err(ids::NC_EVALUATION, format!("P= must name a parameter such as P1092, got {other:?}"))),
+            Some(other) => Err(err(
+                ids::NC_EVALUATION,
+                format!("P= must name a parameter such as P1092, got {other:?}"),
+            )),
             None => Ok(None),
         }
     }

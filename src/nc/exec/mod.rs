@@ -216,18 +216,31 @@ impl Executor {
         for b in &self.program.blocks {
             for item in &b.items {
                 match item {
-                    Item::Axis { name, span, .. } | Item::Independent { axis: name, span, .. }
-                        if self.axis(name).is_none() =>
-                    {
+                    Item::Axis { name, span, .. }
+                    | Item::Independent {
+                        axis: name, span, ..
+                    } if self.axis(name).is_none() => {
                         return Err((
                             *span,
-                            format!("unknown axis '{name}'; the channel has {}", self.names.join(", ")),
+                            format!(
+                                "unknown axis '{name}'; the channel has {}",
+                                self.names.join(", ")
+                            ),
                         ));
                     }
                     Item::G { code, span } if !SUPPORTED_G.contains(code) => {
-                        return Err((*span, format!("G{code} is not supported; supported: {}", supported_g_text())));
+                        return Err((
+                            *span,
+                            format!(
+                                "G{code} is not supported; supported: {}",
+                                supported_g_text()
+                            ),
+                        ));
                     }
-                    Item::Command { command: Command::Trafo { .. }, span } => {
+                    Item::Command {
+                        command: Command::Trafo { .. },
+                        span,
+                    } => {
                         return Err((
                             *span,
                             "#TRAFO (kinematic transformation) is not supported by fieldprobe; measure in 2.5D or with #CS".into(),
@@ -302,7 +315,10 @@ impl Executor {
             return Step::End;
         };
         self.pc += 1;
-        let bref = BlockRef { number: block.number, line: block.span.line };
+        let bref = BlockRef {
+            number: block.number,
+            line: block.span.line,
+        };
         tracing::trace!(block = %bref, "execute block");
         ch.set_block(Some(bref));
         match self.run_block(&block, ch, events) {
@@ -354,7 +370,9 @@ impl Executor {
 
     fn take_outcome(&mut self, ch: &Channel, out: MeasurementOutcome) -> Result<(), Fail> {
         self.last_meas_type = Some(out.mtype);
-        let Some(pm) = self.pending_meas.take() else { return Ok(()) };
+        let Some(pm) = self.pending_meas.take() else {
+            return Ok(());
+        };
         let radius = self.tool.map(|t| t.radius).unwrap_or(0.0);
         let block = crate::core::measure::results::MeasuringBlock {
             target_pcs: &pm.target_pcs,
@@ -363,18 +381,29 @@ impl Executor {
             ball_radius: radius,
             include_radius: !ch.config().meas.pcs_without_radius,
         };
-        let results = crate::core::measure::results::compute(&self.frames, &block, &out.latched, &self.results)
-            .map_err(|e| err(ids::MEAS_LATCH, format!("measurement results: {e}")))?;
+        let results = crate::core::measure::results::compute(
+            &self.frames,
+            &block,
+            &out.latched,
+            &self.results,
+        )
+        .map_err(|e| err(ids::MEAS_LATCH, format!("measurement results: {e}")))?;
         self.results = results;
         for (i, inv) in out.involved.iter().enumerate() {
             if *inv || pm.programmed.get(i).copied().unwrap_or(false) {
-                self.merf[i] = out.merf.get(i).copied().unwrap_or(false) && self.results[i].is_some();
+                self.merf[i] =
+                    out.merf.get(i).copied().unwrap_or(false) && self.results[i].is_some();
             }
         }
         Ok(())
     }
 
-    fn run_block(&mut self, block: &Block, ch: &mut Channel, events: &mut Vec<Event>) -> Result<bool, Fail> {
+    fn run_block(
+        &mut self,
+        block: &Block,
+        ch: &mut Channel,
+        events: &mut Vec<Event>,
+    ) -> Result<bool, Fail> {
         // 1. G codes: modal groups first, so `G00 X0 Y0 G90` uses G90.
         let mut g92 = false;
         let mut limit: Option<Side> = None;
@@ -406,7 +435,10 @@ impl Executor {
                     other => {
                         return Err(err(
                             ids::NC_UNSUPPORTED,
-                            format!("G{other} is not supported; supported: {}", supported_g_text()),
+                            format!(
+                                "G{other} is not supported; supported: {}",
+                                supported_g_text()
+                            ),
                         ))
                     }
                 },
@@ -442,7 +474,11 @@ impl Executor {
                     let v = self.num(value, *span, ch)?;
                     axes.push((i, v));
                 }
-                Item::Centre { letter, value, span } => {
+                Item::Centre {
+                    letter,
+                    value,
+                    span,
+                } => {
                     let k = match letter.to_ascii_uppercase() {
                         'I' => 0,
                         'J' => 1,
@@ -503,18 +539,28 @@ impl Executor {
         }
         if g101 {
             let list: Vec<(usize, f64)> = axes;
-            crate::core::measure::results::g101(&mut self.frames, &self.results, &list).map_err(|e| {
-                let axis = match e {
-                    crate::core::measure::results::ResultsError::NoMeasuredValue { axis } => {
-                        self.names.get(axis).cloned().unwrap_or_default()
-                    }
-                    _ => String::new(),
-                };
-                err(
-                    if axis.is_empty() { ids::NC_EVALUATION } else { ids::MEAS_NO_VALUE },
-                    if axis.is_empty() { format!("{e}") } else { format!("G101: axis {axis} has no measured value") },
-                )
-            })?;
+            crate::core::measure::results::g101(&mut self.frames, &self.results, &list).map_err(
+                |e| {
+                    let axis = match e {
+                        crate::core::measure::results::ResultsError::NoMeasuredValue { axis } => {
+                            self.names.get(axis).cloned().unwrap_or_default()
+                        }
+                        _ => String::new(),
+                    };
+                    err(
+                        if axis.is_empty() {
+                            ids::NC_EVALUATION
+                        } else {
+                            ids::MEAS_NO_VALUE
+                        },
+                        if axis.is_empty() {
+                            format!("{e}")
+                        } else {
+                            format!("G101: axis {axis} has no measured value")
+                        },
+                    )
+                },
+            )?;
             self.frames_changed(ch);
             return Ok(end);
         }
@@ -552,7 +598,10 @@ impl Executor {
         let values = if g == 53 {
             vec![0.0; n]
         } else {
-            self.zero_offsets.get(&g).cloned().unwrap_or_else(|| vec![0.0; n])
+            self.zero_offsets
+                .get(&g)
+                .cloned()
+                .unwrap_or_else(|| vec![0.0; n])
         };
         self.frames
             .set_zero_offset(&values)
@@ -564,14 +613,20 @@ impl Executor {
 
     fn select_tool(&mut self, d: f64, ch: &mut Channel) -> Result<(), Fail> {
         if d.fract() != 0.0 || !(0.0..=32767.0).contains(&d) {
-            return Err(err(ids::NC_EVALUATION, format!("D{d}: tool offset number must be 0 … 32767")));
+            return Err(err(
+                ids::NC_EVALUATION,
+                format!("D{d}: tool offset number must be 0 … 32767"),
+            ));
         }
         let n = d as u32;
         self.tool = if n == 0 {
             None
         } else {
             Some(*self.tools.get(&n).ok_or_else(|| {
-                err(ids::NC_EVALUATION, format!("D{n}: no tool data for D{n} in the machine file ([tool.{n}])"))
+                err(
+                    ids::NC_EVALUATION,
+                    format!("D{n}: no tool data for D{n} in the machine file ([tool.{n}])"),
+                )
             })?)
         };
         self.frames
@@ -594,10 +649,14 @@ impl Executor {
 
 /// G codes this build executes.
 pub const SUPPORTED_G: &[u32] = &[
-    0, 1, 2, 3, 17, 18, 19, 53, 54, 55, 56, 57, 58, 59, 90, 91, 92, 98, 99, 100, 101, 102, 161, 162,
-    210, 310,
+    0, 1, 2, 3, 17, 18, 19, 53, 54, 55, 56, 57, 58, 59, 90, 91, 92, 98, 99, 100, 101, 102, 161,
+    162, 210, 310,
 ];
 
 fn supported_g_text() -> String {
-    SUPPORTED_G.iter().map(|g| format!("G{g:02}")).collect::<Vec<_>>().join(" ")
+    SUPPORTED_G
+        .iter()
+        .map(|g| format!("G{g:02}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }

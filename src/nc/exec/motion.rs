@@ -17,7 +17,8 @@ impl Executor {
         ch: &mut Channel,
         measured: &mut [bool],
     ) -> Result<bool, Fail> {
-        let is_arc = matches!(self.modal.motion, MotionMode::G2 | MotionMode::G3) && meas_g.is_none();
+        let is_arc =
+            matches!(self.modal.motion, MotionMode::G2 | MotionMode::G3) && meas_g.is_none();
         if axes.is_empty() && !(is_arc && centre.iter().any(Option::is_some)) {
             if meas_g.is_some() && axes.is_empty() {
                 // G100 with only independent axes: nothing for the path.
@@ -39,7 +40,10 @@ impl Executor {
         let feed = match (self.modal.motion, meas_g) {
             (MotionMode::G0, None) => 0.0,
             _ => self.modal.feed.ok_or_else(|| {
-                err(ids::NC_NO_FEED, "no feed programmed (F) for a G01/G02/G03/G100 block")
+                err(
+                    ids::NC_NO_FEED,
+                    "no feed programmed (F) for a G01/G02/G03/G100 block",
+                )
             })?,
         };
         let (kind, measure) = match meas_g {
@@ -60,7 +64,12 @@ impl Executor {
         };
         let start_pcs = self.prog.clone();
         let is_meas = measure.is_some();
-        let req = MotionRequest { kind, target, feed, measure };
+        let req = MotionRequest {
+            kind,
+            target,
+            feed,
+            measure,
+        };
         match ch.start_motion(&req) {
             Prepared::Started => {
                 if is_meas {
@@ -68,7 +77,11 @@ impl Executor {
                         *m |= *p;
                     }
                     self.pending_meas = Some(PendingMeasurement {
-                        direction_pcs: crate::core::measure::results::motion_direction(&self.frames, &start_pcs, &prog),
+                        direction_pcs: crate::core::measure::results::motion_direction(
+                            &self.frames,
+                            &start_pcs,
+                            &prog,
+                        ),
                         target_pcs: prog.clone(),
                         programmed,
                     });
@@ -94,7 +107,10 @@ impl Executor {
             Plane::G19 => (self.main[1], self.main[2], 1, 2),
         };
         let (Some(a1), Some(a2)) = (a1, a2) else {
-            return Err(err(ids::NC_ARC_GEOMETRY, "G02/G03: the channel lacks a main axis of the active plane"));
+            return Err(err(
+                ids::NC_ARC_GEOMETRY,
+                "G02/G03: the channel lacks a main axis of the active plane",
+            ));
         };
         let o1 = centre[c1].unwrap_or(0.0);
         let o2 = centre[c2].unwrap_or(0.0);
@@ -107,7 +123,12 @@ impl Executor {
         let clockwise = self.modal.motion == MotionMode::G2;
         let rotating = self.frames.cs().is_some_and(|c| c.has_rotation());
         if !rotating {
-            return Ok(MotionKind::Arc { a1, a2, centre_offset, clockwise });
+            return Ok(MotionKind::Arc {
+                a1,
+                a2,
+                centre_offset,
+                clockwise,
+            });
         }
         let arc = Segment::arc(
             self.prog.clone(),
@@ -164,10 +185,16 @@ impl Executor {
         let pos = self.num(&motion.pos, span, ch)?;
         let feed = match &motion.feed {
             Some(f) => self.num(f, span, ch)?,
-            None => self.modal.feed.ok_or_else(|| err(ids::NC_NO_FEED, format!("independent axis {name}: no FEED")))?,
+            None => self
+                .modal
+                .feed
+                .ok_or_else(|| err(ids::NC_NO_FEED, format!("independent axis {name}: no FEED")))?,
         };
         if feed.is_nan() || feed <= 0.0 {
-            return Err(err(ids::NC_NO_FEED, format!("independent axis {name}: FEED{feed} must be > 0")));
+            return Err(err(
+                ids::NC_NO_FEED,
+                format!("independent axis {name}: FEED{feed} must be > 0"),
+            ));
         }
         let target_pcs = if absolute { pos } else { self.prog[i] + pos };
         let mut prog = self.prog.clone();

@@ -66,6 +66,10 @@ impl VarSource for Vars<'_> {
     }
 
     fn param(&self, n: u32) -> Result<f64, String> {
-        self.exec.params.get(&n).copied().ok_or_else(|| format!("P{n} has no value"))
+        self.exec
+            .params
+            .get(&n)
+            .copied()
+            .ok_or_else(|| format!("P{n} has no value"))
     }
 }

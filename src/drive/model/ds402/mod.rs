@@ -77,9 +77,9 @@
 //!   fits.
 
 pub mod motion;
-pub mod touch_probe;
 #[cfg(test)]
 mod tests;
+pub mod touch_probe;
 
 use self::motion::{Cycle, Wall, SUBSAMPLES};
 use self::touch_probe::{Signal, TouchProbes, NUM_INPUTS};

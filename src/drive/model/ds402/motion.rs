@@ -101,11 +101,7 @@ pub struct Outcome {
 /// Integrate one cycle; `out[k]` is the position at the end of sub-step `k` (not the start).
 /// Non-finite intermediate results stop the motion (the position holds), so garbage never
 /// propagates.
-pub fn integrate(
-    c: &Cycle,
-    mut wall: Option<&mut Wall>,
-    out: &mut [f64; SUBSAMPLES],
-) -> Outcome {
+pub fn integrate(c: &Cycle, mut wall: Option<&mut Wall>, out: &mut [f64; SUBSAMPLES]) -> Outcome {
     let mut outcome = Outcome::default();
     let h = c.dt / SUBSAMPLES as f64;
     let s = (c.r1 - c.r0) / c.dt;

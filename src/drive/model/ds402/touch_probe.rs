@@ -230,7 +230,11 @@ mod tests {
     fn timing_rules() {
         let mut tp = TouchProbes::new(false);
         tp.edge(Signal::Input(1), true, 5);
-        assert_eq!((tp.status(), tp.value(0)), (0, Some(0)), "disabled: nothing");
+        assert_eq!(
+            (tp.status(), tp.value(0)),
+            (0, Some(0)),
+            "disabled: nothing"
+        );
         tp.write_function(0x0011); // TP1 on, first event, input 1, positive edge
         assert_eq!(tp.status(), 0x0001);
         tp.edge(Signal::Input(2), true, 7);
@@ -238,7 +242,10 @@ mod tests {
         assert_eq!(tp.status(), 0x0001, "other input / other edge");
         tp.edge(Signal::Input(1), true, 9);
         tp.edge(Signal::Input(1), true, 10);
-        assert_eq!((tp.status(), tp.value(0), tp.counter(0)), (0x0003, Some(9), Some(1)));
+        assert_eq!(
+            (tp.status(), tp.value(0), tp.counter(0)),
+            (0x0003, Some(9), Some(1))
+        );
         tp.write_function(0x0001); // positive edge off: stored bit goes, value stays
         assert_eq!((tp.status(), tp.value(0)), (0x0001, Some(9)));
         tp.write_function(0x0011); // re-armed
@@ -287,12 +294,20 @@ mod tests {
         assert_eq!((tp.status(), tp.value(0)), (0x0002, Some(5)));
         tp.write_function(0x0011);
         tp.write_function(0x0021);
-        assert_eq!(tp.status(), 0x0002, "same or changed word while enabled: ignored");
+        assert_eq!(
+            tp.status(),
+            0x0002,
+            "same or changed word while enabled: ignored"
+        );
         tp.edge(Signal::Input(1), true, 6);
         assert_eq!(tp.value(0), Some(5));
         tp.write_function(0x0000);
         tp.write_function(0x0021);
-        assert_eq!(tp.status(), 0x0001, "0 -> 1 re-arms with the new configuration");
+        assert_eq!(
+            tp.status(),
+            0x0001,
+            "0 -> 1 re-arms with the new configuration"
+        );
         tp.edge(Signal::Input(1), false, 7);
         assert_eq!((tp.status(), tp.value(1)), (0x0004, Some(7)));
     }

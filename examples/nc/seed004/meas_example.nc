@@ -1,0 +1,10 @@
+%meas_example
+:
+;Measuring probe tool
+;with radius 2 mm
+D1
+:
+G0 X150 Z200
+G100 Z20
+:
+M30
