@@ -76,6 +76,19 @@ pub struct RunReport {
     pub events: Vec<RunEvent>,
     /// Interpolation cycles run.
     pub cycles: u64,
+    /// Measurement results per channel axis at the end of the run (`V.A.MESS` & co.).
+    pub measurements: Vec<AxisMeasurement>,
+}
+
+/// The measurement variables of one axis at the end of a run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisMeasurement {
+    /// `V.A.MESS` & co., `None` when the axis has no measured value.
+    pub result: Option<crate::core::measure::results::AxisResult>,
+    /// `V.A.MERF`.
+    pub merf: bool,
+    /// `V.A.MEIN`.
+    pub mein: f64,
 }
 
 impl RunReport {
@@ -437,11 +450,10 @@ impl Machine {
                 _ => self.step(),
             }
         };
-        RunReport {
-            status,
-            events,
-            cycles: self.channel.cycles() - start_cycles,
-        }
+        let measurements = (0..self.channel.axis_count())
+            .map(|i| AxisMeasurement { result: exec.result(i), merf: exec.merf(i), mein: exec.frames().mein(i) })
+            .collect();
+        RunReport { status, events, cycles: self.channel.cycles() - start_cycles, measurements }
     }
 }
 

@@ -119,6 +119,14 @@ fn report_json(name: &Option<String>, r: &RunReport, m: &Machine) -> serde_json:
                 "lag": ax.lag(),
                 "sls_negative": neg,
                 "sls_positive": pos,
+                "measurement": r.measurements.get(i).map(|m| serde_json::json!({
+                    "mess": m.result.map(|x| x.mess),
+                    "acs": m.result.map(|x| x.acs),
+                    "pcs": m.result.map(|x| x.pcs),
+                    "moffs": m.result.map(|x| x.moffs),
+                    "merf": m.merf,
+                    "mein": m.mein,
+                })),
                 "pcs_limits": ch.pcs_limits(i).map(|p| serde_json::json!({
                     "positive": p.positive, "negative": p.negative,
                     "distance_positive": p.distance_positive, "distance_negative": p.distance_negative,

@@ -273,6 +273,11 @@ impl Executor {
         self.results.get(i).copied().flatten()
     }
 
+    /// `V.A.MERF` of axis `i`.
+    pub fn merf(&self, i: usize) -> bool {
+        self.merf.get(i).copied().unwrap_or(false)
+    }
+
     /// Arithmetic parameter `P<n>`.
     pub fn param(&self, n: u32) -> Option<f64> {
         self.params.get(&n).copied()
