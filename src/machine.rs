@@ -451,9 +451,18 @@ impl Machine {
             }
         };
         let measurements = (0..self.channel.axis_count())
-            .map(|i| AxisMeasurement { result: exec.result(i), merf: exec.merf(i), mein: exec.frames().mein(i) })
+            .map(|i| AxisMeasurement {
+                result: exec.result(i),
+                merf: exec.merf(i),
+                mein: exec.frames().mein(i),
+            })
             .collect();
-        RunReport { status, events, cycles: self.channel.cycles() - start_cycles, measurements }
+        RunReport {
+            status,
+            events,
+            cycles: self.channel.cycles() - start_cycles,
+            measurements,
+        }
     }
 }
 

@@ -269,19 +269,24 @@ impl Channel {
             for a in &axes {
                 let c = &self.cfg.axes[a.axis].meas;
                 let name = self.axes[a.axis].name();
-                let params = c.fixed_stop.ok_or_else(|| {
-                    CncMessage::error(
-                        ids::MEAS_CONFIG,
-                        format!(
-                            "axis {name}: fixed-stop parameters invalid (P-AXIS-00774 … 00778)"
-                        ),
-                    )
-                })?;
-                params.check_measuring_start(name)?;
-                fa.push(FixedStopAxis {
-                    params,
-                    monitored: !self.is_coupled_slave(a.axis),
-                });
+                // Only the moved axes (masters of a gantry) are watched for the stop.
+                let monitored = a.required;
+                let params = match (c.fixed_stop, monitored) {
+                    (Some(p), _) => p,
+                    (None, false) => crate::core::measure::fixed_stop::FixedStopParams::inactive(),
+                    (None, true) => {
+                        return Err(CncMessage::error(
+                            ids::MEAS_CONFIG,
+                            format!(
+                                "axis {name}: fixed-stop parameters invalid (P-AXIS-00774 … 00778)"
+                            ),
+                        ))
+                    }
+                };
+                if monitored {
+                    params.check_measuring_start(name)?;
+                }
+                fa.push(FixedStopAxis { params, monitored });
             }
             Some(FixedStopDetector::new(&fa, target_len).map_err(|e| {
                 e.message(self.axes[axes[0].axis].name())

@@ -153,6 +153,22 @@ pub fn per_mille_error(axis_name: &str, value: i64) -> CncMessage {
 }
 
 impl FixedStopParams {
+    /// Parameters with every criterion off (for axes that are not monitored).
+    pub fn inactive() -> FixedStopParams {
+        FixedStopParams {
+            lag_limit: None,
+            lag_limit_origin: Origin::Default,
+            min_time: Nanos::ZERO,
+            min_time_origin: Origin::Default,
+            start_distance: 0.0,
+            start_distance_origin: Origin::Default,
+            start_per_mille: None,
+            start_per_mille_origin: Origin::Default,
+            max_delta_window: None,
+            max_delta_window_origin: Origin::Default,
+        }
+    }
+
     /// The effective parameters of one axis, with the fallback chains of seed 004 §8.2.2:
     /// * lag limit P-AXIS-00774: 0 = off; < 0 → P-AXIS-00769 if > 0, else P-AXIS-00331
     ///   (0 = off);
