@@ -81,6 +81,8 @@ pub(super) struct MeasAxis {
     handshake: bool,
     /// Position of the axis at the start of the block (fixed-stop start distance).
     start: f64,
+    /// `CNC_DEFINED`: the 0x60D0 write that must finish before the latch is armed.
+    source_sdo: Option<(u64, ProbeRequest)>,
 }
 
 /// State of one measuring block.
@@ -255,6 +257,7 @@ impl Channel {
                 eval,
                 handshake,
                 start: start[i],
+                source_sdo: None,
             });
         }
         if !axes.iter().any(|a| a.required) {
@@ -334,18 +337,21 @@ impl Channel {
     }
 
     /// Arm every source of the run (drive latch units now; confirmation is polled per cycle).
+    /// With `CNC_DEFINED` (P-AXIS-00702) the CNC first writes the probing input into 0x60D0 by
+    /// SDO and arms the latch (source 10b) once the drive has confirmed the write.
     fn arm_sources(&mut self, run: &mut MeasRun) -> Result<(), CncMessage> {
-        for m in &run.axes {
+        for m in &mut run.axes {
             if !m.signal.uses_drive_latch() {
                 continue;
             }
             let c = &self.cfg.axes[m.axis].meas;
-            let probe = if c.trigger_mode == TriggerSourceMode::Default {
+            let mode = c.trigger_mode;
+            let probe = if mode == TriggerSourceMode::Default {
                 m.input.clamp(1, 2)
             } else {
                 1
             };
-            let trigger = match c.trigger_mode {
+            let trigger = match mode {
                 TriggerSourceMode::Default => ProbeTrigger::Input,
                 _ => ProbeTrigger::SourceObject,
             };
@@ -354,10 +360,26 @@ impl Channel {
                 edge: m.edge,
                 trigger,
                 continuous: false,
-                source_mode: c.trigger_mode,
+                source_mode: mode,
                 input: m.input,
             };
             let name = self.axes[m.axis].name().to_string();
+            if mode == TriggerSourceMode::CncDefined {
+                let what = format!(
+                    "0x60D0:{probe:02} = {} (P-AXIS-00702 CNC_DEFINED, axis {name})",
+                    m.input
+                );
+                let id = self.queue_acyclic(
+                    m.axis,
+                    0x60D0,
+                    probe,
+                    super::acyclic::AcyclicOp::Write(i64::from(m.input)),
+                    false,
+                    &what,
+                );
+                m.source_sdo = Some((id, req));
+                continue;
+            }
             self.axes[m.axis].arm_probe(&req).map_err(|e| {
                 CncMessage::error(
                     ids::MEAS_LATCH,
@@ -376,6 +398,7 @@ impl Channel {
             if m.signal.uses_drive_latch() {
                 self.axes[m.axis].disarm_probe();
             }
+            self.plc[m.axis].measuring_r = false;
             if m.handshake {
                 if let Some(c) = self.ext_latch[m.axis].as_mut() {
                     // A refused DISABLE (another task still waiting) is owed and written at the
@@ -397,6 +420,7 @@ impl Channel {
                     for m in &mut run.axes {
                         if let Some(e) = m.eval.as_mut() {
                             e.arm(now, &self.plc[m.axis]);
+                            self.plc[m.axis].measuring_r = true;
                         }
                     }
                 }
@@ -415,6 +439,38 @@ impl Channel {
                                         ),
                                     ));
                                 }
+                            }
+                        }
+                    }
+                }
+                for m in &mut run.axes {
+                    if let Some((id, req)) = m.source_sdo {
+                        match self.take_acyclic_result(id) {
+                            None => {
+                                all = false;
+                                continue;
+                            }
+                            Some(Ok(_)) => {
+                                m.source_sdo = None;
+                                let name = self.axes[m.axis].name().to_string();
+                                if let Err(e) = self.axes[m.axis].arm_probe(&req) {
+                                    return MeasStep::Fail(
+                                        CncMessage::error(
+                                            ids::MEAS_LATCH,
+                                            format!("axis {name}: cannot arm the drive latch: {e}"),
+                                        )
+                                        .on_axis(&name),
+                                    );
+                                }
+                                all = false;
+                                continue;
+                            }
+                            // The channel reported the failed write already and is stopping.
+                            Some(Err(e)) => {
+                                return MeasStep::Fail(CncMessage::error(
+                                    ids::MEAS_LATCH,
+                                    format!("0x60D0 write failed: {e}"),
+                                ));
                             }
                         }
                     }

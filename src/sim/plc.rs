@@ -190,6 +190,8 @@ pub struct ScriptedPlc {
     hw: SimProbeState,
     enabled_at: Nanos,
     latched: bool,
+    /// Last seen `measuring_r`.
+    saw_measuring: bool,
     ext_event: bool,
     last_timestamp: Option<i64>,
     acks: u64,
@@ -213,6 +215,7 @@ impl ScriptedPlc {
             hw: SimProbeState::Off,
             enabled_at: Nanos::ZERO,
             latched: false,
+            saw_measuring: false,
             ext_event: false,
             last_timestamp: None,
             acks: 0,
@@ -268,8 +271,13 @@ impl ScriptedPlc {
         self.ext_event = false;
     }
 
-    /// One NC step up to `now`: queue the step's edges, run every PLC cycle ≤ `now`.
+    /// One NC step up to `now`: queue the step's edges, run every PLC cycle ≤ `now`. A rising
+    /// `measuring_r` (the CNC armed a measurement) clears the first-event latch.
     pub fn step(&mut self, now: Nanos, inputs: &dyn ProbeInputs, plc: &mut AxisPlc) {
+        if plc.measuring_r && !self.saw_measuring {
+            self.latched = false;
+        }
+        self.saw_measuring = plc.measuring_r;
         let probe = self.config.probe;
         let queue = &mut self.queue;
         let dropped = &mut self.dropped;

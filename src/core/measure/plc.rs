@@ -134,6 +134,11 @@ pub struct AxisPlc {
     pub probing_position: ControlUnit<f64>,
     /// External-latch handshake (`PLC_EXT_LATCH_CONTROL`, `EXT_PROBE_WITH_DRIVE`).
     pub ext_latch: ExtLatchInterface,
+    /// CNC → PLC: a measuring block of this axis is armed and waiting for the probing signal
+    /// (project interpretation; the seed names no such datum). A PLC that latches the first
+    /// probe event itself (`PLC_FIRST_EVENT`) clears its latch on the rising edge, so an event
+    /// from before the measurement is never taken as the measured one.
+    pub measuring_r: bool,
 }
 
 impl AxisPlc {
