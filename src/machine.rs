@@ -139,6 +139,25 @@ pub struct Machine {
     plcs: Vec<Option<ScriptedPlc>>,
     /// Warnings of the configuration, reported at the first run (e.g. 110757).
     startup: Vec<CncMessage>,
+    /// Recorded trace (`--trace`), when enabled.
+    trace: Option<Trace>,
+}
+
+/// A recorded run: positions per cycle, probe edges and latched values (for `--trace`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trace {
+    /// Axis names.
+    pub axes: Vec<String>,
+    /// Time of each sample in s.
+    pub t: Vec<f64>,
+    /// Command position per axis per sample (mm / °).
+    pub command: Vec<Vec<f64>>,
+    /// Actual position per axis per sample.
+    pub actual: Vec<Vec<f64>>,
+    /// Probe signal edges: (time s, rising).
+    pub edges: Vec<(f64, bool)>,
+    /// Latched values: (time s, axis, position).
+    pub latches: Vec<(f64, usize, f64)>,
 }
 
 impl Machine {
@@ -216,6 +235,7 @@ impl Machine {
             zero_offsets,
             plcs: (0..cfg.axes.len()).map(|_| None).collect(),
             startup,
+            trace: None,
         })
     }
 
@@ -299,6 +319,29 @@ impl Machine {
         Ok(())
     }
 
+    /// Start recording a [`Trace`] (every cycle from now on).
+    pub fn enable_trace(&mut self) {
+        let axes: Vec<String> = self
+            .channel
+            .axes()
+            .iter()
+            .map(|a| a.name().to_string())
+            .collect();
+        let n = axes.len();
+        self.trace = Some(Trace {
+            axes,
+            command: vec![Vec::new(); n],
+            actual: vec![Vec::new(); n],
+            ..Trace::default()
+        });
+        self.channel.record_latches(true);
+    }
+
+    /// The recorded trace, if enabled.
+    pub fn trace(&self) -> Option<&Trace> {
+        self.trace.as_ref()
+    }
+
     /// The simulated PLC of axis `i`, if it has one (test knobs: acknowledge script, period).
     pub fn sim_plc_mut(&mut self, i: usize) -> Option<&mut ScriptedPlc> {
         self.plcs.get_mut(i).and_then(Option::as_mut)
@@ -346,6 +389,19 @@ impl Machine {
                 self.channel.cycle(self.now, &mut self.images)
             }
             Err(e) => self.channel.link_lost(&e),
+        }
+        if let Some(tr) = self.trace.as_mut() {
+            tr.t.push(self.now.as_secs_f64());
+            for (i, a) in self.channel.axes().iter().enumerate() {
+                tr.command[i].push(a.command());
+                tr.actual[i].push(a.actual());
+            }
+            for e in self.link.plant().last_edges() {
+                tr.edges.push((e.at.as_secs_f64(), e.rising));
+            }
+            for (t, axis, p) in self.channel.take_latch_log() {
+                tr.latches.push((t.as_secs_f64(), axis, p));
+            }
         }
         // Acyclic requests (#DRIVE, #IDENT) go over the link's mailbox.
         for req in self.channel.take_acyclic_requests() {

@@ -252,3 +252,23 @@ fn jog_subcommand_reports_limit_and_warning() {
         stdout(&o)
     );
 }
+
+#[test]
+fn trace_svg_is_written_with_latch_marked() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("run.svg");
+    let o = fieldprobe(&[
+        "run",
+        "examples/nc/seed004/meas1.nc",
+        "--probe-at",
+        "Z=100",
+        "--trace",
+        svg.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<svg"), "an SVG document");
+    assert!(text.contains("Z position [mm]") && text.contains("Z velocity [mm/s]"));
+    // The latched value is written next to its marker.
+    assert!(text.contains("100.000000"), "latched value labelled");
+}

@@ -552,6 +552,9 @@ impl Channel {
                             let mut settle = Vec::new();
                             for m in &mut run.axes {
                                 let p = self.axes[m.axis].actual();
+                                if let Some(log) = self.latch_log.as_mut() {
+                                    log.push((now, m.axis, p));
+                                }
                                 m.latched = Some((p, now));
                                 m.before_target = s < run.target_len - 1e-9;
                                 settle.push((m.axis, p));
@@ -568,6 +571,9 @@ impl Channel {
                         if m.latched.is_none() {
                             m.latched = Some((pos, now));
                             m.before_target = s < run.target_len - 1e-9;
+                            if let Some(log) = self.latch_log.as_mut() {
+                                log.push((now, axis, pos));
+                            }
                         }
                     }
                 }
@@ -692,6 +698,19 @@ impl Channel {
             .iter()
             .flatten()
             .any(|slot| run_has(slot.motion()))
+    }
+
+    /// Record latched values for a trace (`--trace`).
+    pub fn record_latches(&mut self, on: bool) {
+        self.latch_log = on.then(Vec::new);
+    }
+
+    /// Latched values recorded since the last call: (time, axis, ACS position).
+    pub fn take_latch_log(&mut self) -> Vec<(Nanos, usize, f64)> {
+        self.latch_log
+            .as_mut()
+            .map(std::mem::take)
+            .unwrap_or_default()
     }
 
     /// The outcome of the last measuring block, taken once.

@@ -238,6 +238,8 @@ pub struct Channel {
     ext_latch: Vec<Option<crate::core::measure::plc::ExtLatchClient>>,
     /// Time of the current cycle.
     now: Nanos,
+    /// Latches recorded for a trace (`None`: not recording).
+    latch_log: Option<Vec<(Nanos, usize, f64)>>,
 }
 
 impl Channel {
@@ -283,6 +285,7 @@ impl Channel {
             plc: vec![Default::default(); n],
             ext_latch: vec![None; n],
             now: Nanos::ZERO,
+            latch_log: None,
         })
     }
 

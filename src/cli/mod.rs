@@ -10,6 +10,7 @@
 mod jog;
 mod params;
 mod run;
+mod trace;
 
 use clap::{Parser, Subcommand};
 

@@ -31,6 +31,10 @@ pub struct RunArgs {
     /// Print one JSON document on stdout instead of the `#MSG` lines.
     #[arg(long)]
     json: bool,
+    /// Draw the run into an SVG file: position and velocity per axis over time, probe edges and
+    /// latched values marked.
+    #[arg(long, value_name = "FILE.svg")]
+    trace: Option<PathBuf>,
 }
 
 fn parse_axis_pos(opt: &str, s: &str) -> anyhow::Result<(String, f64)> {
@@ -82,6 +86,9 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         eprintln!("{file}:{}:{}: {msg}", span.line, span.col);
         return Ok(EXIT_BAD_INPUT);
     }
+    if a.trace.is_some() {
+        machine.enable_trace();
+    }
     let json = a.json;
     let stdout = std::io::stdout();
     let report = machine.run_program(&program, &mut |e| match e {
@@ -92,6 +99,9 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         RunEvent::Message(m) => eprintln!("{m}"),
         RunEvent::Output(_) => {}
     });
+    if let (Some(path), Some(tr)) = (&a.trace, machine.trace()) {
+        super::trace::write_svg(tr, path).with_context(|| format!("--trace {}", path.display()))?;
+    }
     if json {
         println!(
             "{}",

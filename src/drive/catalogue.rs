@@ -16,7 +16,8 @@
 //!
 //! [rxpdo]                                 # master -> drive, default = CSP mapping
 //! entries = ["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"]
-//! defaults = { "0x2000:01" = 1 }          # written by the adapter to objects it does not drive
+//! # defaults = { "0x6072:00" = 3000 }     # values the adapter writes to mapped objects it does
+//! #                                       # not drive (only with 0x6072 in `entries`)
 //!
 //! [txpdo]                                 # drive -> master
 //! entries = ["0x6041:00", "0x6064:00", "0x60F4:00", "0x6061:00", "0x60B9:00",

@@ -77,15 +77,16 @@
 //!   fits.
 
 pub mod motion;
+mod objects;
+mod power;
 #[cfg(test)]
 mod tests;
 pub mod touch_probe;
 
 use self::motion::{Cycle, Wall, SUBSAMPLES};
 use self::touch_probe::{Signal, TouchProbes, NUM_INPUTS};
-use super::abort;
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::pdo::{self, PdoLayout};
+use crate::drive::pdo::PdoLayout;
 use crate::drive::PowerState;
 use crate::units::Nanos;
 
@@ -105,34 +106,6 @@ const DEFAULT_TORQUE_LIMIT: u16 = 3000;
 /// At most this many encoder zero pulses are evaluated per step (a garbage set-point jump must
 /// not make a step loop for long); more in one cycle are dropped.
 const MAX_ZERO_PULSES_PER_STEP: usize = 1024;
-
-/// Controlword command (CiA 402 §6.3 Table "command coding").
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Command {
-    Shutdown,
-    SwitchOn,
-    EnableOperation,
-    DisableVoltage,
-    QuickStop,
-    /// Bit 7 set: only the fault reset edge counts.
-    None,
-}
-
-fn decode_command(cw: u16) -> Command {
-    if cw & 0x0002 == 0 {
-        Command::DisableVoltage
-    } else if cw & 0x0004 == 0 {
-        Command::QuickStop
-    } else if cw & 0x0080 != 0 {
-        Command::None
-    } else if cw & 0x0001 == 0 {
-        Command::Shutdown
-    } else if cw & 0x0008 == 0 {
-        Command::SwitchOn
-    } else {
-        Command::EnableOperation
-    }
-}
 
 /// Drive side of a CiA 402 servo in CSP mode (see the module documentation).
 #[derive(Debug, Clone, PartialEq)]
@@ -392,57 +365,6 @@ impl Ds402Model {
         }
     }
 
-    fn apply_controlword(&mut self) {
-        use PowerState::*;
-        let cw = self.controlword;
-        let bit7 = cw & 0x0080 != 0;
-        let edge = bit7 && !self.prev_bit7;
-        self.prev_bit7 = bit7;
-        let cmd = decode_command(cw);
-        if cmd != Command::EnableOperation || self.state != SwitchedOn {
-            self.enable_count = 0;
-        }
-        let next = match (self.state, cmd) {
-            (Fault, _) if edge => {
-                // Transition 15: fault reset.
-                self.fe_flag = false;
-                self.fe_over_ns = 0;
-                SwitchOnDisabled
-            }
-            (SwitchOnDisabled, Command::Shutdown) => ReadyToSwitchOn,
-            (ReadyToSwitchOn, Command::SwitchOn | Command::EnableOperation) => SwitchedOn,
-            (ReadyToSwitchOn | SwitchedOn, Command::DisableVoltage | Command::QuickStop) => {
-                SwitchOnDisabled
-            }
-            (SwitchedOn, Command::Shutdown) => ReadyToSwitchOn,
-            (SwitchedOn, Command::EnableOperation) => {
-                self.enable_count += 1;
-                if self.enable_count > self.enable_delay_cycles {
-                    self.enable_count = 0;
-                    OperationEnabled
-                } else {
-                    SwitchedOn
-                }
-            }
-            (OperationEnabled, Command::SwitchOn) => SwitchedOn,
-            (OperationEnabled, Command::Shutdown) => ReadyToSwitchOn,
-            (OperationEnabled | QuickStopActive, Command::DisableVoltage) => SwitchOnDisabled,
-            (OperationEnabled, Command::QuickStop) => QuickStopActive,
-            (QuickStopActive, Command::EnableOperation) => OperationEnabled,
-            (s, _) => s,
-        };
-        if next == OperationEnabled && self.state != OperationEnabled {
-            // Start the set-point ramp at the actual position.
-            self.prev_target = self.position;
-            self.fe_over_ns = 0;
-        }
-        self.state = next;
-    }
-
-    fn following(&self) -> bool {
-        self.state == PowerState::OperationEnabled && self.mode == MODE_CSP
-    }
-
     /// Effective torque limits (‰) for positive and negative torque (CiA 402 0x6072, 0x60E0,
     /// 0x60E1).
     fn torque_limits(&self) -> (f64, f64) {
@@ -588,36 +510,6 @@ impl Ds402Model {
         }
     }
 
-    /// Statusword 0x6041 as the drive reports it now.
-    pub fn statusword(&self) -> u16 {
-        use PowerState::*;
-        let state_bits: u16 = match self.state {
-            NotReadyToSwitchOn => return 0x0000,
-            SwitchOnDisabled => 0x0040,
-            ReadyToSwitchOn => 0x0021,
-            SwitchedOn => 0x0023,
-            OperationEnabled => 0x0027,
-            QuickStopActive => 0x0007,
-            FaultReactionActive => 0x000F,
-            Fault => 0x0008,
-            Unknown(sw) => sw,
-        };
-        let mut sw = state_bits | 0x0010 | 0x0200; // voltage enabled, remote
-        if self.following() {
-            sw |= 0x1000; // drive follows the command value (CSP)
-            if self.following_error().unsigned_abs() <= self.position_window {
-                sw |= 0x0400; // target reached
-            }
-            if self.limited {
-                sw |= 0x0800; // internal limit active
-            }
-        }
-        if self.fe_flag {
-            sw |= 0x2000;
-        }
-        sw
-    }
-
     /// Position actual value 0x6064 (rounded, saturated to `INTEGER32`).
     fn position_actual(&self) -> i32 {
         round_i32(self.position + self.disturbance)
@@ -630,84 +522,6 @@ impl Ds402Model {
         }
         let fe = i64::from(self.target) - i64::from(self.position_actual());
         fe.clamp(i32::MIN.into(), i32::MAX.into()) as i32
-    }
-
-    /// Read an object (SDO upload / CoE). Errors are CiA 301 abort codes ([`abort`]).
-    pub fn read_object(&self, index: u16, sub: u8) -> Result<i64, u32> {
-        Ok(match (index, sub) {
-            (0x603F, 0) => self.error_code.into(),
-            (0x6040, 0) => self.controlword.into(),
-            (0x6041, 0) => self.statusword().into(),
-            (0x6060, 0) | (0x6061, 0) => self.mode.into(),
-            (0x6064, 0) => self.position_actual().into(),
-            (0x6065, 0) => self.fe_window.into(),
-            (0x6066, 0) => self.fe_timeout_ms.into(),
-            (0x6067, 0) => self.position_window.into(),
-            (0x606C, 0) => round_i32(self.velocity).into(),
-            (0x6072, 0) => self.max_torque.into(),
-            (0x6077, 0) => (self.torque.round() as i16).into(),
-            (0x607A, 0) => self.target.into(),
-            (0x60B8, 0) => self.probes.function().into(),
-            (0x60B9, 0) => self.probes.status().into(),
-            (0x60BA..=0x60BD, 0) => self
-                .probes
-                .value(usize::from(index - 0x60BA))
-                .unwrap_or(0)
-                .into(),
-            (0x60D0, 0) => 2,
-            (0x60D0, 1 | 2) => self.probes.source(sub).unwrap_or(0).into(),
-            (0x60D5..=0x60D8, 0) => self
-                .probes
-                .counter(usize::from(index - 0x60D5))
-                .unwrap_or(0)
-                .into(),
-            (0x60E0, 0) => self.torque_limit_pos.into(),
-            (0x60E1, 0) => self.torque_limit_neg.into(),
-            (0x60F4, 0) => self.following_error().into(),
-            (0x6502, 0) => SUPPORTED_DRIVE_MODES.into(),
-            (i, _) => return Err(missing(i)),
-        })
-    }
-
-    /// Write an object (SDO download / CoE). Read-only objects abort with 0x06010002, values
-    /// outside the data type (or an unsupported mode of operation) with 0x06090030.
-    pub fn write_object(&mut self, index: u16, sub: u8, value: i64) -> Result<(), u32> {
-        let info = pdo::lookup(index, sub).ok_or_else(|| missing(index))?;
-        if matches!(
-            (index, sub),
-            (
-                0x603F | 0x6041 | 0x6061 | 0x6064 | 0x606C | 0x6077 | 0x60B9 | 0x60F4 | 0x6502,
-                0
-            ) | (0x60BA..=0x60BD, 0)
-                | (0x60D5..=0x60D8, 0)
-                | (0x60D0, 0)
-        ) {
-            return Err(abort::READ_ONLY);
-        }
-        if !info.ty.contains(value) {
-            return Err(abort::VALUE_RANGE);
-        }
-        // In range of the object's type, so the narrowing casts below are exact.
-        match (index, sub) {
-            (0x6040, 0) => self.controlword = value as u16,
-            (0x6060, 0) => {
-                if !SUPPORTED_MODES.contains(&(value as i8)) {
-                    return Err(abort::VALUE_RANGE);
-                }
-                self.mode = value as i8;
-            }
-            (0x6065, 0) => self.fe_window = value as u32,
-            (0x6066, 0) => self.fe_timeout_ms = value as u16,
-            (0x6067, 0) => self.position_window = value as u32,
-            (0x6072, 0) => self.max_torque = value as u16,
-            (0x607A, 0) => self.target = value as i32,
-            (0x60B8, 0) => self.probes.write_function(value as u16),
-            (0x60D0, 1 | 2) => self.probes.set_source(sub, value as i16),
-            (0x60E0, 0) => self.torque_limit_pos = value as u16,
-            (0x60E1, 0) => self.torque_limit_neg = value as u16,
-            _ => return Err(abort::NO_OBJECT),
-        }
-        Ok(())
     }
 
     /// Power state now (NOT READY TO SWITCH ON until the first step).
@@ -779,14 +593,6 @@ fn interpolate(traj: &[(Nanos, f64)], t: Nanos) -> Option<f64> {
     }
     let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
     Some(xa + (xb - xa) * f)
-}
-
-fn missing(index: u16) -> u32 {
-    if pdo::OBJECTS.iter().any(|o| o.index == index) {
-        abort::NO_SUB_INDEX
-    } else {
-        abort::NO_OBJECT
-    }
 }
 
 fn round_i32(v: f64) -> i32 {

@@ -1,8 +1,10 @@
 //! Unit tests of the CiA 402 drive model (module-private parts; the end-to-end behaviour is
 //! tested through the adapter in `tests/ds402.rs` and `tests/touch_probe.rs`).
 
+use super::power::{decode_command, Command};
 use super::*;
 use crate::drive::catalogue;
+use crate::drive::model::abort;
 
 fn model() -> Ds402Model {
     Ds402Model::new(&catalogue::builtin("cia402-generic").unwrap())
