@@ -246,9 +246,9 @@ impl Channel {
         } else {
             f64::INFINITY
         };
-        for i in 0..n {
-            if dir[i].abs() > 1e-12 {
-                ext = ext.min(self.cfg.axes[i].meas.overtravel / dir[i].abs());
+        for (d, c) in dir.iter().zip(&self.cfg.axes) {
+            if d.abs() > 1e-12 {
+                ext = ext.min(c.meas.overtravel / d.abs());
             }
         }
         if !ext.is_finite() {
@@ -272,13 +272,11 @@ impl Channel {
             };
             let bound = if dir[i] > 0.0 { pos } else { neg };
             let s_cut = ((bound - start[i]) / dir[i]).max(0.0);
-            if s_cut < total {
-                if s_cut >= len || limit_target {
-                    if s_cut < len {
-                        limited = true;
-                    }
-                    total = s_cut;
+            if s_cut < total && (s_cut >= len || limit_target) {
+                if s_cut < len {
+                    limited = true;
                 }
+                total = s_cut;
             }
         }
         let target_len = len.min(total);
