@@ -483,7 +483,10 @@ impl Machine {
             }
             match self.channel.state() {
                 ChannelState::Aborted => break RunStatus::Aborted,
-                ChannelState::Idle if ended => break RunStatus::Completed,
+                ChannelState::Idle if ended => {
+                    self.channel.program_end();
+                    break RunStatus::Completed;
+                }
                 ChannelState::Idle => {
                     let step = exec.step(&mut self.channel, &mut out);
                     for Event::Output(line) in out.drain(..) {

@@ -810,6 +810,23 @@ impl Channel {
         Ok(())
     }
 
+    /// Program end (seed 004 §7.2 Notice): the preparation of all prepared axes is reset.
+    pub fn program_end(&mut self) {
+        for c in self.ext_latch.iter_mut().flatten() {
+            c.clear_preparation();
+        }
+        self.prepared.iter_mut().for_each(|p| *p = false);
+    }
+
+    /// Homing of axis `i` (G74): resets the preparation of every prepared axis when `i` was
+    /// prepared (seed 004 §7.2 Notice).
+    pub fn homing(&mut self, i: usize) {
+        if self.prepared.get(i).copied().unwrap_or(false) {
+            self.program_end();
+        }
+        self.set_referenced(i, true);
+    }
+
     /// The PLC interface of axis `i` (control units and the external-latch handshake) — what a
     /// machine builder's PLC glue reads and writes between cycles.
     pub fn plc(&self, i: usize) -> Option<&crate::core::measure::plc::AxisPlc> {

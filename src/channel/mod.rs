@@ -435,6 +435,17 @@ impl Channel {
         for a in &mut self.axes {
             a.set_fault_reset(true);
         }
+        // CNC reset: a pending PLC task is withdrawn and preparations cleared (seed 004 §7.2: "If
+        // a reset is executed between preparation and the actual measuring block, the probe is
+        // enabled as normal at the start of the measuring block").
+        for (c, p) in self.ext_latch.iter_mut().zip(self.plc.iter_mut()) {
+            if let Some(c) = c {
+                c.cnc_reset(&mut p.ext_latch);
+            }
+            p.measuring_r = false;
+        }
+        self.prepared.iter_mut().for_each(|p| *p = false);
+        self.measurement = None;
     }
 
     /// Mark axis `i` referenced or not.
