@@ -121,7 +121,7 @@ impl Channel {
             return Prepared::Rejected;
         }
         let meas = match &measure {
-            Some(mreq) => match self.prepare_measurement(mreq, &segment, target_len) {
+            Some(mreq) => match self.prepare_measurement(mreq, &segment, target_len, true) {
                 Ok(mut run) => {
                     run.limited_at_sls = limited;
                     Some(Box::new(run))

@@ -134,6 +134,7 @@ impl Channel {
         req: &MeasureRequest,
         segment: &Segment,
         target_len: f64,
+        only_moved: bool,
     ) -> Result<MeasRun, CncMessage> {
         let n = self.axes.len();
         let start = segment.start();
@@ -203,7 +204,9 @@ impl Channel {
                 )
                 .on_axis(self.axes[i].name()));
             }
-            if !c.enabled {
+            // An independent axis measures alone: the other axes' latches belong to their own
+            // runs.
+            if !c.enabled || (only_moved && !required) {
                 continue;
             }
             let ov = req.overrides.iter().rev().find(|o| o.axis == i);

@@ -149,7 +149,7 @@ impl Channel {
             }
         }
         let meas = match &req.measure {
-            Some(mreq) => match self.prepare_measurement(mreq, &segment, target_len) {
+            Some(mreq) => match self.prepare_measurement(mreq, &segment, target_len, false) {
                 Ok(mut run) => {
                     run.limited_at_sls = limited;
                     Some(Box::new(run))
