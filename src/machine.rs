@@ -278,28 +278,25 @@ impl Machine {
         surface.active_high = cfg.axes[i].meas.edge == ProbeEdge::Positive;
         let probe = self.link.plant_mut().add_probe_surface(surface);
         let cycle = self.cycle;
-        for (j, c) in cfg.axes.iter().enumerate() {
-            let mode = match c.meas.signal {
-                SignalSource::Plc
-                | SignalSource::PlcTimestamp
-                | SignalSource::ExtProbeWithDrive => SimPlcMode::Signal,
-                SignalSource::PlcFirstEvent => SimPlcMode::FirstEventLatch { edge: c.meas.edge },
-                SignalSource::PlcExtLatchControl => SimPlcMode::ExtLatchControl,
-                _ => continue,
-            };
+        let signals: Vec<(SignalSource, ProbeEdge)> = cfg
+            .axes
+            .iter()
+            .map(|c| (c.meas.signal, c.meas.edge))
+            .collect();
+        for (j, (signal, edge)) in signals.into_iter().enumerate() {
             if self.plcs[j].is_some() {
                 continue;
             }
+            // Every axis gets a PLC on the first probe; its mode follows the source the axis
+            // measures with (configured, or a #MEAS override while a run is armed).
             let mut pc = SimPlcConfig::new(cycle);
             pc.probe = probe;
-            pc.mode = mode;
-            if c.meas.signal == SignalSource::PlcTimestamp {
-                pc.timestamp = Some(TimestampOutput {
-                    clock: DcClock::default(),
-                    terminal_delay_ns: 0,
-                    edge: c.meas.edge,
-                });
-            }
+            pc.mode = sim_plc_mode(signal, edge);
+            pc.timestamp = Some(TimestampOutput {
+                clock: DcClock::default(),
+                terminal_delay_ns: 0,
+                edge,
+            });
             self.plcs[j] = Some(ScriptedPlc::new(pc));
         }
         Ok(probe)
@@ -374,6 +371,15 @@ impl Machine {
         match self.link.exchange(self.now, &mut self.images) {
             Ok(()) => {
                 for i in 0..self.plcs.len() {
+                    if let (Some(plc), Some(src)) =
+                        (self.plcs[i].as_mut(), self.channel.armed_signal(i))
+                    {
+                        let edge = self.channel.config().axes[i].meas.edge;
+                        let mode = sim_plc_mode(src, edge);
+                        if plc.config().mode != mode {
+                            plc.config_mut().mode = mode;
+                        }
+                    }
                     if let Some(plc) = self.plcs[i].as_mut() {
                         let sc = self.channel.axes()[i].scaling();
                         let inputs = AxisInputs {
@@ -636,5 +642,14 @@ impl ProbeInputs for AxisInputs<'_> {
     fn crossing_position(&self, edge: &InputEdge) -> Option<f64> {
         let inc = self.link.models().get(self.device)?.position_at(edge.at)?;
         Some(inc / self.scaling.increments_per_unit + self.scaling.offset)
+    }
+}
+
+/// What the simulated PLC puts on `probing_signal` for a signal source.
+fn sim_plc_mode(signal: SignalSource, edge: ProbeEdge) -> SimPlcMode {
+    match signal {
+        SignalSource::PlcFirstEvent => SimPlcMode::FirstEventLatch { edge },
+        SignalSource::PlcExtLatchControl => SimPlcMode::ExtLatchControl,
+        _ => SimPlcMode::Signal,
     }
 }

@@ -123,6 +123,10 @@ impl Channel {
                     MotionStep::Running(m) => self.mode = Mode::Moving(m),
                     MotionStep::Done => self.mode = Mode::Idle,
                     MotionStep::Fail => self.begin_stop(ChannelState::Aborted),
+                    MotionStep::FailAtRest => {
+                        self.drop_independent();
+                        self.mode = Mode::Aborted;
+                    }
                 }
             }
         }
@@ -269,7 +273,7 @@ impl Channel {
                     }
                     if let Err(msg) = self.finish_measurement(*run, false) {
                         self.push(msg);
-                        return MotionStep::Fail;
+                        return MotionStep::FailAtRest;
                     }
                     return MotionStep::Done;
                 }
@@ -319,11 +323,26 @@ impl Channel {
         if !done {
             return MotionStep::Running(m);
         }
+        if let Some(run) = m.meas.as_mut() {
+            if !run.end_settled(&self.axes) {
+                return MotionStep::Running(m);
+            }
+        }
         if let Some(run) = m.meas.take() {
             let reached = m.braking.is_none();
-            if let Err(msg) = self.finish_measurement(*run, reached) {
-                self.push(msg);
-                return MotionStep::Fail;
+            match self.finish_measurement(*run, reached) {
+                Ok(settle) => {
+                    for (i, p) in settle {
+                        if only.is_none() || only == Some(i) {
+                            self.next[i] = p;
+                        }
+                    }
+                }
+                Err(msg) => {
+                    // The block is at its end and at rest: stop here, without braking on.
+                    self.push(msg);
+                    return MotionStep::FailAtRest;
+                }
             }
         }
         MotionStep::Done
@@ -343,6 +362,15 @@ impl Channel {
         }
         if let Some(run) = abandoned {
             self.disarm_sources(&run);
+        }
+        let moving = matches!(
+            self.mode,
+            Mode::Moving(_) | Mode::Manual(_) | Mode::Stopping { .. }
+        ) || self.indp.iter().any(Option::is_some);
+        if !moving {
+            // At rest (e.g. an error right after a block ended): the velocity of the block's last
+            // set-point must not carry the axes on.
+            self.velocity.iter_mut().for_each(|v| *v = 0.0);
         }
         self.drop_independent();
         let brakes = self
@@ -366,6 +394,8 @@ pub(super) enum MotionStep {
     Running(Box<Motion>),
     /// Finished (at standstill).
     Done,
-    /// Aborted with an error (already queued).
+    /// Aborted with an error (already queued); brake from the current motion.
     Fail,
+    /// Ended at rest with an error (already queued): no braking needed.
+    FailAtRest,
 }

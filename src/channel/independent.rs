@@ -120,6 +120,24 @@ impl Channel {
             self.begin_stop(ChannelState::Aborted);
             return Prepared::Rejected;
         }
+        if measure.is_some() {
+            // A path measurement of the same block must leave this axis's latch to this run
+            // (seed 004 §2: independent measurement "in parallel to a path motion of a G100").
+            let released = match &mut self.mode {
+                Mode::Moving(m) => m.meas.as_mut().map_or(true, |run| run.release_axis(axis)),
+                _ => true,
+            };
+            if !released {
+                self.report(
+                    CncMessage::error(
+                        ids::MEAS_CONFIG,
+                        format!("axis {name} must latch for the path measurement"),
+                    )
+                    .on_axis(&name),
+                );
+                return Prepared::Rejected;
+            }
+        }
         let meas = match &measure {
             Some(mreq) => match self.prepare_measurement(mreq, &segment, target_len, true) {
                 Ok(mut run) => {
@@ -175,7 +193,7 @@ impl Channel {
                     })
                 }
                 MotionStep::Done => {}
-                MotionStep::Fail => {
+                MotionStep::Fail | MotionStep::FailAtRest => {
                     self.begin_stop(ChannelState::Aborted);
                     return;
                 }

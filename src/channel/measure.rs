@@ -28,6 +28,10 @@ use crate::drive::{ProbeEdge, ProbeRequest, ProbeState, ProbeTrigger, TriggerSou
 use crate::messages::{ids, CncMessage};
 use crate::units::Nanos;
 
+/// A lag below this (mm, one 0.1 µm increment) counts as none when an undetected type-7 run
+/// ends (P-CHAN-00266 = 1).
+const SETTLE_LAG: f64 = 1e-4;
+
 /// Cycles a measuring block may wait for its sources to confirm the arming (1 s at 1 ms).
 pub const ARMING_TIMEOUT_CYCLES: u32 = 1000;
 
@@ -101,6 +105,13 @@ pub(super) struct MeasRun {
     event_s: Option<f64>,
     /// Fixed-stop detection (type 7) over the run's axes, in run-axis order.
     fixed: Option<FixedStopDetector>,
+    /// Actual positions of the previous cycle while waiting for standstill at the end of an
+    /// undetected type-7 run.
+    settle_prev: Option<Vec<f64>>,
+    /// Cycles waited for standstill.
+    settle_cycles: u32,
+    /// Consecutive cycles without change of the actual positions.
+    settle_still: u32,
     /// Sources armed (first arming cycle done).
     armed_once: bool,
 }
@@ -123,6 +134,51 @@ impl MeasRun {
     /// Axis `i` takes part in this run.
     fn has_axis(&self, i: usize) -> bool {
         self.axes.iter().any(|a| a.axis == i)
+    }
+
+    /// At the end of a type-7 path the block ends once the axes are at rest (detection still
+    /// running); without a detected stop and with P-CHAN-00266 = 1 the CNC then goes to the actual
+    /// position "to eliminate a possible position lag" (§8.2.1) — in free air the target itself.
+    /// True when the block may end.
+    pub(super) fn end_settled(&mut self, axes: &[crate::axis::Axis]) -> bool {
+        if self.mtype != MeasType::Type7 || self.complete() {
+            return true;
+        }
+        // Detection goes on after the path end until the axes are at rest (P-AXIS-00777 = 1000
+        // activates it only there): the lag has gone (free air) or the actual positions have not
+        // changed for 50 cycles (pressed against something, quantised to increments).
+        let now: Vec<f64> = self.axes.iter().map(|a| axes[a.axis].actual()).collect();
+        let no_lag = self
+            .axes
+            .iter()
+            .all(|a| axes[a.axis].lag().abs() <= SETTLE_LAG);
+        let unchanged = self
+            .settle_prev
+            .as_ref()
+            .is_some_and(|p| p.iter().zip(&now).all(|(a, b)| a == b));
+        self.settle_still = if unchanged { self.settle_still + 1 } else { 0 };
+        self.settle_prev = Some(now);
+        self.settle_cycles += 1;
+        no_lag || self.settle_still >= 50 || self.settle_cycles > ARMING_TIMEOUT_CYCLES
+    }
+
+    /// The axes that still have a lag to eliminate after an undetected type-7 run.
+    pub(super) fn lagging_axes(&self, axes: &[crate::axis::Axis]) -> Vec<(usize, f64)> {
+        self.axes
+            .iter()
+            .filter(|a| axes[a.axis].lag().abs() > SETTLE_LAG)
+            .map(|a| (a.axis, axes[a.axis].actual()))
+            .collect()
+    }
+
+    /// Leave axis `i` to another run (an independent measuring motion of the same block): it is
+    /// neither armed nor read by this one any more. Returns false when `i` must latch here.
+    pub(super) fn release_axis(&mut self, i: usize) -> bool {
+        if self.axes.iter().any(|a| a.axis == i && a.required) {
+            return false;
+        }
+        self.axes.retain(|a| a.axis != i);
+        true
     }
 }
 
@@ -313,6 +369,9 @@ impl Channel {
             event_s: None,
             fixed,
             armed_once: false,
+            settle_prev: None,
+            settle_cycles: 0,
+            settle_still: 0,
         };
         self.arm_sources(&mut run)?;
         Ok(run)
@@ -612,12 +671,15 @@ impl Channel {
     }
 
     /// The block is over (standstill): disarm, decide about errors, publish the outcome. An
-    /// error (missing signal per type) is returned; nothing is published then.
+    /// error (missing signal per type) is returned; nothing is published then. Returns the
+    /// positions some axes must move to at once: a type-7 run without detected stop and
+    /// P-CHAN-00266 = 1 "goes to the position of the current axis actual value … to eliminate a
+    /// possible position lag" (§8.2.1).
     pub(super) fn finish_measurement(
         &mut self,
         mut run: MeasRun,
         target_reached: bool,
-    ) -> Result<(), CncMessage> {
+    ) -> Result<Vec<(usize, f64)>, CncMessage> {
         run.phase = Phase::Done;
         self.disarm_sources(&run);
         let n = self.axes.len();
@@ -657,6 +719,12 @@ impl Channel {
                 return Err(e);
             }
         }
+        let settle: Vec<(usize, f64)> =
+            if run.mtype == MeasType::Type7 && !complete && self.cfg.meas.fixed_stop_no_error {
+                run.lagging_axes(&self.axes)
+            } else {
+                Vec::new()
+            };
         let mut latched = vec![None; n];
         let mut merf = vec![false; n];
         let mut involved = vec![false; n];
@@ -685,7 +753,27 @@ impl Channel {
             Some(old) => merge_outcomes(old, new),
             None => new,
         });
-        Ok(())
+        Ok(settle)
+    }
+
+    /// The signal source axis `i` measures with in a running (armed) measurement, if any — with
+    /// `#MEAS [AXNR=.. SIGNAL=..]` overrides applied.
+    pub fn armed_signal(&self, i: usize) -> Option<SignalSource> {
+        let of = |m: &super::Motion| {
+            m.meas
+                .as_ref()
+                .and_then(|r| r.axes.iter().find(|a| a.axis == i).map(|a| a.signal))
+        };
+        let path = match &self.mode {
+            super::Mode::Moving(m) => of(m),
+            _ => None,
+        };
+        path.or_else(|| {
+            self.indp
+                .iter()
+                .flatten()
+                .find_map(|slot| of(slot.motion()))
+        })
     }
 
     /// Axis `i` is in a running measurement to a fixed stop (type 7).

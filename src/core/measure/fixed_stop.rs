@@ -344,19 +344,22 @@ impl FixedStopDetector {
         if !block_length.is_finite() || block_length < 0.0 {
             return Err(FixedStopError::InvalidBlockLength(block_length));
         }
-        for (i, a) in axes.iter().enumerate() {
+        for (i, a) in axes.iter().enumerate().filter(|(_, a)| a.monitored) {
             if let Some(v) = a.params.start_per_mille.filter(|v| *v > MAX_PER_MILLE) {
                 return Err(FixedStopError::PerMilleTooLarge { axis: i, value: v });
             }
-            if a.monitored && !a.params.has_criterion() {
+            if !a.params.has_criterion() {
                 return Err(FixedStopError::NoCriterion { axis: i });
             }
         }
         if !axes.iter().any(|a| a.monitored) {
             return Err(FixedStopError::NoMonitoredAxis);
         }
+        // "When measuring with several axes, the smallest block motion path of all axes involved
+        // in the measurement is used" — the axes watched for the stop (§8.2.2 P-AXIS-00776).
         let activation = axes
             .iter()
+            .filter(|a| a.monitored)
             .map(|a| a.params.activation_distance(block_length))
             .fold(f64::INFINITY, f64::min);
         Ok(FixedStopDetector {
