@@ -602,6 +602,7 @@ pub fn channel_meas_config(p: &ParamSet) -> ChannelMeasConfig {
         fixed_stop_no_error: p.int("P-CHAN-00266") != 0,
         limit_at_sls: p.int("P-CHAN-00268") != 0,
         pcs_without_radius: p.int("P-CHAN-00311") != 0,
+        plc_cycle: None,
     }
 }
 

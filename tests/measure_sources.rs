@@ -802,6 +802,7 @@ fn reset_between_prepare_and_measuring_block_enables_as_normal() {
 
 fn ts_config(dead: DeadTimes) -> TimestampConfig {
     TimestampConfig {
+        signal_window: None,
         edge: ProbeEdge::Positive,
         cycle: Nanos(T_NC),
         capacity: 32,
@@ -1702,6 +1703,7 @@ proptest! {
                 capacity,
                 dead,
                 clock: DcClock::new(offset),
+                signal_window: Some(Nanos(0)),
             },
         };
         let mut evs: Vec<SourceEvaluator> = [
@@ -1769,6 +1771,57 @@ proptest! {
                 2 => plc.clear_latch(),
                 _ => { let _ = client.prepare(&mut axis.ext_latch, Nanos(now)); }
             }
+        }
+    }
+}
+
+#[test]
+fn timestamp_outside_the_signal_window_is_inconsistent() {
+    use fieldprobe::core::measure::plc::{
+        AxisPlc, SignalEvaluator, SourceError, TimestampEvaluator,
+    };
+    // NC cycle 1 ms, synchronous PLC (no slack). The signal is inactive at 10 ms and seen active
+    // at 11 ms: the edge must lie in (10 ms, 11 ms].
+    let clock = DcClock::new(0);
+    let cfg = TimestampConfig {
+        signal_window: Some(Nanos(0)),
+        ..ts_config(DeadTimes::default())
+    };
+    for (edge_ns, ok) in [
+        (10_500_000i64, true),
+        (11_000_000, true),
+        (9_500_000, false),
+        (11_500_000, false),
+    ] {
+        let mut ev = TimestampEvaluator::new(TimestampConfig { clock, ..cfg });
+        let mut plc = AxisPlc::default();
+        plc.probing_signal.plc_command(false);
+        plc.timestamp.plc_command(0);
+        let mut result = None;
+        for k in 0..=14u64 {
+            let now = Nanos(k * 1_000_000);
+            if k == 0 {
+                ev.arm(now, &plc);
+            }
+            if k == 11 {
+                plc.probing_signal.plc_command(true);
+                plc.timestamp
+                    .plc_command(clock.dc_time(Nanos(edge_ns as u64)));
+            }
+            let pos = k as f64; // 1 mm per ms
+            if let Some(r) = ev.update(now, pos, &plc).transpose() {
+                result = Some(r);
+                break;
+            }
+        }
+        match (ok, result) {
+            (true, Some(Ok(e))) => assert!(
+                (e.position - edge_ns as f64 / 1e6).abs() < 1e-9,
+                "{edge_ns}: {}",
+                e.position
+            ),
+            (false, Some(Err(SourceError::InconsistentTimestamp { .. }))) => {}
+            (ok, r) => panic!("edge {edge_ns} (ok {ok}): {r:?}"),
         }
     }
 }

@@ -143,23 +143,29 @@ fn shifted(shift_ns: i64) -> impl Fn(&mut Machine) {
 }
 
 #[test]
-fn a_timestamp_one_cycle_off_is_a_value_off_by_v_t() {
-    // Constant-velocity part of the block: the path (111.8 mm) accelerates over at most
-    // v²/(2a) = 12.4 mm (10 m/min, a = 1118 mm/s² on the path) and decelerates over as much at
-    // the end, and the actual lags the command by v/kv ≤ 4.2 mm; Z = 45 and 61 (path 50 and
-    // 68 mm) lie in the cruise at every feed here.
+fn a_timestamp_one_cycle_off_is_detected() {
+    // A terminal whose timestamps are one NC cycle late or early (a dead time the CNC does not
+    // know of) contradicts its own probing signal: the edge would lie after the cycle in which
+    // the signal was first seen active, or before the last cycle it was seen inactive. The
+    // measuring block fails with 900043 and publishes nothing, instead of a value off by v·T.
     for feed in [1000.0, 3000.0, 6000.0, 10000.0] {
-        let v_z = feed / 60.0 * z_share();
         for p in [45.0123, 61.0009] {
-            let what = format!("F{feed} p {p}");
-            // One cycle late: the position one cycle after the crossing, ahead by v·T.
-            let r = sweep_run("PLC_TIMESTAMP", feed, p, &shifted(1_000_000));
-            let (_, z) = latched(&r, &what);
-            within(&format!("{what} +T"), z, p + v_z * T, timestamp_bound());
-            // One cycle early: behind by v·T.
-            let r = sweep_run("PLC_TIMESTAMP", feed, p, &shifted(-1_000_000));
-            let (_, z) = latched(&r, &what);
-            within(&format!("{what} −T"), z, p - v_z * T, timestamp_bound());
+            for shift in [1_000_000, -1_000_000] {
+                let what = format!("F{feed} p {p} shift {shift}");
+                let r = sweep_run("PLC_TIMESTAMP", feed, p, &shifted(shift));
+                assert_eq!(r.status, RunStatus::Aborted, "{what}");
+                assert_eq!(r.message_ids(), vec![900043], "{what}: {:?}", r.messages());
+                assert!(
+                    r.messages()[0].text.contains("outside the window"),
+                    "{what}"
+                );
+                assert_eq!(r.measurements[Z].result, None, "{what}");
+            }
+            // Within the signal's window (a sub-cycle terminal delay) it is accepted.
+            let r = sweep_run("PLC_TIMESTAMP", feed, p, &shifted(500));
+            let (_, z) = latched(&r, &format!("F{feed} p {p} 0.5 µs"));
+            let v_z = feed / 60.0 * z_share();
+            within("0.5 µs late", z, p + v_z * 500e-9, timestamp_bound());
         }
     }
 }
@@ -199,6 +205,7 @@ fn timestamp_beats_sampling_by_orders_of_magnitude_at_speed() {
     // The PLC period shows in the sampled value, not in the timestamp.
     let slow = |m: &mut Machine| {
         m.sim_plc_mut(Z).unwrap().config_mut().period = Nanos(4_000_000);
+        m.channel_mut().set_plc_cycle(Some(Nanos(4_000_000)));
     };
     let (_, ts4) = latched(&sweep_run("PLC_TIMESTAMP", 10000.0, p, &slow), "TS 4 ms");
     within("timestamp with a 4 ms PLC", ts4, p, timestamp_bound());

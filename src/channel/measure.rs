@@ -284,6 +284,12 @@ impl Channel {
                         capacity: 64,
                         dead: DeadTimes::default(),
                         clock: DcClock::default(),
+                        signal_window: Some(crate::units::Nanos(
+                            self.cfg
+                                .meas
+                                .plc_cycle
+                                .map_or(0, |p| p.0.saturating_sub(self.cfg.cycle.0)),
+                        )),
                     },
                 },
             );
@@ -899,6 +905,12 @@ impl Channel {
             .map_err(|e| CncMessage::error(ids::MEAS_LATCH, format!("#MEAS PREPARE: {e}")))?;
         self.prepared[axis] = true;
         Ok(())
+    }
+
+    /// The cycle of the PLC that delivers the probing signal (`None`: the NC cycle). A PLC
+    /// slower than the NC cycle widens the window in which a `PLC_TIMESTAMP` must lie.
+    pub fn set_plc_cycle(&mut self, cycle: Option<Nanos>) {
+        self.cfg.meas.plc_cycle = cycle;
     }
 
     /// Program end (seed 004 §7.2 Notice): the preparation of all prepared axes is reset.

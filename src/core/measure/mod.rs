@@ -219,6 +219,9 @@ pub struct ChannelMeasConfig {
     pub limit_at_sls: bool,
     /// P-CHAN-00311 `meas_pcs_value_no_probe_radius`: leave the ball radius out of the PCS value.
     pub pcs_without_radius: bool,
+    /// Cycle of the PLC that feeds the probing signal (project setting): a PLC slower than the
+    /// NC cycle widens the window a `PLC_TIMESTAMP` must lie in. `None`: the NC cycle.
+    pub plc_cycle: Option<crate::units::Nanos>,
 }
 
 impl Default for ChannelMeasConfig {
@@ -232,6 +235,7 @@ impl Default for ChannelMeasConfig {
             fixed_stop_no_error: false,
             limit_at_sls: false,
             pcs_without_radius: false,
+            plc_cycle: None,
         }
     }
 }

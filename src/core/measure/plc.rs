@@ -614,6 +614,17 @@ pub enum SourceError {
     /// `PLC_TIMESTAMP`: back-calculation failed.
     #[error("PLC_TIMESTAMP: {0}")]
     Timestamp(TimestampError),
+    /// `PLC_TIMESTAMP`: the timestamp lies outside the window in which the probing signal
+    /// changed (DC ns): the timestamp is off (wrong dead time, stale or future value).
+    #[error("PLC_TIMESTAMP: timestamp {edge} ns is outside the window ({low}, {high}] ns in which the probing signal changed")]
+    InconsistentTimestamp {
+        /// Event time from the timestamp (dead times removed).
+        edge: i64,
+        /// Last DC time the signal was seen inactive (less the slack).
+        low: i64,
+        /// DC time the signal was first seen active.
+        high: i64,
+    },
 }
 
 /// One evaluator per PLC signal source. Call [`update`](Self::update) every CNC cycle, armed or
@@ -887,6 +898,12 @@ pub struct TimestampConfig {
     pub dead: DeadTimes,
     /// Virtual time ↔ DC time.
     pub clock: DcClock,
+    /// Check the timestamp against the probing signal: the edge must lie after the last cycle
+    /// in which the signal was seen inactive (less this slack — the PLC period beyond the NC
+    /// cycle when the PLC samples asynchronously) and not after the cycle in which it was first
+    /// seen active. A timestamp that contradicts its own signal (e.g. one cycle off) is
+    /// [`SourceError::InconsistentTimestamp`]. `None`: no check.
+    pub signal_window: Option<Nanos>,
 }
 
 /// Cycles an edge may wait for a fresh timestamp (beyond the wait for the bracketing sample).
@@ -914,6 +931,10 @@ pub struct TimestampEvaluator {
     last_ts: Option<i64>,
     pending: Option<u32>,
     max_wait: u32,
+    /// DC time of the last cycle with the signal at its inactive level.
+    last_inactive: Option<i64>,
+    /// Window (low, high] of the pending edge.
+    window: Option<(i64, i64)>,
 }
 
 impl TimestampEvaluator {
@@ -930,6 +951,8 @@ impl TimestampEvaluator {
             last_ts: None,
             pending: None,
             max_wait: bracket + STALE_WAIT_CYCLES,
+            last_inactive: None,
+            window: None,
         }
     }
 
@@ -959,11 +982,17 @@ impl TimestampEvaluator {
         let level = plc.probing_signal();
         let edge = is_edge(self.config.edge, self.prev, level);
         self.prev = level;
+        let active_level = self.config.edge == ProbeEdge::Positive;
+        let last_inactive = self.last_inactive;
+        if level != active_level {
+            self.last_inactive = Some(dc_time);
+        }
         if !self.armed {
             return Ok(None);
         }
         if edge && self.pending.is_none() {
             self.pending = Some(0);
+            self.window = Some((last_inactive.unwrap_or(i64::MIN), dc_time));
         }
         let Some(waited) = self.pending else {
             return Ok(None);
@@ -988,11 +1017,21 @@ impl TimestampEvaluator {
         }
         self.pending = None;
         self.last_ts = Some(ts);
+        let event_time = ts.saturating_sub(self.buffer.dead_times().event_shift());
+        if let (Some(slack), Some((low, high))) = (self.config.signal_window, self.window.take()) {
+            let low = low.saturating_sub(i64::try_from(slack.0).unwrap_or(i64::MAX));
+            if event_time <= low || event_time > high {
+                return Err(SourceError::InconsistentTimestamp {
+                    edge: event_time,
+                    low,
+                    high,
+                });
+            }
+        }
         let est = self
             .buffer
             .estimate_at(ts)
             .map_err(SourceError::Timestamp)?;
-        let event_time = ts.saturating_sub(self.buffer.dead_times().event_shift());
         Ok(Some(SourceEvent {
             position: est.position,
             at: self.config.clock.to_nanos(event_time),
