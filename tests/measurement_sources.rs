@@ -198,6 +198,8 @@ fn plc_timestamp_does_not_depend_on_the_plc_period() {
     let mut m = machine(&["Z.kenngr.measure.signal=PLC_TIMESTAMP"]);
     m.add_probe("Z", P).unwrap();
     m.sim_plc_mut(Z).unwrap().config_mut().period = Nanos(4_000_000);
+    // The CNC is told the PLC's cycle: the signal-consistency window widens accordingly.
+    m.channel_mut().set_plc_cycle(Some(Nanos(4_000_000)));
     close(
         "timestamp",
         latched(&run(&mut m, &down_program(6000.0))),
