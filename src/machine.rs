@@ -15,8 +15,6 @@ use crate::core::measure::{
 };
 use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
 use crate::drive::catalogue;
-use crate::drive::ds402::Ds402Adapter;
-use crate::drive::model::ds402::Ds402Model;
 use crate::drive::DriveError;
 use crate::drive::ProbeEdge;
 use crate::link::sim::SimLink;
@@ -180,14 +178,15 @@ impl Machine {
                 drive: a.drive.clone(),
                 source,
             })?;
-            let adapter = Ds402Adapter::new(&def).map_err(|source| MachineError::Drive {
+            let drive_err = |source| MachineError::Drive {
                 axis: a.name.clone(),
                 drive: a.drive.clone(),
                 source,
-            })?;
-            let model = Ds402Model::new(&def);
+            };
+            let adapter = crate::drive::adapter_for(&def).map_err(drive_err)?;
+            let model = crate::drive::model::for_definition(&def).map_err(drive_err)?;
             let scaling = def.scaling;
-            let axis = Axis::new(a.name.clone(), Box::new(adapter), scaling, a.referenced)
+            let axis = Axis::new(a.name.clone(), adapter, scaling, a.referenced)
                 .with_definition(std::sync::Arc::new(def));
             images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
             axes.push(axis);
@@ -226,7 +225,7 @@ impl Machine {
             .collect();
         Ok(Machine {
             channel,
-            link: SimLink::new(models, cycle),
+            link: SimLink::from_models(models, cycle),
             images,
             now: Nanos::ZERO,
             cycle,

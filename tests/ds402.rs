@@ -78,7 +78,7 @@ impl Rig {
     }
 
     fn model(&mut self) -> &mut Ds402Model {
-        self.link.model_mut(0).expect("model 0")
+        self.link.model_as::<Ds402Model>(0).expect("model 0")
     }
 
     /// Power up with the standard sequence (asserted in `power_on_to_operation_enabled`).
@@ -272,14 +272,14 @@ fn lost_exchange_leaves_inputs_and_models_alone() {
     cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => ReadyToSwitchOn, 0x07);
     let inputs = rig.images[0].inputs.clone();
-    let model = rig.link.models()[0].clone();
+    let model = rig.link.model_ref_as::<Ds402Model>(0).unwrap().clone();
     let err = rig.link.exchange(rig.now, &mut rig.images).unwrap_err();
     assert!(
         matches!(err, LinkError::Lost { at, .. } if at == rig.now),
         "{err}"
     );
     assert_eq!(rig.images[0].inputs, inputs);
-    assert_eq!(rig.link.models()[0], model);
+    assert_eq!(rig.link.model_ref_as::<Ds402Model>(0).unwrap(), &model);
     assert_eq!(rig.link.exchanges(), 3);
     // The next exchange goes through and the sequence continues where it was.
     cycle!(rig => SwitchedOn, 0x0F);

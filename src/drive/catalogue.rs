@@ -59,6 +59,14 @@ use toml_edit::{ImDocument, Item, TableLike, Value};
 pub enum Profile {
     /// CiA 402 (CANopen / CoE): [`super::ds402::Ds402Adapter`], [`super::model::ds402::Ds402Model`].
     Cia402,
+    /// SERCOS (SoE, AX5000 kind): real-time control / status bits, probe IDNs (seed 004 §6.1).
+    Sercos,
+    /// PROFIdrive (telegrams 3 / 5 / 102 / 105, encoder interface G1_STW / G1_ZSW, seed 004 §6.5).
+    Profidrive,
+    /// Beckhoff Lightbus (AX2000, digital input 2 as probe input, seed 004 §6.2).
+    Lightbus,
+    /// Terminal drive with a KL5101 / EL5101 encoder terminal as position feedback (§6.3).
+    Terminal,
 }
 
 impl Profile {
@@ -66,7 +74,25 @@ impl Profile {
     pub const fn name(self) -> &'static str {
         match self {
             Profile::Cia402 => "cia402",
+            Profile::Sercos => "sercos",
+            Profile::Profidrive => "profidrive",
+            Profile::Lightbus => "lightbus",
+            Profile::Terminal => "terminal",
         }
+    }
+
+    /// Every profile, in drive-file spelling order.
+    pub const ALL: [Profile; 5] = [
+        Profile::Cia402,
+        Profile::Sercos,
+        Profile::Profidrive,
+        Profile::Lightbus,
+        Profile::Terminal,
+    ];
+
+    /// The profile of a drive-file name.
+    pub fn from_name(name: &str) -> Option<Profile> {
+        Profile::ALL.into_iter().find(|p| p.name() == name)
     }
 }
 
@@ -267,6 +293,9 @@ pub struct DriveDefinition {
     pub name: String,
     /// `[drive] profile`.
     pub profile: Profile,
+    /// The whole file text: a family module parses its own section (`[sercos]`, `[profidrive]`,
+    /// `[lightbus]`, `[terminal]`) from it, with line numbers.
+    pub source: String,
     /// Where the definition came from (file path or `builtin:NAME`).
     pub file: String,
     /// `[scaling]`.
@@ -356,6 +385,11 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
             "probe",
             "functions",
             "idn",
+            // The family's own section, parsed by its module from `DriveDefinition::source`.
+            "sercos",
+            "profidrive",
+            "lightbus",
+            "terminal",
         ],
     )?;
 
@@ -364,15 +398,32 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
         drive.ok_or_else(|| cx.err(None, "missing table [drive] (name, profile)".into()))?;
     cx.check_keys(drive.1, "[drive]", &["name", "profile"])?;
     let name = cx.req_str(&drive, "[drive]", "name")?;
-    let profile = match cx.req_str(&drive, "[drive]", "profile")?.as_str() {
-        "cia402" => Profile::Cia402,
-        other => {
+    let profile_name = cx.req_str(&drive, "[drive]", "profile")?;
+    let profile = Profile::from_name(&profile_name).ok_or_else(|| {
+        let allowed: Vec<String> = Profile::ALL
+            .iter()
+            .map(|p| format!("\"{}\"", p.name()))
+            .collect();
+        cx.err(
+            cx.value_span(drive.1, "profile"),
+            format!(
+                "[drive] profile: unknown profile \"{profile_name}\"; allowed: {}",
+                allowed.join(", ")
+            ),
+        )
+    })?;
+    for p in Profile::ALL {
+        if p != profile && p != Profile::Cia402 && root.contains_key(p.name()) {
             return Err(cx.err(
-                cx.value_span(drive.1, "profile"),
-                format!("[drive] profile: unknown profile \"{other}\"; allowed: \"cia402\""),
-            ))
+                root.get(p.name()).and_then(|i| i.span()),
+                format!(
+                    "[{}] does not belong to a drive of profile \"{}\"",
+                    p.name(),
+                    profile.name()
+                ),
+            ));
         }
-    };
+    }
 
     let scaling = cx
         .table(root, "scaling", None)?
@@ -400,10 +451,15 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
 
     let (rxpdo, rxpdo_defaults) = cx.pdo(root, "rxpdo", pdo::DEFAULT_RXPDO, true)?;
     let (txpdo, _) = cx.pdo(root, "txpdo", pdo::DEFAULT_TXPDO, false)?;
-    for (layout, table, needed) in [
-        (&rxpdo, "rxpdo", [0x6040, 0x607A]),
-        (&txpdo, "txpdo", [0x6041, 0x6064]),
-    ] {
+    let needed_pdo: &[(&PdoLayout, &str, [u16; 2])] = if profile == Profile::Cia402 {
+        &[
+            (&rxpdo, "rxpdo", [0x6040, 0x607A]),
+            (&txpdo, "txpdo", [0x6041, 0x6064]),
+        ]
+    } else {
+        &[]
+    };
+    for &(layout, table, needed) in needed_pdo {
         for index in needed {
             if !layout.contains(index, 0) {
                 let span = root
@@ -424,6 +480,7 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
     Ok(DriveDefinition {
         name,
         profile,
+        source: text.to_string(),
         file: file.to_string(),
         scaling,
         rxpdo,

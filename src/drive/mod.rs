@@ -220,3 +220,16 @@ pub trait DriveAdapter: Send + fmt::Debug {
         None
     }
 }
+
+/// The master-side adapter for a drive definition (by its profile).
+pub fn adapter_for(def: &catalogue::DriveDefinition) -> Result<Box<dyn DriveAdapter>, DriveError> {
+    use catalogue::Profile;
+    match def.profile {
+        Profile::Cia402 => Ok(Box::new(ds402::Ds402Adapter::new(def)?)),
+        other => Err(DriveError::Unsupported(format!(
+            "drive '{}': no adapter for profile {} yet",
+            def.name,
+            other.name()
+        ))),
+    }
+}

@@ -1,9 +1,9 @@
 //! In-memory link to drive models.
 //!
 //! [`SimLink`] stands in for a bus: each exchange hands every axis's output image to its
-//! [`Ds402Model`] and lets the model write the input image, one model step per exchange with the
+//! [`DriveModel`] and lets the model write the input image, one model step per exchange with the
 //! link's cycle time. The images are laid out as the drives' PDO mappings
-//! ([`Ds402Model::rx_len`] / [`Ds402Model::tx_len`]).
+//! ([`DriveModel::rx_len`] / [`DriveModel::tx_len`]).
 //!
 //! # One exchange at `now`
 //!
@@ -11,12 +11,12 @@
 //!
 //! 1. the [`Plant`]'s fixed stops are applied to the models when they changed, and every wired
 //!    input gets its surface's level at the cycle start as a static level (no edge);
-//! 2. every model runs [`Ds402Model::begin_step`] (RxPDO decoded, position loop advanced,
+//! 2. every model runs [`DriveModel::begin_step`] (RxPDO decoded, position loop advanced,
 //!    trajectory recorded);
 //! 3. the plant finds the probe-surface edges inside the cycle from the probed devices'
 //!    trajectories ([`Plant::advance`]) and every edge goes to every wired `(device, input)` with
-//!    [`Ds402Model::input_edge`], in time order;
-//! 4. every model runs [`Ds402Model::finish_step`] (TxPDO written).
+//!    [`DriveModel::input_edge`], in time order;
+//! 4. every model runs [`DriveModel::finish_step`] (TxPDO written).
 //!
 //! Acyclic access ([`Link::read_object`] / [`Link::write_object`]) goes straight to the model's
 //! object dictionary, as an SDO / CoE mailbox transfer between two cycles would; refusals come
@@ -27,15 +27,15 @@
 //! models and the plant not stepped, as a lost EtherCAT frame would.
 
 use super::{Link, LinkError, ProcessImage};
-use crate::drive::model::ds402::Ds402Model;
+use crate::drive::model::DriveModel;
 use crate::sim::plant::Plant;
 use crate::units::Nanos;
 use std::collections::BTreeSet;
 
-/// A link whose drives are [`Ds402Model`]s in memory (sans-IO; the caller supplies `now`).
-#[derive(Debug, Clone)]
+/// A link whose drives are [`DriveModel`]s in memory (sans-IO; the caller supplies `now`).
+#[derive(Debug)]
 pub struct SimLink {
-    models: Vec<Ds402Model>,
+    models: Vec<Box<dyn DriveModel>>,
     cycle: Nanos,
     exchanges: u64,
     lose: BTreeSet<u64>,
@@ -48,13 +48,27 @@ pub struct SimLink {
 impl SimLink {
     /// A link to `models` (image `i` belongs to model `i`) stepping them by `cycle` per exchange,
     /// with an empty plant.
-    pub fn new(models: Vec<Ds402Model>, cycle: Nanos) -> Self {
+    pub fn new<M: DriveModel + 'static>(models: Vec<M>, cycle: Nanos) -> Self {
         SimLink::with_plant(models, cycle, Plant::new())
+    }
+
+    /// A link to drive models of any profile (boxed), with an empty plant.
+    pub fn from_models(models: Vec<Box<dyn DriveModel>>, cycle: Nanos) -> Self {
+        SimLink::boxed_with_plant(models, cycle, Plant::new())
     }
 
     /// A link to `models` with `plant` around them (probe surfaces, fixed stops). Fixed stops
     /// are applied to the models at once.
-    pub fn with_plant(models: Vec<Ds402Model>, cycle: Nanos, plant: Plant) -> Self {
+    pub fn with_plant<M: DriveModel + 'static>(models: Vec<M>, cycle: Nanos, plant: Plant) -> Self {
+        let boxed = models
+            .into_iter()
+            .map(|m| Box::new(m) as Box<dyn DriveModel>)
+            .collect();
+        SimLink::boxed_with_plant(boxed, cycle, plant)
+    }
+
+    /// [`with_plant`](Self::with_plant) for boxed models of any profile.
+    pub fn boxed_with_plant(models: Vec<Box<dyn DriveModel>>, cycle: Nanos, plant: Plant) -> Self {
         let n = models.len();
         let mut link = SimLink {
             models,
@@ -86,18 +100,28 @@ impl SimLink {
     }
 
     /// The drive models, in image order.
-    pub fn models(&self) -> &[Ds402Model] {
+    pub fn models(&self) -> &[Box<dyn DriveModel>] {
         &self.models
     }
 
     /// The drive models, mutable (plant and fault knobs).
-    pub fn models_mut(&mut self) -> &mut [Ds402Model] {
+    pub fn models_mut(&mut self) -> &mut [Box<dyn DriveModel>] {
         &mut self.models
     }
 
     /// Model `i`, if there is one.
-    pub fn model_mut(&mut self, i: usize) -> Option<&mut Ds402Model> {
-        self.models.get_mut(i)
+    pub fn model_mut(&mut self, i: usize) -> Option<&mut (dyn DriveModel + 'static)> {
+        self.models.get_mut(i).map(|m| m.as_mut())
+    }
+
+    /// Model `i` as its concrete type `T` (e.g. `Ds402Model`), if it is one.
+    pub fn model_as<T: 'static>(&mut self, i: usize) -> Option<&mut T> {
+        self.models.get_mut(i)?.as_any_mut().downcast_mut::<T>()
+    }
+
+    /// Model `i` as its concrete type `T`, shared.
+    pub fn model_ref_as<T: 'static>(&self, i: usize) -> Option<&T> {
+        self.models.get(i)?.as_any().downcast_ref::<T>()
     }
 
     /// The plant (probe surfaces, fixed stops, the last cycle's probe edges).
@@ -146,7 +170,7 @@ impl SimLink {
         }
     }
 
-    fn device(&mut self, device: usize) -> Result<&mut Ds402Model, LinkError> {
+    fn device(&mut self, device: usize) -> Result<&mut Box<dyn DriveModel>, LinkError> {
         let n = self.models.len();
         self.models.get_mut(device).ok_or_else(|| {
             LinkError::Other(format!("device {device}: not on the link ({n} devices)"))
@@ -180,9 +204,9 @@ impl Link for SimLink {
         let start = Nanos(now.0.saturating_sub(self.cycle.0));
         let models = &mut self.models;
         let edges = {
-            let view: &[Ds402Model] = models;
+            let view: &[Box<dyn DriveModel>] = models;
             self.plant
-                .advance(start, now, |d| view.get(d).map(Ds402Model::trajectory))
+                .advance(start, now, |d| view.get(d).map(|m| m.trajectory()))
                 .to_vec()
         };
         for e in &edges {

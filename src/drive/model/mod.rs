@@ -6,6 +6,151 @@
 
 pub mod ds402;
 
+use super::PowerState;
+use crate::units::Nanos;
+use std::fmt;
+
+/// The drive side of one profile, as the in-memory link and the emulators drive it (sans-IO).
+///
+/// One exchange at `now` covers the cycle `[now − dt, now]`: [`begin_step`](Self::begin_step)
+/// decodes the output image and moves the axis (recording the trajectory), the plant then
+/// delivers probe edges inside the cycle with [`input_edge`](Self::input_edge), and
+/// [`finish_step`](Self::finish_step) writes the input image. Positions are drive increments.
+/// Acyclic access (`read_object` / `write_object`) addresses the profile's parameters: CiA 402
+/// objects `index:sub`; for SERCOS the IDN number in `index` (bit 15 P-/S-IDN, bits 12–14 the
+/// parameter set); for PROFIdrive the PNU in `index` with `sub` as its sub-index. Refusals are
+/// CiA 301 abort codes ([`abort`]).
+pub trait DriveModel: Send + fmt::Debug {
+    /// Bytes of the output image the model reads.
+    fn rx_len(&self) -> usize;
+    /// Bytes of the input image the model writes.
+    fn tx_len(&self) -> usize;
+    /// Decode the output image and advance the axis over the cycle ending at `now`.
+    fn begin_step(&mut self, now: Nanos, dt_s: f64, rx: &[u8]);
+    /// A digital-input edge at `at` inside the current cycle (probe signal).
+    fn input_edge(&mut self, input: u8, rising: bool, at: Nanos);
+    /// Write the input image of this cycle.
+    fn finish_step(&mut self, tx: &mut [u8]);
+    /// `begin_step` and `finish_step` without edges.
+    fn step(&mut self, now: Nanos, dt_s: f64, rx: &[u8], tx: &mut [u8]) {
+        self.begin_step(now, dt_s, rx);
+        self.finish_step(tx);
+    }
+    /// Trajectory of the last cycle: (time, position in increments).
+    fn trajectory(&self) -> &[(Nanos, f64)];
+    /// Position (increments) at `t` within the last cycle.
+    fn position_at(&self, t: Nanos) -> Option<f64>;
+    /// Static level of a digital input.
+    fn set_input_level(&mut self, input: u8, level: bool);
+    /// Level of a digital input (`None`: no such input).
+    fn input_level(&self, input: u8) -> Option<bool>;
+    /// A mechanical wall at this position (increments), or none.
+    fn set_fixed_stop(&mut self, position: Option<f64>);
+    /// The wall, if any.
+    fn fixed_stop(&self) -> Option<f64>;
+    /// Power state in the common state model.
+    fn state(&self) -> PowerState;
+    /// Last error code (profile-specific; CiA 402 0x603F style).
+    fn last_error_code(&self) -> u16;
+    /// Actual position (increments, including the disturbance).
+    fn actual(&self) -> f64;
+    /// Put the axis at this actual position (increments).
+    fn set_actual(&mut self, inc: f64);
+    /// Constant offset of the reported position (collision / overshoot emulation).
+    fn set_disturbance(&mut self, offset_inc: f64);
+    /// Force a drive fault with this error code.
+    fn inject_fault(&mut self, code: u16);
+    /// Acyclic read.
+    fn read_object(&self, index: u16, sub: u8) -> Result<i64, u32>;
+    /// Acyclic write.
+    fn write_object(&mut self, index: u16, sub: u8, value: i64) -> Result<(), u32>;
+    /// The concrete model (for profile-specific test and plant knobs).
+    fn as_any(&self) -> &dyn std::any::Any;
+    /// The concrete model, mutable.
+    fn as_any_mut(&mut self) -> &mut dyn std::any::Any;
+}
+
+impl DriveModel for ds402::Ds402Model {
+    fn rx_len(&self) -> usize {
+        ds402::Ds402Model::rx_len(self)
+    }
+    fn tx_len(&self) -> usize {
+        ds402::Ds402Model::tx_len(self)
+    }
+    fn begin_step(&mut self, now: Nanos, dt_s: f64, rx: &[u8]) {
+        ds402::Ds402Model::begin_step(self, now, dt_s, rx)
+    }
+    fn input_edge(&mut self, input: u8, rising: bool, at: Nanos) {
+        ds402::Ds402Model::input_edge(self, input, rising, at)
+    }
+    fn finish_step(&mut self, tx: &mut [u8]) {
+        ds402::Ds402Model::finish_step(self, tx)
+    }
+    fn trajectory(&self) -> &[(Nanos, f64)] {
+        ds402::Ds402Model::trajectory(self)
+    }
+    fn position_at(&self, t: Nanos) -> Option<f64> {
+        ds402::Ds402Model::position_at(self, t)
+    }
+    fn set_input_level(&mut self, input: u8, level: bool) {
+        ds402::Ds402Model::set_input_level(self, input, level)
+    }
+    fn input_level(&self, input: u8) -> Option<bool> {
+        ds402::Ds402Model::input_level(self, input)
+    }
+    fn set_fixed_stop(&mut self, position: Option<f64>) {
+        ds402::Ds402Model::set_fixed_stop(self, position)
+    }
+    fn fixed_stop(&self) -> Option<f64> {
+        ds402::Ds402Model::fixed_stop(self)
+    }
+    fn state(&self) -> PowerState {
+        ds402::Ds402Model::state(self)
+    }
+    fn last_error_code(&self) -> u16 {
+        ds402::Ds402Model::last_error_code(self)
+    }
+    fn actual(&self) -> f64 {
+        ds402::Ds402Model::actual(self)
+    }
+    fn set_actual(&mut self, inc: f64) {
+        ds402::Ds402Model::set_actual(self, inc)
+    }
+    fn set_disturbance(&mut self, offset_inc: f64) {
+        ds402::Ds402Model::set_disturbance(self, offset_inc)
+    }
+    fn inject_fault(&mut self, code: u16) {
+        ds402::Ds402Model::inject_fault(self, code)
+    }
+    fn read_object(&self, index: u16, sub: u8) -> Result<i64, u32> {
+        ds402::Ds402Model::read_object(self, index, sub)
+    }
+    fn write_object(&mut self, index: u16, sub: u8, value: i64) -> Result<(), u32> {
+        ds402::Ds402Model::write_object(self, index, sub, value)
+    }
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
+        self
+    }
+}
+
+/// The drive model for a drive definition (by its profile).
+pub fn for_definition(
+    def: &super::catalogue::DriveDefinition,
+) -> Result<Box<dyn DriveModel>, super::DriveError> {
+    use super::catalogue::Profile;
+    match def.profile {
+        Profile::Cia402 => Ok(Box::new(ds402::Ds402Model::new(def))),
+        other => Err(super::DriveError::Unsupported(format!(
+            "drive '{}': no drive model for profile {} yet",
+            def.name,
+            other.name()
+        ))),
+    }
+}
+
 /// CiA 301 SDO abort codes (CiA 301 §7.2.4.3.17, Table 22) returned by model object access.
 pub mod abort {
     /// 0x06010002 — attempt to write a read-only object.
