@@ -183,7 +183,7 @@ impl Machine {
                 drive: a.drive.clone(),
                 source,
             };
-            let adapter = crate::drive::adapter_for(&def).map_err(drive_err)?;
+            let adapter = crate::drive::adapter_for(&def, &a.params).map_err(drive_err)?;
             let model = crate::drive::model::for_definition(&def).map_err(drive_err)?;
             let scaling = def.scaling;
             let axis = Axis::new(a.name.clone(), adapter, scaling, a.referenced)

@@ -221,9 +221,14 @@ pub trait DriveAdapter: Send + fmt::Debug {
     }
 }
 
-/// The master-side adapter for a drive definition (by its profile).
-pub fn adapter_for(def: &catalogue::DriveDefinition) -> Result<Box<dyn DriveAdapter>, DriveError> {
+/// The master-side adapter for a drive definition (by its profile), with the axis parameter
+/// list of the axis it drives (e.g. P-AXIS-00060 / 00106 select SERCOS real-time bits).
+pub fn adapter_for(
+    def: &catalogue::DriveDefinition,
+    axis: &crate::params::ParamSet,
+) -> Result<Box<dyn DriveAdapter>, DriveError> {
     use catalogue::Profile;
+    let _ = axis;
     match def.profile {
         Profile::Cia402 => Ok(Box::new(ds402::Ds402Adapter::new(def)?)),
         other => Err(DriveError::Unsupported(format!(
