@@ -178,6 +178,7 @@ impl Machine {
                 drive: a.drive.clone(),
                 source,
             })?;
+            check_probing_input(a, &def)?;
             let drive_err = |source| MachineError::Drive {
                 axis: a.name.clone(),
                 drive: a.drive.clone(),
@@ -652,4 +653,37 @@ fn sim_plc_mode(signal: SignalSource, edge: ProbeEdge) -> SimPlcMode {
         SignalSource::PlcExtLatchControl => SimPlcMode::ExtLatchControl,
         _ => SimPlcMode::Signal,
     }
+}
+
+/// P-AXIS-00517 per the seed's table (seed 004 §8.2.2): PLC_EXT_LATCH_CONTROL 1 … 255,
+/// EXT_PROBE_WITH_DRIVE 1 … 2, DRIVE on SERCOS / CANopen / PROFIDRIVE 1 … 2, DRIVE on the other
+/// drive types (Lightbus, terminal) 1. 0 = not given (input 1).
+fn check_probing_input(
+    a: &AxisConfig,
+    def: &crate::drive::catalogue::DriveDefinition,
+) -> Result<(), MachineError> {
+    use crate::drive::catalogue::Profile;
+    let p = &a.params;
+    let input = p.int("P-AXIS-00517");
+    let signal =
+        SignalSource::from_text(p.text("P-AXIS-00516")).unwrap_or(SignalSource::DriveTypeDefault);
+    let max = match signal {
+        SignalSource::PlcExtLatchControl => 255,
+        SignalSource::ExtProbeWithDrive => 2,
+        SignalSource::Drive | SignalSource::DriveTypeDefault => match def.profile {
+            Profile::Cia402 | Profile::Sercos | Profile::Profidrive => 2,
+            Profile::Lightbus | Profile::Terminal => 1,
+        },
+        _ => return Ok(()),
+    };
+    if input == 0 || (1..=max).contains(&input) {
+        return Ok(());
+    }
+    Err(MachineError::Config(format!(
+        "axis {}: P-AXIS-00517 kenngr.measure.input = {input} is not allowed for measurement method {} on a {} drive ('{}'); allowed 1 … {max} (seed 004 §8.2.2)",
+        a.name,
+        signal.name(),
+        def.profile.name(),
+        def.name
+    )))
 }

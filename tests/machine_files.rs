@@ -70,3 +70,26 @@ fn table_keys_override_the_list_and_list_errors_name_the_list_line() {
     let cfg = MachineConfig::load(&m).unwrap();
     assert_eq!(cfg.channel.int("P-CHAN-00498"), 1);
 }
+
+#[test]
+fn probing_input_is_validated_per_drive_type() {
+    use fieldprobe::machine::Machine;
+    // Seed 004 §8.2.2 P-AXIS-00517 table: DRIVE on a CANopen / EtherCAT CiA 402 drive 1 … 2,
+    // PLC_EXT_LATCH_CONTROL 1 … 255.
+    let mut cfg = MachineConfig::default_machine();
+    cfg.apply_set("Z.P-AXIS-00517=3").unwrap();
+    let e = Machine::new(&cfg).unwrap_err().to_string();
+    assert!(
+        e.contains("P-AXIS-00517") && e.contains("1 … 2") && e.contains("axis Z"),
+        "{e}"
+    );
+    cfg.apply_set("Z.P-AXIS-00516=PLC_EXT_LATCH_CONTROL")
+        .unwrap();
+    assert!(
+        Machine::new(&cfg).is_ok(),
+        "3 is fine for PLC_EXT_LATCH_CONTROL"
+    );
+    cfg.apply_set("Z.P-AXIS-00516=EXT_PROBE_WITH_DRIVE")
+        .unwrap();
+    assert!(Machine::new(&cfg).is_err(), "EXT_PROBE_WITH_DRIVE: 1 … 2");
+}

@@ -330,12 +330,27 @@ impl DriveDefinition {
     }
 }
 
-const BUILTINS: &[(&str, &str)] = &[(
-    "cia402-generic",
-    include_str!("../../drives/cia402-generic.toml"),
-)];
+/// The drive files compiled into the crate: one line per file (name, text).
+const BUILTINS: &[(&str, &str)] = &[
+    (
+        "cia402-generic",
+        include_str!("../../drives/cia402-generic.toml"),
+    ),
+    (
+        "cia402-drive-defined",
+        include_str!("../../drives/cia402-drive-defined.toml"),
+    ),
+];
 
-const BUILTIN_NAMES: &[&str] = &["cia402-generic"];
+const BUILTIN_NAMES: &[&str] = &{
+    let mut names = [""; BUILTINS.len()];
+    let mut i = 0;
+    while i < BUILTINS.len() {
+        names[i] = BUILTINS[i].0;
+        i += 1;
+    }
+    names
+};
 
 /// Names of the drive definitions compiled into the crate (`drives/*.toml`).
 pub fn builtin_names() -> &'static [&'static str] {
