@@ -475,7 +475,7 @@ fn drive_file_errors_name_the_line() {
 
 #[test]
 fn load_builtin_file_and_missing() {
-    assert_eq!(catalogue::builtin_names(), &["cia402-generic"]);
+    assert!(catalogue::builtin_names().contains(&"cia402-generic"));
     assert_eq!(
         catalogue::load("cia402-generic").unwrap().name,
         "cia402-generic"

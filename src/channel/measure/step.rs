@@ -1,0 +1,306 @@
+//! One cycle of a measuring block (arming progress, latch collection, fixed-stop detection) and
+//! its end (errors per type, outcome published).
+
+use super::*;
+
+impl Channel {
+    /// Per cycle, before interpolation: arming progress and latch collection. `s` is the path
+    /// position last commanded. Returns what the interpolator must do.
+    pub(in crate::channel) fn measurement_step(&mut self, run: &mut MeasRun, now: Nanos, s: f64) -> MeasStep {
+        match run.phase {
+            Phase::Arming { cycles } => {
+                let mut all = true;
+                if !run.armed_once {
+                    run.armed_once = true;
+                    for m in &mut run.axes {
+                        if let Some(e) = m.eval.as_mut() {
+                            e.arm(now, &self.plc[m.axis]);
+                            self.plc[m.axis].measuring_r = true;
+                        }
+                    }
+                }
+                for m in &run.axes {
+                    if m.handshake {
+                        if let Some(c) = self.ext_latch[m.axis].as_mut() {
+                            match c.start_measuring_block(&mut self.plc[m.axis].ext_latch, now) {
+                                BlockGate::Go => {}
+                                BlockGate::Wait => all = false,
+                                BlockGate::Failed(task) => {
+                                    return MeasStep::Fail(CncMessage::error(
+                                        ids::MEAS_LATCH,
+                                        format!(
+                                            "axis {}: the PLC did not acknowledge {task:?}",
+                                            self.axes[m.axis].name()
+                                        ),
+                                    ));
+                                }
+                            }
+                        }
+                    }
+                }
+                for m in &mut run.axes {
+                    if let Some((id, req)) = m.source_sdo {
+                        match self.take_acyclic_result(id) {
+                            None => {
+                                all = false;
+                                continue;
+                            }
+                            Some(Ok(_)) => {
+                                m.source_sdo = None;
+                                let name = self.axes[m.axis].name().to_string();
+                                if let Err(e) = self.axes[m.axis].arm_probe(&req) {
+                                    return MeasStep::Fail(
+                                        CncMessage::error(
+                                            ids::MEAS_LATCH,
+                                            format!("axis {name}: cannot arm the drive latch: {e}"),
+                                        )
+                                        .on_axis(&name),
+                                    );
+                                }
+                                all = false;
+                                continue;
+                            }
+                            // The channel reported the failed write already and is stopping.
+                            Some(Err(e)) => {
+                                return MeasStep::Fail(CncMessage::error(
+                                    ids::MEAS_LATCH,
+                                    format!("0x60D0 write failed: {e}"),
+                                ));
+                            }
+                        }
+                    }
+                }
+                for m in &run.axes {
+                    if !m.signal.uses_drive_latch() {
+                        continue;
+                    }
+                    match self.axes[m.axis].probe_state() {
+                        ProbeState::Armed => {}
+                        ProbeState::Failed(why) => {
+                            let name = self.axes[m.axis].name().to_string();
+                            return MeasStep::Fail(
+                                CncMessage::error(
+                                    ids::MEAS_LATCH,
+                                    format!("axis {name}: drive latch failed while arming: {why}"),
+                                )
+                                .on_axis(&name),
+                            );
+                        }
+                        _ => all = false,
+                    }
+                }
+                if all {
+                    run.phase = Phase::Measuring;
+                    MeasStep::Go
+                } else if cycles >= ARMING_TIMEOUT_CYCLES {
+                    MeasStep::Fail(CncMessage::error(
+                        ids::MEAS_LATCH,
+                        format!("the probing-signal sources did not confirm arming within {ARMING_TIMEOUT_CYCLES} cycles"),
+                    ))
+                } else {
+                    run.phase = Phase::Arming { cycles: cycles + 1 };
+                    MeasStep::Hold
+                }
+            }
+            Phase::Measuring => {
+                let was_complete = run.complete();
+                for k in 0..run.axes.len() {
+                    let (axis, signal) = (run.axes[k].axis, run.axes[k].signal);
+                    let event = if signal.uses_drive_latch() {
+                        if let ProbeState::Failed(why) = self.axes[axis].probe_state() {
+                            let name = self.axes[axis].name().to_string();
+                            return MeasStep::Fail(
+                                CncMessage::error(
+                                    ids::MEAS_LATCH,
+                                    format!("axis {name}: drive latch failed: {why}"),
+                                )
+                                .on_axis(&name),
+                            );
+                        }
+                        self.axes[axis].take_latch()
+                    } else if let Some(e) = run.axes[k].eval.as_mut() {
+                        let actual = self.axes[axis].actual();
+                        match e.update(now, actual, &self.plc[axis]) {
+                            Ok(ev) => ev.map(|ev| ev.position),
+                            Err(err) => {
+                                let name = self.axes[axis].name().to_string();
+                                return MeasStep::Fail(
+                                    CncMessage::error(
+                                        ids::MEAS_LATCH,
+                                        format!("axis {name}: {} signal: {err}", signal.name()),
+                                    )
+                                    .on_axis(&name),
+                                );
+                            }
+                        }
+                    } else if signal == SignalSource::FixedStop {
+                        let a = &self.axes[axis];
+                        let travelled = (a.command() - run.axes[k].start).abs();
+                        let detected = run
+                            .fixed
+                            .as_mut()
+                            .and_then(|d| d.update(now, k, travelled, a.lag(), a.actual()));
+                        if detected.is_some() {
+                            // The measuring point is latched for each axis involved (seed 004
+                            // §7.3): every axis of the run takes its actual position, and all move
+                            // there at once ("reduce interpolation to measured value").
+                            let mut settle = Vec::new();
+                            for m in &mut run.axes {
+                                let p = self.axes[m.axis].actual();
+                                if let Some(log) = self.latch_log.as_mut() {
+                                    log.push((now, m.axis, p));
+                                }
+                                m.latched = Some((p, now));
+                                m.before_target = s < run.target_len - 1e-9;
+                                settle.push((m.axis, p));
+                            }
+                            run.event_s = Some(s);
+                            return MeasStep::Settle(settle);
+                        }
+                        None
+                    } else {
+                        None
+                    };
+                    if let Some(pos) = event {
+                        let m = &mut run.axes[k];
+                        if m.latched.is_none() {
+                            m.latched = Some((pos, now));
+                            m.before_target = s < run.target_len - 1e-9;
+                            if let Some(log) = self.latch_log.as_mut() {
+                                log.push((now, axis, pos));
+                            }
+                        }
+                    }
+                }
+                if !was_complete && run.complete() {
+                    run.event_s = Some(s);
+                    if run.mtype == MeasType::Type3 {
+                        MeasStep::Go
+                    } else {
+                        MeasStep::Brake
+                    }
+                } else {
+                    MeasStep::Go
+                }
+            }
+            Phase::Done => MeasStep::Go,
+        }
+    }
+
+    /// The block is over (standstill): disarm, decide about errors, publish the outcome. An
+    /// error (missing signal per type) is returned; nothing is published then. Returns the
+    /// positions some axes must move to at once: a type-7 run without detected stop and
+    /// P-CHAN-00266 = 1 "goes to the position of the current axis actual value … to eliminate a
+    /// possible position lag" (§8.2.1).
+    pub(in crate::channel) fn finish_measurement(
+        &mut self,
+        mut run: MeasRun,
+        target_reached: bool,
+    ) -> Result<Vec<(usize, f64)>, CncMessage> {
+        run.phase = Phase::Done;
+        self.disarm_sources(&run);
+        let n = self.axes.len();
+        let complete = run.complete();
+        if !complete {
+            let missing: Vec<&str> = run
+                .axes
+                .iter()
+                .filter(|a| a.required && a.latched.is_none())
+                .map(|a| self.axes[a.axis].name())
+                .collect();
+            let list = missing.join(", ");
+            let m = &self.cfg.meas;
+            let error = if run.limited_at_sls {
+                Some(CncMessage::error(
+                    ids::MEAS_PATH_LIMITED,
+                    format!("measurement run stopped at the software limit switch without probing signal (axes {list})"),
+                ))
+            } else {
+                match run.mtype {
+                    MeasType::Type2 => Some(CncMessage::error(
+                        ids::MEAS_NO_SIGNAL,
+                        format!("measurement type 2: probing signal missing (axes {list})"),
+                    )),
+                    MeasType::Type1 if m.error_no_signal_type1 => Some(CncMessage::error(
+                        ids::MEAS_NO_SIGNAL,
+                        format!("probing signal missing (axes {list}; P-CHAN-00176 = 1)"),
+                    )),
+                    MeasType::Type7 if !m.fixed_stop_no_error => Some(CncMessage::error(
+                        ids::MEAS_NO_FIXED_STOP,
+                        format!("measurement type 7: fixed stop not detected (axes {list}; P-CHAN-00266 = 0)"),
+                    )),
+                    _ => None,
+                }
+            };
+            if let Some(e) = error {
+                return Err(e);
+            }
+        }
+        let settle: Vec<(usize, f64)> =
+            if run.mtype == MeasType::Type7 && !complete && self.cfg.meas.fixed_stop_no_error {
+                run.lagging_axes(&self.axes)
+            } else {
+                Vec::new()
+            };
+        let mut latched = vec![None; n];
+        let mut merf = vec![false; n];
+        let mut involved = vec![false; n];
+        if complete {
+            for a in &run.axes {
+                involved[a.axis] = true;
+                if let Some((p, _)) = a.latched {
+                    latched[a.axis] = Some(p);
+                    merf[a.axis] = a.before_target;
+                }
+            }
+        } else {
+            for a in &run.axes {
+                involved[a.axis] = a.required;
+            }
+        }
+        let new = MeasurementOutcome {
+            mtype: run.mtype,
+            latched,
+            merf,
+            involved,
+            target_reached,
+        };
+        // Independent axes of one block finish one by one: merge their outcomes until taken.
+        self.measurement = Some(match self.measurement.take() {
+            Some(old) => merge_outcomes(old, new),
+            None => new,
+        });
+        Ok(settle)
+    }
+}
+
+/// Combine two outcomes of the same block (independent axes): per axis the one that involved it.
+fn merge_outcomes(old: MeasurementOutcome, new: MeasurementOutcome) -> MeasurementOutcome {
+    let n = old.latched.len().max(new.latched.len());
+    let pick = |i: usize| new.involved.get(i).copied().unwrap_or(false);
+    MeasurementOutcome {
+        mtype: new.mtype,
+        latched: (0..n)
+            .map(|i| {
+                if pick(i) {
+                    new.latched.get(i).copied().flatten()
+                } else {
+                    old.latched.get(i).copied().flatten()
+                }
+            })
+            .collect(),
+        merf: (0..n)
+            .map(|i| {
+                if pick(i) {
+                    new.merf.get(i).copied().unwrap_or(false)
+                } else {
+                    old.merf.get(i).copied().unwrap_or(false)
+                }
+            })
+            .collect(),
+        involved: (0..n)
+            .map(|i| pick(i) || old.involved.get(i).copied().unwrap_or(false))
+            .collect(),
+        target_reached: old.target_reached && new.target_reached,
+    }
+}
