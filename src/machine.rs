@@ -33,14 +33,14 @@ use crate::units::{param_pos_to_mm, param_vel_to_mm_s, Nanos};
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MachineError {
     /// A drive definition could not be loaded.
-    #[error("axis {axis}: drive '{drive}': {source}")]
+    #[error("axis {axis}: drive '{drive}': {cause}")]
     Drive {
         /// Axis name.
         axis: String,
         /// Drive name or file.
         drive: String,
-        /// Cause.
-        source: DriveError,
+        /// Cause (not a `source`: the text above already carries it).
+        cause: DriveError,
     },
     /// The configuration is inconsistent.
     #[error("{0}")]
@@ -176,13 +176,13 @@ impl Machine {
             let def = catalogue::load(&a.drive).map_err(|source| MachineError::Drive {
                 axis: a.name.clone(),
                 drive: a.drive.clone(),
-                source,
+                cause: source,
             })?;
             check_probing_input(a, &def)?;
             let drive_err = |source| MachineError::Drive {
                 axis: a.name.clone(),
                 drive: a.drive.clone(),
-                source,
+                cause: source,
             };
             let adapter = crate::drive::adapter_for(&def, &a.params).map_err(drive_err)?;
             let model = crate::drive::model::for_definition(&def).map_err(drive_err)?;
@@ -652,6 +652,75 @@ fn sim_plc_mode(signal: SignalSource, edge: ProbeEdge) -> SimPlcMode {
         SignalSource::PlcFirstEvent => SimPlcMode::FirstEventLatch { edge },
         SignalSource::PlcExtLatchControl => SimPlcMode::ExtLatchControl,
         _ => SimPlcMode::Signal,
+    }
+}
+
+/// The commissioning findings of one axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxisCheck {
+    /// Axis name.
+    pub axis: String,
+    /// Drive definition name.
+    pub drive: String,
+    /// Drive family.
+    pub profile: &'static str,
+    /// Mismatches in plain words (empty: consistent).
+    pub findings: Vec<String>,
+}
+
+impl Machine {
+    /// Commissioning check (seed 004 §6): read each drive's settings over the link and compare
+    /// them with the axis parameters of `cfg`; every mismatch in plain words.
+    pub fn commissioning_check(&mut self, cfg: &MachineConfig) -> Vec<AxisCheck> {
+        let mut out = Vec::new();
+        for (i, a) in cfg.axes.iter().enumerate() {
+            let Some(def) = self.channel.axes()[i].definition().cloned() else {
+                continue;
+            };
+            let mut findings = Vec::new();
+            let p = &a.params;
+            let signal = SignalSource::from_text(p.text("P-AXIS-00516"))
+                .unwrap_or(SignalSource::DriveTypeDefault);
+            let measures = p.int("P-AXIS-00118") != 0;
+            let link = std::cell::RefCell::new(&mut self.link);
+            let read = |index: u16, sub: u8| link.borrow_mut().read_object(i, index, sub).ok();
+            findings.extend(crate::drive::commissioning_check(&def, p, &read));
+            if measures
+                && signal.uses_drive_latch()
+                && def.profile == crate::drive::catalogue::Profile::Cia402
+            {
+                let mapped = |index: u16| def.txpdo.contains(index, 0);
+                if !mapped(0x60B9) {
+                    findings.push("the touch probe status 0x60B9 is not in the TxPDO; the drive latch cannot be read (seed 004 §6.4)".into());
+                }
+                let probe2 = p.int("P-AXIS-00517") == 2;
+                let edge_neg = p.text("P-AXIS-00518").eq_ignore_ascii_case("NEG");
+                let value = match (probe2, edge_neg) {
+                    (false, false) => 0x60BA,
+                    (false, true) => 0x60BB,
+                    (true, false) => 0x60BC,
+                    (true, true) => 0x60BD,
+                };
+                if !mapped(value) {
+                    findings.push(format!(
+                        "P-AXIS-00517 / 00518 select the latch value {value:#06X}, which is not in the TxPDO (seed 004 §6.4 table)"
+                    ));
+                }
+                if !def.rxpdo.contains(0x60B8, 0) {
+                    findings.push(
+                        "the touch probe function 0x60B8 is not in the RxPDO (seed 004 §6.4)"
+                            .into(),
+                    );
+                }
+            }
+            out.push(AxisCheck {
+                axis: a.name.clone(),
+                drive: def.name.clone(),
+                profile: def.profile.name(),
+                findings,
+            });
+        }
+        out
     }
 }
 

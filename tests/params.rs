@@ -786,7 +786,7 @@ fn machine_structure_errors() {
         ("[[axis]]\nname = \"X\"\n[[axis]]\nname = \"X\"\n", "m.toml:4: duplicate axis name 'X' (first defined at line 2)"),
         ("[[axis]]\nname = 1\n", "m.toml:2: 'name' must be a string: an axis name such as \"X\""),
         ("[[axis]]\nname = \"X\"\nreferenced = 1\n", "m.toml:3: 'referenced' must be true or false"),
-        ("[[axis]]\nname = \"X\"\ndrive = \"../x\"\n", "m.toml:3: invalid drive '../x'; expected the name of a drives/<name>.toml definition (letters, digits, '-', '_')"),
+        ("[[axis]]\nname = \"X\"\ndrive = \"../x\"\n", "m.toml:3: invalid drive '../x'; expected the name of a drives/<name>.toml definition (letters, digits, '-', '_') or the path of a drive file ending in .toml"),
         ("[channel]\ncycle_time_us = 50\n[[axis]]\nname = \"X\"\n", "m.toml:2: cycle_time_us = 50: cycle_time_us must be an integer number of µs, 100 ..= 100000"),
     ];
     for (text, expected) in cases {

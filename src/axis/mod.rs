@@ -1,7 +1,7 @@
 //! One axis: drive adapter, scaling and state (referenced, command / actual / lag).
 //!
 //! The axis layer is where drive increments become mm (°) and back, through
-//! [`Scaling`](crate::units::Scaling) from the drive file. It does not know wire formats: the
+//! [`Scaling`] from the drive file. It does not know wire formats: the
 //! adapter encodes and decodes the process image, the link moves it.
 
 use crate::drive::catalogue::DriveDefinition;

@@ -7,6 +7,7 @@
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
 //! 1 aborted by a CNC error, 2 bad input.
 
+mod check;
 mod jog;
 mod params;
 mod run;
@@ -40,6 +41,8 @@ enum Command {
     Jog(jog::JogArgs),
     /// List the parameters of the seeds (ID, name path, type, default, range).
     Params(params::ParamsArgs),
+    /// Commissioning check: drive settings against the axis parameters, in plain words.
+    Check(check::CheckArgs),
 }
 
 /// Parse arguments, run, return the exit code.
@@ -60,6 +63,7 @@ pub fn main() -> i32 {
         Command::Run(a) => run::run(a),
         Command::Jog(a) => jog::run(a),
         Command::Params(a) => params::run(a),
+        Command::Check(a) => check::run(a),
     };
     match result {
         Ok(code) => code,

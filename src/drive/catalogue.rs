@@ -340,6 +340,26 @@ const BUILTINS: &[(&str, &str)] = &[
         "cia402-drive-defined",
         include_str!("../../drives/cia402-drive-defined.toml"),
     ),
+    (
+        "sercos-ax5000",
+        include_str!("../../drives/sercos-ax5000.toml"),
+    ),
+    (
+        "ax2000-lightbus",
+        include_str!("../../drives/ax2000-lightbus.toml"),
+    ),
+    (
+        "kl5101-terminal",
+        include_str!("../../drives/kl5101-terminal.toml"),
+    ),
+    (
+        "el5101-terminal",
+        include_str!("../../drives/el5101-terminal.toml"),
+    ),
+    (
+        "profidrive-t105",
+        include_str!("../../drives/profidrive-t105.toml"),
+    ),
 ];
 
 const BUILTIN_NAMES: &[&str] = &{

@@ -12,8 +12,13 @@
 
 pub mod catalogue;
 pub mod ds402;
+pub mod el1252;
+pub mod lightbus;
 pub mod model;
 pub mod pdo;
+pub mod profidrive;
+pub mod sercos;
+pub mod terminal;
 
 use crate::units::Nanos;
 use std::fmt;
@@ -228,13 +233,42 @@ pub fn adapter_for(
     axis: &crate::params::ParamSet,
 ) -> Result<Box<dyn DriveAdapter>, DriveError> {
     use catalogue::Profile;
-    let _ = axis;
     match def.profile {
         Profile::Cia402 => Ok(Box::new(ds402::Ds402Adapter::new(def)?)),
-        other => Err(DriveError::Unsupported(format!(
-            "drive '{}': no adapter for profile {} yet",
-            def.name,
-            other.name()
-        ))),
+        Profile::Profidrive => Ok(Box::new(profidrive::ProfidriveAdapter::new(def)?)),
+        Profile::Lightbus => Ok(Box::new(lightbus::LightbusAdapter::new(def)?)),
+        Profile::Terminal => Ok(Box::new(terminal::TerminalAdapter::new(def, axis)?)),
+        Profile::Sercos => Ok(Box::new(sercos::SercosAdapter::new(def, axis)?)),
+    }
+}
+
+/// Family-specific commissioning checks (seed 004 §6): the drive's own settings, read with
+/// `read(index, sub)` (acyclic access of its profile: CoE object, SERCOS IDN code, PROFIdrive
+/// PNU, Lightbus parameter; `None` = cannot be read), against the axis parameters, as
+/// plain-words findings. The CiA 402 PDO mapping checks need no drive access and are made by
+/// the machine.
+pub fn commissioning_check(
+    def: &catalogue::DriveDefinition,
+    axis: &crate::params::ParamSet,
+    read: &dyn Fn(u16, u8) -> Option<i64>,
+) -> Vec<String> {
+    use catalogue::Profile;
+    match def.profile {
+        Profile::Cia402 => Vec::new(),
+        Profile::Sercos => sercos::commissioning_check(def, axis, &|idn| read(idn, 0)),
+        Profile::Profidrive => profidrive::check_drive(read),
+        Profile::Lightbus => match read(lightbus::PARAM_IN2MODE, 0) {
+            Some(v) => lightbus::check_drive(v),
+            None => vec![format!(
+                "drive parameter IN2MODE ({:#06X}) cannot be read; measuring needs IN2MODE = {} \
+                 (seed 004 §6.2)",
+                lightbus::PARAM_IN2MODE,
+                lightbus::IN2MODE_PROBE
+            )],
+        },
+        Profile::Terminal => match terminal::TerminalConfig::from_definition(def) {
+            Ok(cfg) => terminal::check_axis_params(cfg.variant, axis),
+            Err(e) => vec![e.to_string()],
+        },
     }
 }

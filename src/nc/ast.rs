@@ -1,6 +1,6 @@
 //! Block AST of the NC language subset (DIN 66025 + the seeds' `#` commands).
 //!
-//! The parser ([`super::parse`]) produces a [`Program`]; the executor walks it. Every node keeps
+//! The parser ([`super::parser::parse`]) produces a [`Program`]; the executor walks it. Every node keeps
 //! its [`Span`] so that errors name line and column.
 
 /// 1-based line and column in the program source.

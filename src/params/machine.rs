@@ -782,21 +782,34 @@ fn looks_like_axis_prefix(prefix: &str) -> bool {
     chars.next().is_some_and(|c| c.is_ascii_alphabetic()) && chars.all(|c| c.is_ascii_digit())
 }
 
+/// A drive value: a built-in / `drives/<name>.toml` name (letters, digits, '-', '_'), or the
+/// path of a user drive definition ending in `.toml`. A relative path in a machine file is
+/// taken relative to that file's directory; from `--set`, relative to the working directory.
 fn valid_drive(name: &str, origin: &Origin) -> Result<String, ParamError> {
-    let ok = !name.is_empty()
+    let is_name = !name.is_empty()
         && name
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
-    if ok {
-        Ok(name.to_string())
-    } else {
-        Err(ParamError::Config {
-            origin: origin.clone(),
-            message: format!(
-                "invalid drive '{name}'; expected the name of a drives/<name>.toml definition (letters, digits, '-', '_')"
-            ),
-        })
+    if is_name {
+        return Ok(name.to_string());
     }
+    if name.len() > ".toml".len() && name.ends_with(".toml") {
+        let path = std::path::Path::new(name);
+        let base = std::path::Path::new(&origin.file).parent();
+        let from_file = origin.line > 0 && path.is_relative();
+        return Ok(match base {
+            Some(dir) if from_file && !dir.as_os_str().is_empty() => {
+                dir.join(path).to_string_lossy().into_owned()
+            }
+            _ => name.to_string(),
+        });
+    }
+    Err(ParamError::Config {
+        origin: origin.clone(),
+        message: format!(
+            "invalid drive '{name}'; expected the name of a drives/<name>.toml definition (letters, digits, '-', '_') or the path of a drive file ending in .toml"
+        ),
+    })
 }
 
 #[cfg(test)]

@@ -186,14 +186,6 @@ impl MeasRun {
 }
 
 impl Channel {
-
-
-
-
-
-
-
-
     /// The signal source axis `i` measures with in a running (armed) measurement, if any — with
     /// `#MEAS [AXNR=.. SIGNAL=..]` overrides applied.
     pub fn armed_signal(&self, i: usize) -> Option<SignalSource> {
@@ -271,7 +263,6 @@ pub(super) enum MeasStep {
     /// Abort the block with this error.
     Fail(CncMessage),
 }
-
 
 impl Channel {
     /// `#MEAS PREPARE [AXNR=..]` (seed 004 §7.2): ask the PLC to prepare the switchable probe of

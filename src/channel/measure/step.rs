@@ -6,7 +6,12 @@ use super::*;
 impl Channel {
     /// Per cycle, before interpolation: arming progress and latch collection. `s` is the path
     /// position last commanded. Returns what the interpolator must do.
-    pub(in crate::channel) fn measurement_step(&mut self, run: &mut MeasRun, now: Nanos, s: f64) -> MeasStep {
+    pub(in crate::channel) fn measurement_step(
+        &mut self,
+        run: &mut MeasRun,
+        now: Nanos,
+        s: f64,
+    ) -> MeasStep {
         match run.phase {
             Phase::Arming { cycles } => {
                 let mut all = true;

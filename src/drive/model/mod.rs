@@ -5,6 +5,11 @@
 //! 301 abort codes ([`abort`]).
 
 pub mod ds402;
+pub mod el1252;
+pub mod lightbus;
+pub mod profidrive;
+pub mod sercos;
+pub mod terminal;
 
 use super::PowerState;
 use crate::units::Nanos;
@@ -143,11 +148,10 @@ pub fn for_definition(
     use super::catalogue::Profile;
     match def.profile {
         Profile::Cia402 => Ok(Box::new(ds402::Ds402Model::new(def))),
-        other => Err(super::DriveError::Unsupported(format!(
-            "drive '{}': no drive model for profile {} yet",
-            def.name,
-            other.name()
-        ))),
+        Profile::Profidrive => Ok(Box::new(profidrive::ProfidriveModel::new(def)?)),
+        Profile::Lightbus => Ok(Box::new(lightbus::LightbusModel::new(def))),
+        Profile::Terminal => Ok(Box::new(terminal::TerminalModel::new(def)?)),
+        Profile::Sercos => Ok(Box::new(sercos::SercosModel::new(def)?)),
     }
 }
 
