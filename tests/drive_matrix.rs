@@ -174,3 +174,63 @@ fn the_canopen_fixed_stop_example_latches_the_wall_on_every_family_with_a_torque
         assert!((z.acs - 150.0).abs() < 1e-3, "{drive}: latched {}", z.acs);
     }
 }
+
+#[test]
+fn the_sercos_gantry_fixed_stop_example_latches_the_wall_on_every_family_with_an_idn_map() {
+    // Seed 004 §7.3.1: the master X and its gantry slave X2 measure against a stop; the
+    // example reads / writes S-0-0092 and S-0-0159 with #IDENT, which each drive file maps to
+    // its own objects ([idn]). A terminal drive has no torque limit and no map.
+    let base = std::fs::read_to_string(format!(
+        "{}/examples/machines/gantry.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    let mut ran = Vec::new();
+    for &drive in catalogue::builtin_names() {
+        let def = catalogue::load(drive).unwrap();
+        if def.idn("S-0-0092").is_none() || def.idn("S-0-0159").is_none() {
+            continue;
+        }
+        let extra = if drive == "cia402-drive-defined" {
+            "\"P-AXIS-00702\" = \"DRIVE_DEFINED\"\n"
+        } else {
+            ""
+        };
+        let toml = base
+            .replace(
+                "name = \"X\"\n",
+                &format!("name = \"X\"\ndrive = \"{drive}\"\n{extra}"),
+            )
+            .replace(
+                "name = \"X2\"\n",
+                &format!("name = \"X2\"\ndrive = \"{drive}\"\n{extra}"),
+            );
+        let cfg = MachineConfig::parse(&toml, "gantry.toml").unwrap();
+        let mut m = Machine::new(&cfg).unwrap_or_else(|e| panic!("{drive}: {e}"));
+        m.add_fixed_stop("X", 300.0).unwrap();
+        let r = m.run_program(
+            &parse(&program("meas_fixed_stop_sercos")).unwrap(),
+            &mut |_| {},
+        );
+        assert_eq!(
+            r.status,
+            RunStatus::Completed,
+            "{drive}: {:?}",
+            r.messages()
+        );
+        assert!(r.messages().is_empty(), "{drive}: {:?}", r.messages());
+        let x = r.measurements[0]
+            .result
+            .unwrap_or_else(|| panic!("{drive}: no result"));
+        assert!((x.acs - 300.0).abs() < 1e-3, "{drive}: latched {}", x.acs);
+        ran.push(drive);
+    }
+    for family in [
+        "cia402-generic",
+        "sercos-ax5000",
+        "profidrive-t105",
+        "ax2000-lightbus",
+    ] {
+        assert!(ran.contains(&family), "{family} not run: {ran:?}");
+    }
+}
