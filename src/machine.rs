@@ -187,12 +187,16 @@ impl Machine {
             let adapter = crate::drive::adapter_for(&def, &a.params).map_err(drive_err)?;
             let model = crate::drive::model::for_definition(&def).map_err(drive_err)?;
             let scaling = def.scaling;
+            let sercos = def.profile == catalogue::Profile::Sercos;
             let axis = Axis::new(a.name.clone(), adapter, scaling, a.referenced)
                 .with_definition(std::sync::Arc::new(def));
             images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
             axes.push(axis);
             models.push(model);
-            axis_cfgs.push(channel_axis_config(a, cycle));
+            let mut axis_cfg = channel_axis_config(a, cycle);
+            // Measurement type 6 needs a SERCOS axis (seed 004 §3 table).
+            axis_cfg.meas.sercos = sercos;
+            axis_cfgs.push(axis_cfg);
         }
         let ch_cfg = ChannelConfig {
             cycle,

@@ -322,6 +322,20 @@ fn type_6_needs_a_sercos_axis() {
     aborted_with(&r, 900040, 10);
 }
 
+#[test]
+fn type_6_measures_with_g310_when_z_is_on_a_sercos_drive() {
+    let mut m = machine(&["P-CHAN-00057=6", "Z.drive=sercos-ax5000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(&mut m, "N10 G310 Z50 F1000\nN20 M30\n");
+    completed(&r);
+    close(
+        "latched",
+        r.measurements[Z].result.unwrap().acs,
+        30.0,
+        LATCH_TOL,
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // #MEAS MODE, P-CHAN-00057, V.G.MEAS_TYPE
 // ---------------------------------------------------------------------------------------------

@@ -43,7 +43,7 @@
 //!   position (bit 13), else 0.
 
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::model::ds402::motion::{self, Cycle, Wall, SUBSAMPLES};
+use crate::drive::model::ds402::motion::{self, interpolate, Cycle, Wall, SUBSAMPLES};
 use crate::drive::model::{abort, DriveModel};
 use crate::drive::profidrive::{
     g1_stw, g1_zsw, n4_to_speed, speed_to_n4, stw1, zsw1, ProfidriveConfig, Telegram, Word,
@@ -490,25 +490,6 @@ fn wrap_u32(x: f64) -> u32 {
     } else {
         0
     }
-}
-
-/// Linear interpolation in a time-sorted trajectory; `None` outside it.
-fn interpolate(traj: &[(Nanos, f64)], t: Nanos) -> Option<f64> {
-    let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
-    if t < t0 || t > t1 {
-        return None;
-    }
-    if t == t1 {
-        return Some(x1);
-    }
-    let i = traj.partition_point(|&(ti, _)| ti <= t);
-    let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
-    let (tb, xb) = *traj.get(i)?;
-    if tb <= ta {
-        return Some(xb);
-    }
-    let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
-    Some(xa + (xb - xa) * f)
 }
 
 impl DriveModel for ProfidriveModel {

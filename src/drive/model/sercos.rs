@@ -35,7 +35,7 @@
 //!   stored but the unit works without it (assumption).
 
 use super::abort;
-use super::ds402::motion::{self, Cycle, Wall, SUBSAMPLES};
+use super::ds402::motion::{self, interpolate, round_i32, Cycle, Wall, SUBSAMPLES};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::sercos::{self, idn, rt_mask, Telegram, CW_DRIVE_ON, CW_ENABLE, CW_RUN};
 use crate::drive::{DriveError, PowerState};
@@ -595,26 +595,4 @@ impl super::DriveModel for SercosModel {
     fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
         self
     }
-}
-
-fn interpolate(traj: &[(Nanos, f64)], t: Nanos) -> Option<f64> {
-    let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
-    if t < t0 || t > t1 {
-        return None;
-    }
-    if t == t1 {
-        return Some(x1);
-    }
-    let i = traj.partition_point(|&(ti, _)| ti <= t);
-    let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
-    let (tb, xb) = *traj.get(i)?;
-    if tb <= ta {
-        return Some(xb);
-    }
-    let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
-    Some(xa + (xb - xa) * f)
-}
-
-fn round_i32(v: f64) -> i32 {
-    v.round() as i32
 }

@@ -83,7 +83,7 @@ mod power;
 mod tests;
 pub mod touch_probe;
 
-use self::motion::{Cycle, Wall, SUBSAMPLES};
+use self::motion::{interpolate, round_i32, Cycle, Wall, SUBSAMPLES};
 use self::touch_probe::{Signal, TouchProbes, NUM_INPUTS};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::PdoLayout;
@@ -573,29 +573,4 @@ impl Ds402Model {
     pub fn inject_fault(&mut self, code: u16) {
         self.pending_fault = Some(code);
     }
-}
-
-/// Linear interpolation in a time-sorted trajectory; `None` outside it.
-fn interpolate(traj: &[(Nanos, f64)], t: Nanos) -> Option<f64> {
-    let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
-    if t < t0 || t > t1 {
-        return None;
-    }
-    if t == t1 {
-        return Some(x1);
-    }
-    // First sample after t: exists because t < t1.
-    let i = traj.partition_point(|&(ti, _)| ti <= t);
-    let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
-    let (tb, xb) = *traj.get(i)?;
-    if tb <= ta {
-        return Some(xb);
-    }
-    let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
-    Some(xa + (xb - xa) * f)
-}
-
-fn round_i32(v: f64) -> i32 {
-    // `as` saturates and maps NaN to 0.
-    v.round() as i32
 }
