@@ -136,6 +136,32 @@ pub fn integrate(c: &Cycle, mut wall: Option<&mut Wall>, out: &mut [f64; SUBSAMP
     outcome
 }
 
+/// Linear interpolation in a time-sorted trajectory `(t, x)`; `None` outside it. Shared by the
+/// drive models to read the position at a sub-cycle edge time.
+pub fn interpolate(traj: &[(crate::units::Nanos, f64)], t: crate::units::Nanos) -> Option<f64> {
+    let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
+    if t < t0 || t > t1 {
+        return None;
+    }
+    if t == t1 {
+        return Some(x1);
+    }
+    // First sample after t: exists because t < t1.
+    let i = traj.partition_point(|&(ti, _)| ti <= t);
+    let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
+    let (tb, xb) = *traj.get(i)?;
+    if tb <= ta {
+        return Some(xb);
+    }
+    let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
+    Some(xa + (xb - xa) * f)
+}
+
+/// Round and saturate to `i32` (`as` saturates and maps NaN to 0).
+pub fn round_i32(v: f64) -> i32 {
+    v.round() as i32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,30 +217,4 @@ mod tests {
         assert!(!integrate(&c, Some(&mut wall), &mut out).contact);
         assert_eq!(wall.side, Some(Side::Below));
     }
-}
-
-/// Linear interpolation in a time-sorted trajectory `(t, x)`; `None` outside it. Shared by the
-/// drive models to read the position at a sub-cycle edge time.
-pub fn interpolate(traj: &[(crate::units::Nanos, f64)], t: crate::units::Nanos) -> Option<f64> {
-    let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
-    if t < t0 || t > t1 {
-        return None;
-    }
-    if t == t1 {
-        return Some(x1);
-    }
-    // First sample after t: exists because t < t1.
-    let i = traj.partition_point(|&(ti, _)| ti <= t);
-    let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
-    let (tb, xb) = *traj.get(i)?;
-    if tb <= ta {
-        return Some(xb);
-    }
-    let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
-    Some(xa + (xb - xa) * f)
-}
-
-/// Round and saturate to `i32` (`as` saturates and maps NaN to 0).
-pub fn round_i32(v: f64) -> i32 {
-    v.round() as i32
 }
