@@ -425,3 +425,42 @@ fn a_crossing_between_measuring_blocks_is_not_taken() {
     assert_eq!(r.measurements[Z].result, None);
     assert_eq!(m.channel().axes()[Z].command(), 60.0);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Every drive family: a fault or a lost exchange while measuring stops the axis and reports
+// ---------------------------------------------------------------------------------------------
+
+/// Each built-in drive family on Z: a drive fault, then a lost exchange, in the middle of a
+/// measuring block (before the probe at 80) end the run with the seed's error, publish no
+/// latch, and leave the axes standing.
+#[test]
+fn every_drive_family_stops_safely_on_a_fault_or_lost_exchange() {
+    for &drive in fieldprobe::drive::catalogue::builtin_names() {
+        let mut sets = vec![format!("Z.drive={drive}")];
+        if drive == "cia402-drive-defined" {
+            sets.push("Z.P-AXIS-00702=DRIVE_DEFINED".into());
+        }
+        let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+        for (what, id) in [("fault", 900010), ("lost exchange", 900012)] {
+            let mut m = machine(&sets);
+            m.add_probe("Z", 80.0).unwrap();
+            let t = run_traced(&mut m, "N10 G100 Z100 F3000\nN20 M30\n", |m, _, k| {
+                if k == 300 {
+                    if id == 900010 {
+                        m.link_mut().model_mut(Z).unwrap().inject_fault(0x8611);
+                    } else {
+                        let next = m.link_mut().exchanges();
+                        m.link_mut().lose_exchange_at(next);
+                    }
+                }
+            });
+            assert!(!t.completed, "{drive} {what}");
+            assert_eq!(t.ids(), vec![id], "{drive} {what}: {:?}", t.messages);
+            assert_eq!(t.exec.result(Z), None, "{drive} {what}");
+            assert!(!t.exec.merf(Z), "{drive} {what}");
+            let z = t.z[t.z.len() - 1];
+            assert!(z < 80.0, "{drive} {what}: stopped at {z}, before the probe");
+            standstill(&mut m);
+        }
+    }
+}

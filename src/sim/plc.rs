@@ -9,8 +9,10 @@
 //! 1. the external-latch handshake (§7.2 / §7.4): a new task is taken (`please_rw = FALSE`) and
 //!    acknowledged (`done_w = TRUE`) at the first PLC cycle at least the scripted delay later
 //!    ([`AckScript`]; `None` = never, for timeout tests);
-//! 2. the edges that happened up to the cycle time: the EL1252-style `timestamp` unit takes the
-//!    DC time of the last rising edge (+ terminal delay, [`TimestampOutput`]); in
+//! 2. the edges that happened up to the cycle time: the `timestamp` unit is an EL1252 terminal
+//!    model ([`El1252Device`], continuous mode) whose process image the PLC decodes with the
+//!    master-side [`el1252::Decoder`] each cycle, taking the DC time of the last edge of the
+//!    configured kind (+ terminal delay, [`TimestampOutput`]); in
 //!    [`SimPlcMode::FirstEventLatch`] the first qualifying edge sets the PLC's latch; in
 //!    [`SimPlcMode::ExtLatchControl`] the first qualifying edge after ENABLE makes the PLC write
 //!    `probing_position` (the true crossing position) and then raise `probing_signal`;
@@ -19,10 +21,13 @@
 //! Step the PLC before the CNC evaluates the units in the same NC cycle: a PLC cycle at exactly
 //! the NC cycle time is then visible to the CNC in that cycle (a synchronous PLC). Nothing here
 //! allocates per cycle (edges wait in a queue allocated once; beyond [`EDGE_QUEUE`] entries the
-//! oldest are dropped and counted).
+//! oldest are dropped and counted; the terminal image is decoded only in PLC cycles where it
+//! changed, i.e. after an edge).
 
 use crate::core::measure::plc::{AxisPlc, ExtLatchJob, ExtLatchTask};
 use crate::core::measure::timestamp::DcClock;
+use crate::drive::el1252::{self, LatchMode, CHANNEL_LEN};
+use crate::drive::model::el1252::El1252Device;
 use crate::drive::ProbeEdge;
 use crate::units::Nanos;
 
@@ -194,6 +199,8 @@ pub struct ScriptedPlc {
     saw_measuring: bool,
     ext_event: bool,
     last_timestamp: Option<i64>,
+    /// The timestamp terminal (one channel) and the PLC's decoder of its image.
+    terminal: Option<Terminal>,
     acks: u64,
     /// Edge of the last task read (P-AXIS-00518 as the CNC sent it).
     task_edge: ProbeEdge,
@@ -218,6 +225,7 @@ impl ScriptedPlc {
             saw_measuring: false,
             ext_event: false,
             last_timestamp: None,
+            terminal: config.timestamp.map(|ts| Terminal::new(ts.clock)),
             acks: 0,
             task_edge: ProbeEdge::Positive,
         }
@@ -330,6 +338,11 @@ impl ScriptedPlc {
         }
         self.queue.drain(..n);
 
+        if let (Some(ts), Some(term)) = (self.config.timestamp, self.terminal.as_mut()) {
+            if let Some(dc) = term.read(ts.edge) {
+                self.last_timestamp = Some(dc);
+            }
+        }
         if let Some(ts) = self.config.timestamp {
             let value = self
                 .last_timestamp
@@ -386,10 +399,8 @@ impl ScriptedPlc {
     }
 
     fn on_edge(&mut self, e: &InputEdge, inputs: &dyn ProbeInputs, plc: &mut AxisPlc) {
-        if let Some(ts) = self.config.timestamp {
-            if matches_edge(ts.edge, e.rising) {
-                self.last_timestamp = Some(ts.clock.dc_time(e.at));
-            }
+        if let Some(term) = self.terminal.as_mut() {
+            term.device.edge(1, e.rising, e.at);
         }
         match self.config.mode {
             SimPlcMode::Signal => {}
@@ -523,5 +534,47 @@ impl std::fmt::Debug for ScriptedInputs {
             .field("to", &self.to)
             .field("position", &self.position.is_some())
             .finish()
+    }
+}
+
+/// The EL1252 of a PLC timestamp unit: the terminal model on the input side, the image the
+/// PLC reads, and its decoder.
+#[derive(Debug, Clone)]
+struct Terminal {
+    device: El1252Device,
+    decoder: el1252::Decoder,
+    image: [u8; CHANNEL_LEN],
+    last_image: [u8; CHANNEL_LEN],
+}
+
+impl Terminal {
+    fn new(clock: DcClock) -> Self {
+        let mut t = Terminal {
+            device: El1252Device::new(1, LatchMode::Continuous, clock),
+            decoder: el1252::Decoder::new(1, LatchMode::Continuous),
+            image: [0; CHANNEL_LEN],
+            last_image: [0; CHANNEL_LEN],
+        };
+        // The first image is the decoder's reference: give it the idle terminal.
+        if t.device.write_image(&mut t.image).is_ok() && t.decoder.decode(&t.image).is_ok() {
+            t.last_image = t.image;
+        }
+        t
+    }
+
+    /// One PLC cycle: read the terminal's image; the DC time of the latest new edge of `edge`'s
+    /// kind, if any.
+    fn read(&mut self, edge: ProbeEdge) -> Option<i64> {
+        self.device.write_image(&mut self.image).ok()?;
+        if self.image == self.last_image {
+            return None;
+        }
+        self.last_image = self.image;
+        let (_, edges) = self.decoder.decode(&self.image).ok()?;
+        edges
+            .iter()
+            .rev()
+            .find(|e| matches_edge(edge, e.rising))
+            .map(|e| e.dc_time)
     }
 }

@@ -168,22 +168,7 @@ impl AxisPlant {
 
     /// Position at `t` inside the last cycle (linear between sub-samples).
     pub fn position_at(&self, t: Nanos) -> Option<f64> {
-        let traj = &self.trajectory;
-        let (&(t0, _), &(t1, x1)) = (traj.first()?, traj.last()?);
-        if t < t0 || t > t1 {
-            return None;
-        }
-        if t == t1 {
-            return Some(x1);
-        }
-        let i = traj.partition_point(|&(ti, _)| ti <= t);
-        let (ta, xa) = *traj.get(i.checked_sub(1)?)?;
-        let (tb, xb) = *traj.get(i)?;
-        if tb <= ta {
-            return Some(xb);
-        }
-        let f = (t.0 - ta.0) as f64 / (tb.0 - ta.0) as f64;
-        Some(xa + (xb - xa) * f)
+        super::ds402::motion::interpolate(&self.trajectory, t)
     }
 
     /// Position at `t` clamped into the last cycle; the actual position without trajectory.
@@ -239,10 +224,7 @@ impl AxisPlant {
     }
 }
 
-/// Round and saturate to `i32` (NaN → 0).
-pub fn round_i32(v: f64) -> i32 {
-    v.round() as i32
-}
+pub use super::ds402::motion::round_i32;
 
 /// Drive side of a Lightbus AX2000 (module documentation).
 #[derive(Debug, Clone, PartialEq)]
