@@ -7,7 +7,7 @@ use fieldprobe::drive::el1252::{self, Decoder, LatchMode};
 use fieldprobe::drive::lightbus::{self, telegram, LightbusAdapter};
 use fieldprobe::drive::model::el1252::El1252Device;
 use fieldprobe::drive::model::{self, DriveModel};
-use fieldprobe::drive::terminal::{self, image, CounterExtender, Variant};
+use fieldprobe::drive::terminal::{self, image, CounterExtender, TerminalAdapter, Variant};
 use fieldprobe::drive::{
     DriveAdapter, DriveCommand, DriveFeedback, PowerState, ProbeEdge, ProbeRequest, ProbeState,
     ProbeTrigger, TriggerSourceMode,
@@ -1046,8 +1046,8 @@ fn terminal_section_errors_name_file_line_key_and_allowed_values() {
 
 #[test]
 fn terminal_model_counter_set_cnt_set() {
-    // The adapter never sets CB2 CNT_SET (set value 0 in every output image); the model
-    // implements it, driven here with hand-made output images.
+    // The model's CB2 CNT_SET, driven here with hand-made output images (the adapter's side:
+    // `terminal_adapter_counter_set_rebases_the_position`).
     let def = catalogue::load("el5101-terminal").unwrap();
     let mut m = model::for_definition(&def).unwrap();
     let mut tx = [0u8; image::INPUT_LEN];
@@ -1189,4 +1189,59 @@ fn el1252_dc_time_of_known_edges_per_channel_first_event_vs_continuous() {
         "LatchPosR"
     );
     assert_eq!(img[0], 0x00, "channel 1 untouched");
+}
+
+#[test]
+fn terminal_adapter_counter_set_rebases_the_position() {
+    // notes cnc.md §4.1 CB2 CNT_SET: the adapter writes the set value (low 16 bits of the wanted
+    // position) with CNT_SET until CNTSET_ACC, then counts on from the wanted position.
+    let def = catalogue::load("kl5101-terminal").unwrap();
+    let mut a =
+        TerminalAdapter::new(&def, &ParamSet::new(fieldprobe::params::Scope::Axis)).unwrap();
+    let mut m = model::for_definition(&def).unwrap();
+    let (mut out, mut inp) = ([0u8; image::OUTPUT_LEN], [0u8; image::INPUT_LEN]);
+    let mut k = 0u64;
+    let mut cycle = |a: &mut TerminalAdapter, m: &mut Box<dyn DriveModel>, enable: bool| {
+        k += 1;
+        m.begin_step(Nanos(k * T.0), 1e-3, &out);
+        m.finish_step(&mut inp);
+        let fb = a.read_inputs(Nanos(k * T.0), &inp).unwrap();
+        let cmd = DriveCommand {
+            enable,
+            target: fb.position,
+            fault_reset: false,
+            quick_stop: false,
+        };
+        a.write_outputs(Nanos(k * T.0), &cmd, &mut out).unwrap();
+        (fb.position, out[0], u16::from_le_bytes([out[1], out[2]]))
+    };
+    m.set_actual(3_000.0);
+    cycle(&mut a, &mut m, false);
+    assert_eq!(cycle(&mut a, &mut m, false).0, 3_000);
+    // 100000 = 0x186A0: set value 0x86A0 = 34464, beyond the 16-bit counter.
+    a.preset_counter(100_000).unwrap();
+    assert!(a.presetting());
+    // The next output image: CB 0x04 CNT_SET | set value 34464.
+    let (pos, cb, set) = cycle(&mut a, &mut m, false);
+    assert_eq!((pos, cb, set), (3_000, image::CB_CNT_SET, 34_464));
+    // The terminal loads it and reports CNTSET_ACC: the position is 100000; CB2 dropped.
+    let (pos, cb, set) = cycle(&mut a, &mut m, false);
+    assert_eq!((pos, cb, set), (100_000, 0, 0));
+    assert!(!a.presetting());
+    // Motion after the set counts on from it (+2500), across no wrap trouble.
+    m.set_actual(5_500.0);
+    assert_eq!(cycle(&mut a, &mut m, false).0, 102_500);
+    // A latch cannot be armed during a counter set, nor a counter set made with the amplifier on.
+    a.preset_counter(0).unwrap();
+    assert!(a
+        .arm_probe(&req(ProbeEdge::Positive, ProbeTrigger::Input))
+        .is_err());
+    cycle(&mut a, &mut m, false);
+    cycle(&mut a, &mut m, false);
+    assert_eq!(cycle(&mut a, &mut m, false).0, 0);
+    for _ in 0..5 {
+        cycle(&mut a, &mut m, true);
+    }
+    let e = a.preset_counter(7).unwrap_err().to_string();
+    assert!(e.contains("amplifier disabled"), "{e}");
 }

@@ -322,6 +322,13 @@ impl CounterExtender {
     pub fn position(&self) -> i64 {
         self.ext
     }
+
+    /// Re-base after a counter set: the terminal loaded `set_value` and now shows `counter`
+    /// (set value plus the motion since); the extended position becomes `value` plus that motion.
+    pub fn rebase(&mut self, value: i64, set_value: u16, counter: u16) {
+        self.ext = value.saturating_add(i64::from(counter.wrapping_sub(set_value) as i16));
+        self.last = Some(counter);
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -358,6 +365,8 @@ pub struct TerminalAdapter {
     /// Extended position of the last read.
     position: i64,
     enabled_in: bool,
+    /// Counter set in progress: the extended position wanted and the cycles waited.
+    preset: Option<(i64, u32)>,
 }
 
 impl TerminalAdapter {
@@ -379,7 +388,33 @@ impl TerminalAdapter {
             prev: None,
             position: 0,
             enabled_in: false,
+            preset: None,
         })
+    }
+
+    /// Set the axis position (increments) by the terminal's counter set (CB2 CNT_SET; notes
+    /// cnc.md §4.1), e.g. when referencing: CNT_SET with the set value `value mod 2^16` is
+    /// written until the terminal reports CNTSET_ACC, then the extended position continues from
+    /// `value`. Refused while the amplifier is enabled (the position would jump under the
+    /// position loop) or a latch is armed (its value would be on the old count).
+    pub fn preset_counter(&mut self, value: i64) -> Result<(), DriveError> {
+        if self.enabled_in {
+            return Err(DriveError::Unsupported(
+                "encoder terminal: the counter can only be set with the amplifier disabled".into(),
+            ));
+        }
+        if self.arming.is_some() {
+            return Err(DriveError::Unsupported(
+                "encoder terminal: the counter cannot be set while a latch is armed".into(),
+            ));
+        }
+        self.preset = Some((value, 0));
+        Ok(())
+    }
+
+    /// A counter set is in progress.
+    pub fn presetting(&self) -> bool {
+        self.preset.is_some()
     }
 
     /// The `[terminal]` configuration.
@@ -416,8 +451,26 @@ impl DriveAdapter for TerminalAdapter {
     fn read_inputs(&mut self, _now: Nanos, inputs: &[u8]) -> Result<DriveFeedback, DriveError> {
         use image::*;
         let i = Inputs::decode(inputs)?;
-        self.position = self.counter.update(i.counter);
         let timeout = self.config.arm_timeout_cycles;
+        match self.preset {
+            Some((value, _)) if i.status & SB_CNTSET_ACC != 0 => {
+                self.counter.rebase(value, value as u16, i.counter);
+                self.position = self.counter.position();
+                self.preset = None;
+            }
+            Some((value, waited)) => {
+                self.position = self.counter.update(i.counter);
+                if waited >= timeout {
+                    self.preset = None;
+                    return Err(DriveError::Unsupported(format!(
+                        "encoder terminal: counter set not acknowledged (CNTSET_ACC) within \
+                         {timeout} cycles"
+                    )));
+                }
+                self.preset = Some((value, waited + 1));
+            }
+            None => self.position = self.counter.update(i.counter),
+        }
         if let Some(mut a) = self.arming {
             let val = i.status & a.valid != 0;
             match a.phase {
@@ -532,9 +585,13 @@ impl DriveAdapter for TerminalAdapter {
                 Phase::Armed { .. } => {}
             }
         }
+        let (control, set_value) = match self.preset {
+            Some((value, _)) => (control | CB_CNT_SET, value as u16),
+            None => (control, 0),
+        };
         Outputs {
             control,
-            set_value: 0,
+            set_value,
             velocity,
             drive,
         }
@@ -543,6 +600,11 @@ impl DriveAdapter for TerminalAdapter {
 
     fn arm_probe(&mut self, request: &ProbeRequest) -> Result<(), DriveError> {
         use image::*;
+        if self.preset.is_some() {
+            return Err(DriveError::Unsupported(
+                "encoder terminal: a counter set is in progress".into(),
+            ));
+        }
         let (enable, valid) = match request.trigger {
             ProbeTrigger::ZeroPulse => (CB_EN_LATC, SB_LATC_VAL),
             ProbeTrigger::Input => {
