@@ -593,3 +593,104 @@ fn meas1_end_to_end_on_profidrive() {
         ]
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// MOMRED as a cyclic drive function (#DRIVE, commu = "CYCLIC")
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn drive_torque_reduction_goes_into_the_cyclic_momred_word() {
+    let cfg = MachineConfig::parse(
+        "[[axis]]\nname = \"X\"\n[[axis]]\nname = \"Y\"\n[[axis]]\nname = \"Z\"\ndrive = \"profidrive-t105\"\n",
+        "m.toml",
+    )
+    .unwrap();
+    let mut m = Machine::new(&cfg).unwrap();
+    let p1520 = m
+        .link_mut()
+        .model_mut(2)
+        .unwrap()
+        .read_object(PNU_TORQUE_LIMIT, 0)
+        .unwrap() as f64;
+    let prog = "N10 #DRIVE WR SYN [AX=Z KEY=TORQUE_REDUCTION VAL=500 WAIT]\n\
+                N20 G01 G91 Z1 F1000\n\
+                N30 #DRIVE RD [AX=Z KEY=TORQUE_REDUCTION P=P10 WAIT]\n\
+                N40 #MSG SYN[\"%f\", P10]\n\
+                N50 M30\n";
+    let r = m.run_program(&parse(prog).unwrap(), &mut |_| {});
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    assert_eq!(r.output(), vec!["500.000000".to_string()]);
+    // 500 per mille = MOMRED 0x2000 (0x4000 = 100 %): the drive's limit is half of P1520, and
+    // P1520 itself was not written (MOMRED is not a parameter write).
+    let model = m.link_mut().model_as::<ProfidriveModel>(2).unwrap();
+    assert_eq!(model.torque_limit(), p1520 * 0.5);
+    assert_eq!(
+        model.read_object(PNU_TORQUE_LIMIT, 0).unwrap() as f64,
+        p1520
+    );
+    // Out of range is refused before anything is sent.
+    let mut m = Machine::new(&cfg).unwrap();
+    let r = m.run_program(
+        &parse("N10 #DRIVE WR SYN [AX=Z KEY=TORQUE_REDUCTION VAL=1001 WAIT]\nN20 M30\n").unwrap(),
+        &mut |_| {},
+    );
+    assert_eq!(r.status, RunStatus::Aborted);
+    assert!(
+        r.messages()[0].text.contains("0 … 1000"),
+        "{:?}",
+        r.messages()
+    );
+}
+
+#[test]
+fn a_cyclic_function_on_a_drive_without_one_and_a_bad_commu_are_errors() {
+    let text = std::fs::read_to_string(format!(
+        "{}/drives/cia402-generic.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    // CiA 402 has no cyclic drive functions: the #DRIVE write aborts with the adapter's words.
+    let cyclic = text.replacen(
+        "[functions]\n",
+        "[functions]\nMOMRED = { object = \"0x0065:00\", type = \"u16\", commu = \"CYCLIC\" }\n",
+        1,
+    );
+    assert_ne!(cyclic, text);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("c.toml");
+    std::fs::write(&path, &cyclic).unwrap();
+    let cfg = MachineConfig::parse(
+        &format!(
+            "[[axis]]\nname = \"Z\"\ndrive = \"{}\"\n",
+            path.to_string_lossy()
+        ),
+        "m.toml",
+    )
+    .unwrap();
+    let mut m = Machine::new(&cfg).unwrap();
+    let r = m.run_program(
+        &parse("N10 #DRIVE WR SYN [AX=Z KEY=MOMRED VAL=1 WAIT]\nN20 M30\n").unwrap(),
+        &mut |_| {},
+    );
+    assert_eq!(r.status, RunStatus::Aborted);
+    assert!(
+        r.messages()[0]
+            .text
+            .contains("no cyclic function 0x0065:00"),
+        "{:?}",
+        r.messages()
+    );
+    // commu other than ACYCLIC / CYCLIC: file, line, key, allowed values.
+    let bad = text.replacen(
+        "[functions]\n",
+        "[functions]\nMOMRED = { object = \"0x0065:00\", type = \"u16\", commu = \"FAST\" }\n",
+        1,
+    );
+    let line = bad.lines().position(|l| l.contains("FAST")).unwrap() + 1;
+    let e = catalogue::parse(&bad, "bad.toml").unwrap_err().to_string();
+    assert!(e.starts_with(&format!("bad.toml:{line}:")), "{e}");
+    assert!(
+        e.contains("commu") && e.contains("\"ACYCLIC\" and \"CYCLIC\""),
+        "{e}"
+    );
+}

@@ -222,6 +222,17 @@ impl Axis {
         self.adapter.disarm_probe();
     }
 
+    /// Write a cyclic drive function (telegram signal `index:sub`, see
+    /// [`DriveAdapter::write_cyclic`]).
+    pub fn write_cyclic(&mut self, index: u16, sub: u8, value: i64) -> Result<(), DriveError> {
+        self.adapter.write_cyclic(index, sub, value)
+    }
+
+    /// Read back a cyclic drive function.
+    pub fn read_cyclic(&self, index: u16, sub: u8) -> Result<i64, DriveError> {
+        self.adapter.read_cyclic(index, sub)
+    }
+
     /// State of the drive's latch unit.
     pub fn probe_state(&self) -> ProbeState {
         self.adapter.probe_state()

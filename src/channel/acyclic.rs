@@ -44,6 +44,8 @@ pub(super) struct AcyclicState {
 impl Channel {
     /// Queue an acyclic access to axis `axis`'s drive. With `wait` the channel is busy until the
     /// answer is in. `what` describes the access for messages (`#DRIVE KEY=TORQUE_LIMIT`).
+    /// A `cyclic` drive function (`commu = "CYCLIC"`) is not sent over the mailbox: the axis's
+    /// adapter takes it into its command telegram at once, and the answer is there right away.
     pub fn queue_acyclic(
         &mut self,
         axis: usize,
@@ -56,6 +58,7 @@ impl Channel {
         let a = &mut self.acyclic;
         a.next_id += 1;
         let id = a.next_id;
+        a.pending.push((id, what.to_string()));
         a.queued.push(AcyclicRequest {
             id,
             axis,
@@ -63,10 +66,35 @@ impl Channel {
             sub,
             op,
         });
-        a.pending.push((id, what.to_string()));
         if wait && matches!(self.mode, Mode::Idle) {
             self.mode = Mode::WaitAcyclic { id };
         }
+        id
+    }
+
+    /// A cyclic drive function (see [`queue_acyclic`](Self::queue_acyclic)): carried out on
+    /// the axis's adapter now; the answer is taken like an acyclic one.
+    pub fn cyclic_function(
+        &mut self,
+        axis: usize,
+        index: u16,
+        sub: u8,
+        op: AcyclicOp,
+        what: &str,
+    ) -> u64 {
+        let a = &mut self.acyclic;
+        a.next_id += 1;
+        let id = a.next_id;
+        a.pending.push((id, what.to_string()));
+        let result = match self.axes.get_mut(axis) {
+            None => Err(format!("no axis {axis}")),
+            Some(ax) => match op {
+                AcyclicOp::Read => ax.read_cyclic(index, sub),
+                AcyclicOp::Write(v) => ax.write_cyclic(index, sub, v).map(|()| v),
+            }
+            .map_err(|e| e.to_string()),
+        };
+        self.acyclic_done(id, result);
         id
     }
 

@@ -203,6 +203,10 @@ pub struct DriveFunction {
     pub min: i64,
     /// Largest allowed wire value.
     pub max: i64,
+    /// `commu = "CYCLIC"`: the value goes into the cyclic telegram through the adapter (e.g.
+    /// PROFIdrive MOMRED); default `"ACYCLIC"`: an object write over the mailbox (seed 004
+    /// §7.3.2 `antr.function[i].commu`).
+    pub cyclic: bool,
 }
 
 impl DriveFunction {
@@ -941,8 +945,20 @@ impl Cx<'_> {
             self.check_keys(
                 f.1,
                 &what,
-                &["object", "type", "unit", "scale", "min", "max"],
+                &["object", "type", "unit", "scale", "min", "max", "commu"],
             )?;
+            let cyclic =
+                match self.opt_str(f.1, &what, "commu")?.as_deref() {
+                    None => false,
+                    Some(c) if c.eq_ignore_ascii_case("ACYCLIC") => false,
+                    Some(c) if c.eq_ignore_ascii_case("CYCLIC") => true,
+                    Some(c) => return Err(self.err(
+                        self.value_span(f.1, "commu"),
+                        format!(
+                            "{what} commu = \"{c}\": allowed values are \"ACYCLIC\" and \"CYCLIC\""
+                        ),
+                    )),
+                };
             let (index, sub, ty) = self.object_and_type(f.1, &what, kspan)?;
             let unit = self.opt_str(f.1, &what, "unit")?;
             let scale = self.float(f.1, &what, "scale")?.unwrap_or(1.0);
@@ -970,6 +986,7 @@ impl Cx<'_> {
                 scale,
                 min,
                 max,
+                cyclic,
             });
         }
         Ok(out)

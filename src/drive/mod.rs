@@ -224,6 +224,24 @@ pub trait DriveAdapter: Send + fmt::Debug {
     fn take_probe_event(&mut self) -> Option<ProbeEvent> {
         None
     }
+
+    /// Write a cyclic drive function (`commu = "CYCLIC"` in the drive file, e.g. PROFIdrive
+    /// MOMRED): `value` goes into the command telegram from the next cycle on. `index:sub`
+    /// names the telegram signal in the family's numbering. Families without cyclic functions
+    /// refuse.
+    fn write_cyclic(&mut self, index: u16, sub: u8, value: i64) -> Result<(), DriveError> {
+        let _ = value;
+        Err(DriveError::Unsupported(format!(
+            "this drive has no cyclic function {index:#06x}:{sub:02x}"
+        )))
+    }
+
+    /// Read back a cyclic drive function (the value the adapter sends).
+    fn read_cyclic(&self, index: u16, sub: u8) -> Result<i64, DriveError> {
+        Err(DriveError::Unsupported(format!(
+            "this drive has no cyclic function {index:#06x}:{sub:02x}"
+        )))
+    }
 }
 
 /// The master-side adapter for a drive definition (by its profile), with the axis parameter

@@ -898,4 +898,38 @@ impl DriveAdapter for ProfidriveAdapter {
     fn take_probe_event(&mut self) -> Option<ProbeEvent> {
         self.events.pop_front()
     }
+
+    /// Signal [`SIGNAL_MOMRED`] sub 0: the torque reduction in ‰ (0 … 1000).
+    fn write_cyclic(&mut self, index: u16, sub: u8, value: i64) -> Result<(), DriveError> {
+        if (index, sub) != (SIGNAL_MOMRED, 0) {
+            return Err(DriveError::Unsupported(format!(
+                "PROFIdrive: no cyclic function {index:#06x}:{sub:02x}; signal {SIGNAL_MOMRED} \
+                 (0x0065:00) MOMRED is"
+            )));
+        }
+        let permille = u16::try_from(value)
+            .ok()
+            .filter(|v| *v <= 1000)
+            .ok_or_else(|| {
+                DriveError::Unsupported(format!(
+                    "PROFIdrive MOMRED: {value} is outside 0 … 1000 per mille"
+                ))
+            })?;
+        self.set_torque_reduction(permille)
+    }
+
+    fn read_cyclic(&self, index: u16, sub: u8) -> Result<i64, DriveError> {
+        if (index, sub) != (SIGNAL_MOMRED, 0) {
+            return Err(DriveError::Unsupported(format!(
+                "PROFIdrive: no cyclic function {index:#06x}:{sub:02x}"
+            )));
+        }
+        // Back to per mille, rounded (the word is ‰ × 0x4000 / 1000, truncated).
+        Ok((i64::from(self.momred) * 1000 + 0x2000) / 0x4000)
+    }
 }
+
+/// PROFIdrive signal number of MOMRED (torque reduction): the `index` of the cyclic drive
+/// function `object = "0x0065:00"`, `commu = "CYCLIC"` (assumption: the profile's signal
+/// numbering, 101 = MOMRED).
+pub const SIGNAL_MOMRED: u16 = 101;

@@ -225,10 +225,18 @@ impl Executor {
             let raw = f.encode(v).ok_or_else(|| {
                 err(ids::ACYCLIC_FAILED, format!("#DRIVE WR KEY={key} VAL={v}: outside the function's range {} … {} (wire value = VAL × {})", f.min, f.max, f.scale))
             })?;
-            ch.queue_acyclic(axis, f.index, f.sub, AcyclicOp::Write(raw), wait, &what);
+            if f.cyclic {
+                ch.cyclic_function(axis, f.index, f.sub, AcyclicOp::Write(raw), &what);
+            } else {
+                ch.queue_acyclic(axis, f.index, f.sub, AcyclicOp::Write(raw), wait, &what);
+            }
         } else {
             let param = self.target_param(args)?;
-            let id = ch.queue_acyclic(axis, f.index, f.sub, AcyclicOp::Read, true, &what);
+            let id = if f.cyclic {
+                ch.cyclic_function(axis, f.index, f.sub, AcyclicOp::Read, &what)
+            } else {
+                ch.queue_acyclic(axis, f.index, f.sub, AcyclicOp::Read, true, &what)
+            };
             if let Some(p) = param {
                 self.pending_reads.push(PendingRead {
                     id,
