@@ -234,3 +234,88 @@ fn the_sercos_gantry_fixed_stop_example_latches_the_wall_on_every_family_with_an
         assert!(ran.contains(&family), "{family} not run: {ran:?}");
     }
 }
+
+/// Nothing from a wire may panic: every family's adapter and model take random images of random
+/// lengths (short, exact, long), random object accesses and arming requests without panicking.
+#[test]
+fn random_images_and_object_accesses_never_panic_any_family() {
+    use fieldprobe::drive::{
+        adapter_for, model, DriveCommand, ProbeEdge, ProbeRequest, ProbeTrigger, TriggerSourceMode,
+    };
+    use fieldprobe::params::{ParamSet, Scope};
+    use fieldprobe::units::Nanos;
+    let mut seed: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    for &drive in catalogue::builtin_names() {
+        let def = catalogue::load(drive).unwrap();
+        let mut a = adapter_for(&def, &ParamSet::new(Scope::Axis)).unwrap();
+        let mut m = model::for_definition(&def).unwrap();
+        for k in 1..2000u64 {
+            let now = Nanos(k * 1_000_000);
+            let len = |n: usize, r: u64| match r % 4 {
+                0 => (r as usize / 4) % (n + 1),
+                1 => n + (r as usize / 4) % 8,
+                _ => n,
+            };
+            let mut rx: Vec<u8> = (0..len(a.output_len(), next()))
+                .map(|_| next() as u8)
+                .collect();
+            let mut tx: Vec<u8> = (0..len(a.input_len(), next()))
+                .map(|_| next() as u8)
+                .collect();
+            m.begin_step(now, 1e-3, &rx);
+            if next() % 7 == 0 {
+                m.input_edge((next() % 3) as u8, next() % 2 == 0, Nanos(now.0 - 500_000));
+            }
+            m.finish_step(&mut tx);
+            if next() % 3 == 0 {
+                for b in tx.iter_mut() {
+                    *b = next() as u8;
+                }
+            }
+            let _ = a.read_inputs(now, &tx);
+            let cmd = DriveCommand {
+                enable: next() % 2 == 0,
+                target: next() as i32,
+                fault_reset: next() % 5 == 0,
+                quick_stop: next() % 11 == 0,
+            };
+            let _ = a.write_outputs(now, &cmd, &mut rx);
+            let r = next();
+            let _ = m.write_object(
+                (r >> 16) as u16,
+                (r >> 32) as u8,
+                (r >> 40) as i64 - (1 << 23),
+            );
+            let _ = m.read_object((r >> 8) as u16, r as u8);
+            if r % 13 == 0 {
+                let _ = a.arm_probe(&ProbeRequest {
+                    probe: (next() % 3) as u8,
+                    edge: if next() % 2 == 0 {
+                        ProbeEdge::Positive
+                    } else {
+                        ProbeEdge::Negative
+                    },
+                    trigger: match next() % 3 {
+                        0 => ProbeTrigger::Input,
+                        1 => ProbeTrigger::ZeroPulse,
+                        _ => ProbeTrigger::SourceObject,
+                    },
+                    continuous: next() % 4 == 0,
+                    source_mode: match next() % 3 {
+                        0 => TriggerSourceMode::Default,
+                        1 => TriggerSourceMode::CncDefined,
+                        _ => TriggerSourceMode::DriveDefined,
+                    },
+                    input: (next() % 300) as u8,
+                });
+            }
+            while a.take_probe_event().is_some() {}
+        }
+    }
+}
