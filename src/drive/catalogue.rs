@@ -947,18 +947,19 @@ impl Cx<'_> {
                 &what,
                 &["object", "type", "unit", "scale", "min", "max", "commu"],
             )?;
-            let cyclic =
-                match self.opt_str(f.1, &what, "commu")?.as_deref() {
-                    None => false,
-                    Some(c) if c.eq_ignore_ascii_case("ACYCLIC") => false,
-                    Some(c) if c.eq_ignore_ascii_case("CYCLIC") => true,
-                    Some(c) => return Err(self.err(
+            let cyclic = match self.opt_str(f.1, &what, "commu")?.as_deref() {
+                None => false,
+                Some(c) if c.eq_ignore_ascii_case("ACYCLIC") => false,
+                Some(c) if c.eq_ignore_ascii_case("CYCLIC") => true,
+                Some(c) => {
+                    return Err(self.err(
                         self.value_span(f.1, "commu"),
                         format!(
                             "{what} commu = \"{c}\": allowed values are \"ACYCLIC\" and \"CYCLIC\""
                         ),
-                    )),
-                };
+                    ))
+                }
+            };
             let (index, sub, ty) = self.object_and_type(f.1, &what, kspan)?;
             let unit = self.opt_str(f.1, &what, "unit")?;
             let scale = self.float(f.1, &what, "scale")?.unwrap_or(1.0);
