@@ -15,9 +15,11 @@
 //! ```
 
 pub mod axis;
+pub mod bus;
 pub mod channel;
 pub mod core;
 pub mod drive;
+pub mod esi;
 pub mod link;
 pub mod machine;
 pub mod messages;

@@ -1,4 +1,5 @@
 //! Simulation of the physical world around the drives: probe surfaces, fixed stops, a scripted PLC.
 
+pub mod esc;
 pub mod plant;
 pub mod plc;

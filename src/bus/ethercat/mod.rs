@@ -1,0 +1,4 @@
+//! EtherCAT: frame and datagram wire format ([`wire`]), pcap / pcapng capture files ([`pcap`]).
+
+pub mod pcap;
+pub mod wire;

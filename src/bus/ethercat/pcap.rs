@@ -1,0 +1,1 @@
+//! pcap / pcapng capture files of EtherCAT traffic.

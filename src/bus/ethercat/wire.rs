@@ -1,0 +1,1 @@
+//! EtherCAT frame and datagram wire format (ETG.1000.4).

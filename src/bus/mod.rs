@@ -1,0 +1,3 @@
+//! Fieldbus wire formats and masters.
+
+pub mod ethercat;
