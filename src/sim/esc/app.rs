@@ -1,0 +1,109 @@
+//! The application (PDI side) behind an emulated ESC: mailbox server, process data, state hooks.
+
+use super::types::{AlState, AlStatusCode};
+
+/// Process-data image sizes the application currently expects (bytes), checked against the
+/// process-data sync managers on PRE-OP → SAFE-OP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ProcessDataSizes {
+    /// Output (RxPDO, master → device) bytes; 0 = no output SM expected.
+    pub outputs: u16,
+    /// Input (TxPDO, device → master) bytes; 0 = no input SM expected.
+    pub inputs: u16,
+}
+
+/// The firmware/application behind the PDI of an emulated ESC.
+///
+/// All hooks are called synchronously from [`super::Esc::process`]; the emulated PDI is
+/// infinitely fast (a written mailbox is consumed in the same datagram).
+pub trait EscApplication: Send {
+    /// A complete mailbox message arrived in the write mailbox (SM0, full length incl. padding).
+    /// Return the reply to place into the read mailbox (SM1), if any.
+    fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
+        let _ = data;
+        None
+    }
+
+    /// The master completed writing output SM `sm` (only called in OP).
+    fn outputs_written(&mut self, sm: u8, data: &[u8]) {
+        let _ = (sm, data);
+    }
+
+    /// The master is about to read input SM `sm` (SAFE-OP and OP): fill `buf`.
+    fn inputs(&mut self, sm: u8, buf: &mut [u8]) {
+        let _ = (sm, buf);
+    }
+
+    /// Process-data sizes the current PDO mapping needs.
+    fn process_data_sizes(&self) -> ProcessDataSizes {
+        ProcessDataSizes::default()
+    }
+
+    /// A state transition passed the ESC checks; the application may refuse it with an AL
+    /// status code (the ESC then stays in `from` with the error bit set).
+    fn state_change(&mut self, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
+        let _ = (from, to);
+        Ok(())
+    }
+}
+
+/// Application that does nothing (no mailbox replies, no process data).
+#[derive(Debug, Default, Clone)]
+pub struct NullApp;
+
+impl EscApplication for NullApp {}
+
+/// Tiny test application: echoes every mailbox message back (with the mailbox header's
+/// counter kept), keeps the last outputs and returns `inputs` (or the last outputs, inverted,
+/// if `loopback` is set) as inputs.
+#[derive(Debug, Default, Clone)]
+pub struct EchoApp {
+    /// Expected process-data sizes.
+    pub sizes: ProcessDataSizes,
+    /// Last outputs written by the master.
+    pub outputs: Vec<u8>,
+    /// Inputs returned to the master.
+    pub inputs: Vec<u8>,
+    /// Number of mailbox messages received.
+    pub mailbox_count: usize,
+    /// Return the bitwise-inverted outputs as inputs.
+    pub loopback: bool,
+}
+
+impl EchoApp {
+    /// Echo application with the given process-data sizes.
+    pub fn new(outputs: u16, inputs: u16) -> Self {
+        Self {
+            sizes: ProcessDataSizes { outputs, inputs },
+            outputs: vec![0; usize::from(outputs)],
+            inputs: vec![0; usize::from(inputs)],
+            ..Self::default()
+        }
+    }
+}
+
+impl EscApplication for EchoApp {
+    fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
+        self.mailbox_count += 1;
+        Some(data.to_vec())
+    }
+
+    fn outputs_written(&mut self, _sm: u8, data: &[u8]) {
+        self.outputs = data.to_vec();
+    }
+
+    fn inputs(&mut self, _sm: u8, buf: &mut [u8]) {
+        if self.loopback {
+            for (b, o) in buf.iter_mut().zip(self.outputs.iter()) {
+                *b = !*o;
+            }
+        } else {
+            let n = buf.len().min(self.inputs.len());
+            buf[..n].copy_from_slice(&self.inputs[..n]);
+        }
+    }
+
+    fn process_data_sizes(&self) -> ProcessDataSizes {
+        self.sizes
+    }
+}
