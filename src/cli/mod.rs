@@ -8,6 +8,7 @@
 //! 1 aborted by a CNC error, 2 bad input.
 
 mod check;
+mod esi;
 mod jog;
 mod params;
 mod run;
@@ -43,6 +44,8 @@ enum Command {
     Params(params::ParamsArgs),
     /// Commissioning check: drive settings against the axis parameters, in plain words.
     Check(check::CheckArgs),
+    /// EtherCAT Slave Information (ESI XML) files: show devices, PDOs, mailbox, DC, objects.
+    Esi(esi::EsiArgs),
 }
 
 /// Parse arguments, run, return the exit code.
@@ -64,6 +67,7 @@ pub fn main() -> i32 {
         Command::Jog(a) => jog::run(a),
         Command::Params(a) => params::run(a),
         Command::Check(a) => check::run(a),
+        Command::Esi(a) => esi::run(a),
     };
     match result {
         Ok(code) => code,

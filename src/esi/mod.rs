@@ -21,6 +21,7 @@
 mod device;
 mod parse;
 pub mod sii;
+pub mod to_sii;
 
 pub use device::*;
 
