@@ -28,6 +28,9 @@
 //! only, the PDI watchdog is not modelled (the process-data watchdog is, via [`Esc::tick`]).
 
 pub mod app;
+pub mod coe;
+pub mod segment;
+pub mod soe;
 pub mod types;
 
 use std::collections::VecDeque;
