@@ -12,6 +12,7 @@ mod esi;
 mod jog;
 mod params;
 mod run;
+mod sim;
 mod trace;
 
 use clap::{Parser, Subcommand};
@@ -46,6 +47,8 @@ enum Command {
     Check(check::CheckArgs),
     /// EtherCAT Slave Information (ESI XML) files: show devices, PDOs, mailbox, DC, objects.
     Esi(esi::EsiArgs),
+    /// Emulate EtherCAT devices (from ESI files) on a network interface for a real master.
+    Sim(sim::SimArgs),
 }
 
 /// Parse arguments, run, return the exit code.
@@ -68,6 +71,7 @@ pub fn main() -> i32 {
         Command::Params(a) => params::run(a),
         Command::Check(a) => check::run(a),
         Command::Esi(a) => esi::run(a),
+        Command::Sim(a) => sim::run(a),
     };
     match result {
         Ok(code) => code,

@@ -29,6 +29,8 @@
 
 pub mod app;
 pub mod coe;
+pub mod device;
+pub mod raw;
 pub mod segment;
 pub mod soe;
 pub mod types;
