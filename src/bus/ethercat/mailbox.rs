@@ -1,0 +1,511 @@
+//! CoE mailbox client on ethercrab's public raw command API (`Command::fprd` / `fpwr`).
+//!
+//! Works around the ethercrab 0.7.1 CoE defects (notes `ethercat.md` §0 point 4, §3.2):
+//! spec-conformant segmented upload with toggle check, normal and segmented download
+//! (> 4 bytes), and CoE emergency messages arriving instead of the SDO response are collected
+//! ([`CoeClient::take_emergencies`]) while the client keeps waiting for the real response.
+//! Mailbox handling follows notes §2.4: SM1 status (0x080D bit 3 = mailbox full) is read
+//! before the read mailbox, requests are padded to the full SM0 length, the mailbox counter
+//! runs 1..7. Every wait is bounded by [`CoeClient::timeout`].
+
+use std::time::{Duration, Instant};
+
+use ethercrab::{Command, MainDevice};
+
+use super::wire::{
+    CoeHeader, CoeService, MailboxHeader, MailboxType, SdoCommand, SdoDirection, SdoFrame,
+};
+
+/// SM0 (write mailbox) status register.
+const SM0_STATUS: u16 = 0x0805;
+/// SM1 (read mailbox) status register.
+const SM1_STATUS: u16 = 0x080D;
+/// Mailbox-full bit of a sync manager status register.
+const MBX_FULL: u8 = 0x08;
+
+/// Errors of [`CoeClient`].
+#[derive(Debug, thiserror::Error)]
+pub enum MailboxError {
+    /// The device aborted the transfer.
+    #[error("SDO {index:#06x}:{sub} aborted: {code:#010x} ({text})")]
+    Abort {
+        /// Object index.
+        index: u16,
+        /// Subindex.
+        sub: u8,
+        /// CiA 301 abort code.
+        code: u32,
+        /// The abort code in words.
+        text: &'static str,
+    },
+    /// No (matching) response within the timeout.
+    #[error("mailbox timeout after {0:?} ({1})")]
+    Timeout(Duration, &'static str),
+    /// ethercrab datagram error.
+    #[error("datagram: {0}")]
+    Datagram(String),
+    /// Malformed or unexpected response.
+    #[error("protocol: {0}")]
+    Protocol(String),
+    /// Mailbox error reply (type 0) with its detail code.
+    #[error("mailbox error reply, detail {0:#06x}")]
+    MailboxErrorReply(u16),
+    /// Request does not fit the write mailbox.
+    #[error("request does not fit the write mailbox ({0} bytes)")]
+    TooLarge(usize),
+}
+
+/// A CoE emergency message received while waiting for an SDO response.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Emergency {
+    /// Error code.
+    pub code: u16,
+    /// Error register (0x1001).
+    pub register: u8,
+    /// Manufacturer-specific bytes.
+    pub data: [u8; 5],
+}
+
+/// CiA 301 SDO abort code in words.
+pub fn abort_text(code: u32) -> &'static str {
+    match code {
+        0x0503_0000 => "toggle bit not alternated",
+        0x0504_0000 => "SDO protocol timed out",
+        0x0504_0001 => "client/server command specifier not valid or unknown",
+        0x0504_0005 => "out of memory",
+        0x0601_0000 => "unsupported access to an object",
+        0x0601_0001 => "attempt to read a write-only object",
+        0x0601_0002 => "attempt to write a read-only object",
+        0x0602_0000 => "object does not exist in the object dictionary",
+        0x0604_0041 => "object cannot be mapped to the PDO",
+        0x0604_0042 => "number and length of mapped objects exceed PDO length",
+        0x0604_0043 => "general parameter incompatibility",
+        0x0604_0047 => "general internal incompatibility in the device",
+        0x0606_0000 => "access failed due to a hardware error",
+        0x0607_0010 => "data type does not match, length of service parameter does not match",
+        0x0607_0012 => "data type does not match, length of service parameter too high",
+        0x0607_0013 => "data type does not match, length of service parameter too low",
+        0x0609_0011 => "subindex does not exist",
+        0x0609_0030 => "value range of parameter exceeded",
+        0x0609_0031 => "value of parameter written too high",
+        0x0609_0032 => "value of parameter written too low",
+        0x0609_0036 => "maximum value is less than minimum value",
+        0x0800_0000 => "general error",
+        0x0800_0020 => "data cannot be transferred or stored to the application",
+        0x0800_0021 => "data cannot be transferred because of local control",
+        0x0800_0022 => "data cannot be transferred because of the present device state",
+        0x0800_0023 => "object dictionary not present or dynamic generation failed",
+        _ => "unknown abort code",
+    }
+}
+
+/// CoE (SDO) client for one SubDevice.
+#[derive(Debug)]
+pub struct CoeClient {
+    station: u16,
+    mbx_out: (u16, u16),
+    mbx_in: (u16, u16),
+    counter: u8,
+    emergencies: Vec<Emergency>,
+    /// Bound for each wait (mailbox free, response).
+    pub timeout: Duration,
+}
+
+fn dg(e: ethercrab::error::Error) -> MailboxError {
+    MailboxError::Datagram(e.to_string())
+}
+
+impl CoeClient {
+    /// Client for the SubDevice at configured `station_address`, with the write mailbox
+    /// (SM0) and read mailbox (SM1) as (start address, length).
+    pub fn new(station_address: u16, mbx_out: (u16, u16), mbx_in: (u16, u16)) -> Self {
+        Self {
+            station: station_address,
+            mbx_out,
+            mbx_in,
+            counter: 0,
+            emergencies: Vec::new(),
+            timeout: Duration::from_secs(2),
+        }
+    }
+
+    /// Emergencies received so far (drains the list).
+    pub fn take_emergencies(&mut self) -> Vec<Emergency> {
+        std::mem::take(&mut self.emergencies)
+    }
+
+    fn next_counter(&mut self) -> u8 {
+        self.counter = if self.counter >= 7 {
+            1
+        } else {
+            self.counter + 1
+        };
+        self.counter
+    }
+
+    async fn sm_status(&self, md: &MainDevice<'_>, reg: u16) -> Result<u8, MailboxError> {
+        Command::fprd(self.station, reg)
+            .receive::<u8>(md)
+            .await
+            .map_err(dg)
+    }
+
+    async fn read_mailbox(&self, md: &MainDevice<'_>) -> Result<Vec<u8>, MailboxError> {
+        let r = Command::fprd(self.station, self.mbx_in.0)
+            .receive_slice(md, self.mbx_in.1)
+            .await
+            .map_err(dg)?;
+        Ok(r.to_vec())
+    }
+
+    /// Flush a stale read mailbox, wait for the write mailbox to be free, write `body`
+    /// (CoE header + service data) padded to the full SM0 length.
+    async fn send(&mut self, md: &MainDevice<'_>, body: &[u8]) -> Result<(), MailboxError> {
+        let len = usize::from(self.mbx_out.1);
+        if body.len() + MailboxHeader::LEN > len {
+            return Err(MailboxError::TooLarge(body.len()));
+        }
+        let deadline = Instant::now() + self.timeout;
+        // Stale messages in SM1 (e.g. an old EMCY) are read and collected.
+        for _ in 0..10 {
+            if self.sm_status(md, SM1_STATUS).await? & MBX_FULL == 0 {
+                break;
+            }
+            let m = self.read_mailbox(md).await?;
+            self.collect_emergency(&m);
+        }
+        while self.sm_status(md, SM0_STATUS).await? & MBX_FULL != 0 {
+            if Instant::now() > deadline {
+                return Err(MailboxError::Timeout(self.timeout, "write mailbox busy"));
+            }
+        }
+        let hdr = MailboxHeader {
+            length: body.len() as u16,
+            address: 0,
+            channel: 0,
+            priority: 0,
+            mailbox_type: MailboxType::Coe,
+            counter: self.next_counter(),
+        };
+        let mut buf = vec![0u8; len];
+        buf[..MailboxHeader::LEN].copy_from_slice(&hdr.encode());
+        buf[MailboxHeader::LEN..MailboxHeader::LEN + body.len()].copy_from_slice(body);
+        Command::fpwr(self.station, self.mbx_out.0)
+            .send(md, buf.as_slice())
+            .await
+            .map_err(dg)
+    }
+
+    /// Record `msg` if it is a CoE emergency; returns whether it was one.
+    fn collect_emergency(&mut self, msg: &[u8]) -> bool {
+        let Ok((h, body)) = MailboxHeader::parse(msg) else {
+            return false;
+        };
+        if h.mailbox_type != MailboxType::Coe {
+            return false;
+        }
+        let Ok((coe, rest)) = CoeHeader::parse(body) else {
+            return false;
+        };
+        if coe.service != CoeService::Emergency {
+            return false;
+        }
+        let mut e = Emergency {
+            code: 0,
+            register: 0,
+            data: [0; 5],
+        };
+        if rest.len() >= 2 {
+            e.code = u16::from_le_bytes([rest[0], rest[1]]);
+        }
+        if let Some(r) = rest.get(2) {
+            e.register = *r;
+        }
+        for (d, s) in e.data.iter_mut().zip(rest.iter().skip(3)) {
+            *d = *s;
+        }
+        self.emergencies.push(e);
+        true
+    }
+
+    /// Wait for the SDO response (SM1 full → read); emergencies are collected and skipped.
+    /// Returns the SDO bytes (after the CoE header).
+    async fn receive_sdo(&mut self, md: &MainDevice<'_>) -> Result<Vec<u8>, MailboxError> {
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            if Instant::now() > deadline {
+                return Err(MailboxError::Timeout(self.timeout, "SDO response"));
+            }
+            if self.sm_status(md, SM1_STATUS).await? & MBX_FULL == 0 {
+                continue;
+            }
+            let m = self.read_mailbox(md).await?;
+            if self.collect_emergency(&m) {
+                continue;
+            }
+            let (h, body) = MailboxHeader::parse(&m)
+                .map_err(|e| MailboxError::Protocol(format!("mailbox header: {e}")))?;
+            match h.mailbox_type {
+                MailboxType::Error => {
+                    let d = body
+                        .get(2..4)
+                        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                        .unwrap_or(0);
+                    return Err(MailboxError::MailboxErrorReply(d));
+                }
+                MailboxType::Coe => {}
+                other => {
+                    return Err(MailboxError::Protocol(format!(
+                        "unexpected mailbox type {other:?}"
+                    )))
+                }
+            }
+            let (coe, rest) = CoeHeader::parse(body)
+                .map_err(|e| MailboxError::Protocol(format!("CoE header: {e}")))?;
+            // An abort comes as an SDO *request* (CoE service 2, command specifier 4 = 0x80;
+            // ETG.1000.6 "Abort SDO Transfer Request") in both directions.
+            let abort = coe.service == CoeService::SdoRequest
+                && rest.first().is_some_and(|b| b & 0xE0 == 0x80);
+            if coe.service != CoeService::SdoResponse && !abort {
+                return Err(MailboxError::Protocol(format!(
+                    "unexpected CoE service {:?}",
+                    coe.service
+                )));
+            }
+            return Ok(rest.to_vec());
+        }
+    }
+
+    fn sdo_body(sdo: &[u8]) -> Vec<u8> {
+        let mut b = CoeHeader {
+            number: 0,
+            service: CoeService::SdoRequest,
+        }
+        .encode()
+        .to_vec();
+        b.extend_from_slice(sdo);
+        b
+    }
+
+    fn check_abort(f: &SdoFrame<'_>, index: u16, sub: u8) -> Result<(), MailboxError> {
+        if f.command == SdoCommand::Abort {
+            let code = f.abort_code.unwrap_or(0);
+            return Err(MailboxError::Abort {
+                index: f.index.unwrap_or(index),
+                sub: f.subindex.unwrap_or(sub),
+                code,
+                text: abort_text(code),
+            });
+        }
+        Ok(())
+    }
+
+    /// Best effort abort of a running transfer (errors ignored).
+    async fn send_abort(&mut self, md: &MainDevice<'_>, index: u16, sub: u8, code: u32) {
+        let mut sdo = vec![0x80];
+        sdo.extend_from_slice(&index.to_le_bytes());
+        sdo.push(sub);
+        sdo.extend_from_slice(&code.to_le_bytes());
+        let _ = self.send(md, &Self::sdo_body(&sdo)).await;
+    }
+
+    /// SDO upload (expedited, normal or segmented).
+    pub async fn sdo_upload(
+        &mut self,
+        md: &MainDevice<'_>,
+        index: u16,
+        sub: u8,
+    ) -> Result<Vec<u8>, MailboxError> {
+        let mut sdo = vec![SdoCommand::InitiateUploadRequest {
+            complete_access: false,
+        }
+        .encode()];
+        sdo.extend_from_slice(&index.to_le_bytes());
+        sdo.push(sub);
+        sdo.extend_from_slice(&[0; 4]);
+        self.send(md, &Self::sdo_body(&sdo)).await?;
+        let r = self.receive_sdo(md).await?;
+        let f = SdoFrame::parse(&r, SdoDirection::Response)
+            .map_err(|e| MailboxError::Protocol(format!("SDO: {e}")))?;
+        Self::check_abort(&f, index, sub)?;
+        let SdoCommand::InitiateUploadResponse {
+            expedited,
+            size_indicated,
+            unused,
+            ..
+        } = f.command
+        else {
+            return Err(MailboxError::Protocol(format!(
+                "expected initiate upload response, got {:?}",
+                f.command
+            )));
+        };
+        if f.index != Some(index) || f.subindex != Some(sub) {
+            return Err(MailboxError::Protocol(format!(
+                "response for {:?}:{:?}",
+                f.index, f.subindex
+            )));
+        }
+        if expedited {
+            let n = if size_indicated {
+                4 - usize::from(unused)
+            } else {
+                4
+            };
+            return f
+                .data
+                .get(..n)
+                .map(<[u8]>::to_vec)
+                .ok_or_else(|| MailboxError::Protocol("short expedited response".into()));
+        }
+        if f.data.len() < 4 {
+            return Err(MailboxError::Protocol("missing size".into()));
+        }
+        let total = u32::from_le_bytes([f.data[0], f.data[1], f.data[2], f.data[3]]) as usize;
+        let mut out = f.data[4..].to_vec();
+        if out.len() >= total {
+            out.truncate(total);
+            return Ok(out);
+        }
+        // Segmented upload.
+        let mut toggle = false;
+        loop {
+            let mut seg = vec![SdoCommand::UploadSegmentRequest { toggle }.encode()];
+            seg.extend_from_slice(&[0; 7]);
+            self.send(md, &Self::sdo_body(&seg)).await?;
+            let r = self.receive_sdo(md).await?;
+            let f = SdoFrame::parse(&r, SdoDirection::Response)
+                .map_err(|e| MailboxError::Protocol(format!("SDO: {e}")))?;
+            Self::check_abort(&f, index, sub)?;
+            let SdoCommand::UploadSegmentResponse {
+                toggle: t,
+                unused,
+                last,
+            } = f.command
+            else {
+                return Err(MailboxError::Protocol(format!(
+                    "expected upload segment response, got {:?}",
+                    f.command
+                )));
+            };
+            if t != toggle {
+                self.send_abort(md, index, sub, 0x0503_0000).await;
+                return Err(MailboxError::Abort {
+                    index,
+                    sub,
+                    code: 0x0503_0000,
+                    text: abort_text(0x0503_0000),
+                });
+            }
+            let mut data = f.data;
+            if data.len() <= 7 {
+                data = &data[..data.len().saturating_sub(usize::from(unused))];
+            }
+            out.extend_from_slice(data);
+            if last || out.len() >= total {
+                out.truncate(total);
+                return Ok(out);
+            }
+            toggle = !toggle;
+        }
+    }
+
+    /// SDO download (expedited ≤ 4 bytes, normal, or segmented when the data do not fit the
+    /// write mailbox).
+    pub async fn sdo_download(
+        &mut self,
+        md: &MainDevice<'_>,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), MailboxError> {
+        let mut sdo;
+        let mut rest: &[u8] = &[];
+        if data.len() <= 4 {
+            sdo = vec![SdoCommand::InitiateDownloadRequest {
+                complete_access: false,
+                expedited: true,
+                size_indicated: true,
+                unused: (4 - data.len()) as u8,
+            }
+            .encode()];
+            sdo.extend_from_slice(&index.to_le_bytes());
+            sdo.push(sub);
+            sdo.extend_from_slice(data);
+            sdo.resize(8, 0);
+        } else {
+            // Mailbox header 6 + CoE 2 + command/index/sub 4 + size 4.
+            let cap = usize::from(self.mbx_out.1).saturating_sub(16);
+            if cap == 0 {
+                return Err(MailboxError::TooLarge(data.len()));
+            }
+            let first = data.len().min(cap);
+            sdo = vec![SdoCommand::InitiateDownloadRequest {
+                complete_access: false,
+                expedited: false,
+                size_indicated: true,
+                unused: 0,
+            }
+            .encode()];
+            sdo.extend_from_slice(&index.to_le_bytes());
+            sdo.push(sub);
+            sdo.extend_from_slice(&(data.len() as u32).to_le_bytes());
+            sdo.extend_from_slice(&data[..first]);
+            rest = &data[first..];
+        }
+        self.send(md, &Self::sdo_body(&sdo)).await?;
+        let r = self.receive_sdo(md).await?;
+        let f = SdoFrame::parse(&r, SdoDirection::Response)
+            .map_err(|e| MailboxError::Protocol(format!("SDO: {e}")))?;
+        Self::check_abort(&f, index, sub)?;
+        if f.command != SdoCommand::InitiateDownloadResponse {
+            return Err(MailboxError::Protocol(format!(
+                "expected initiate download response, got {:?}",
+                f.command
+            )));
+        }
+        // Segments: mailbox header 6 + CoE 2 + command 1.
+        let seg_cap = usize::from(self.mbx_out.1).saturating_sub(9).max(7);
+        let mut toggle = false;
+        while !rest.is_empty() {
+            let n = rest.len().min(seg_cap);
+            let last = n == rest.len();
+            let unused = 7usize.saturating_sub(n) as u8;
+            let mut seg = vec![SdoCommand::DownloadSegmentRequest {
+                toggle,
+                unused,
+                last,
+            }
+            .encode()];
+            seg.extend_from_slice(&rest[..n]);
+            if seg.len() < 8 {
+                seg.resize(8, 0);
+            }
+            self.send(md, &Self::sdo_body(&seg)).await?;
+            let r = self.receive_sdo(md).await?;
+            let f = SdoFrame::parse(&r, SdoDirection::Response)
+                .map_err(|e| MailboxError::Protocol(format!("SDO: {e}")))?;
+            Self::check_abort(&f, index, sub)?;
+            match f.command {
+                SdoCommand::DownloadSegmentResponse { toggle: t } if t == toggle => {}
+                SdoCommand::DownloadSegmentResponse { .. } => {
+                    self.send_abort(md, index, sub, 0x0503_0000).await;
+                    return Err(MailboxError::Abort {
+                        index,
+                        sub,
+                        code: 0x0503_0000,
+                        text: abort_text(0x0503_0000),
+                    });
+                }
+                other => {
+                    return Err(MailboxError::Protocol(format!(
+                        "expected download segment response, got {other:?}"
+                    )))
+                }
+            }
+            rest = &rest[n..];
+            toggle = !toggle;
+        }
+        Ok(())
+    }
+}
