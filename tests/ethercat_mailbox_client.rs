@@ -21,7 +21,8 @@ use fieldprobe::bus::ethercat::mailbox::{CoeClient, MailboxError};
 use fieldprobe::drive::catalogue;
 use fieldprobe::drive::model::ds402::Ds402Model;
 use fieldprobe::esi::{self, sii, to_sii::sii_from_device, Pdo};
-use fieldprobe::sim::esc::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
+use fieldprobe::sim::esc::coe::{ds402_objects, Access, CoeServer, ObjectEntry};
+use fieldprobe::sim::esc::device::pdo_objects;
 use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig, NullApp};
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
@@ -51,38 +52,6 @@ impl EscApplication for SharedCoe {
     fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
         self.0.lock().unwrap().handle(data)
     }
-}
-
-fn pdo_objects(assign: u16, pdos: &[&Pdo]) -> Vec<ObjectEntry> {
-    let mut v = vec![ObjectEntry::constant(
-        assign,
-        0,
-        DataType::U8,
-        pdos.len() as i64,
-    )];
-    for (i, p) in pdos.iter().enumerate() {
-        v.push(ObjectEntry::constant(
-            assign,
-            (i + 1) as u8,
-            DataType::U16,
-            i64::from(p.index),
-        ));
-        v.push(ObjectEntry::constant(
-            p.index,
-            0,
-            DataType::U8,
-            p.entries.len() as i64,
-        ));
-        for (j, e) in p.entries.iter().enumerate() {
-            v.push(ObjectEntry::constant(
-                p.index,
-                (j + 1) as u8,
-                DataType::U32,
-                i64::from(e.mapping_value()),
-            ));
-        }
-    }
-    v
 }
 
 /// Servo ESC (PRE-OP capable) + its shared CoE server + (SM0, SM1) mailbox areas.

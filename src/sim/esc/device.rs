@@ -169,8 +169,9 @@ fn check_layout(
     Ok(drive_bytes)
 }
 
-/// Assignment object (0x1C12/0x1C13) and mapping objects of `pdos`.
-fn pdo_objects(assign_index: u16, pdos: &[&Pdo]) -> Vec<ObjectEntry> {
+/// Assignment object (0x1C12/0x1C13) and mapping objects of `pdos`: the CoE entries a master
+/// reads to discover the PDO mapping.
+pub fn pdo_objects(assign_index: u16, pdos: &[&Pdo]) -> Vec<ObjectEntry> {
     let mut v = vec![ObjectEntry::constant(
         assign_index,
         0,

@@ -214,21 +214,9 @@ fn range_overlaps(start: usize, len: usize, reg: u16, reg_len: usize) -> bool {
     start < r + reg_len && r < start + len.max(1)
 }
 
-/// CRC-8 (poly 0x07, init 0xFF) of the SII configuration area (bytes 0..14), as in ETG.2010.
-pub fn sii_crc8(bytes: &[u8]) -> u8 {
-    let mut crc: u8 = 0xFF;
-    for &b in bytes {
-        crc ^= b;
-        for _ in 0..8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x07
-            } else {
-                crc << 1
-            };
-        }
-    }
-    crc
-}
+/// CRC-8 (poly 0x07, init 0xFF) of the SII configuration area (bytes 0..14), as in ETG.2010
+/// (the one implementation, [`crate::esi::sii::crc8`]).
+pub use crate::esi::sii::crc8 as sii_crc8;
 
 impl Esc {
     /// New ESC in INIT, registers loaded from the SII image (words 0..4), port 0 linked.
