@@ -826,3 +826,16 @@ proptest::proptest! {
         let _ = sii::load_image(text.as_bytes());
     }
 }
+
+#[test]
+fn add_string_beyond_255_is_an_error_not_a_panic() {
+    use fieldprobe::esi::sii::{Category, SiiContent};
+    let mut c = SiiContent::default();
+    let names: Vec<String> = (0..300).map(|i| format!("s{i}")).collect();
+    c.categories.push(Category::Strings(names));
+    // Number 1 and 255 still have an index; number 256 and a new 301st do not.
+    assert_eq!(c.add_string("s0").unwrap(), 1);
+    assert_eq!(c.add_string("s254").unwrap(), 255);
+    assert!(c.add_string("s255").is_err());
+    assert!(c.add_string("new").is_err());
+}

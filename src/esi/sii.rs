@@ -566,7 +566,13 @@ impl SiiContent {
             unreachable!("position() found a Strings category");
         };
         if let Some(i) = strings.iter().position(|x| x == s) {
-            return Ok(u8::try_from(i + 1).expect("at most 255 strings"));
+            // A hand-built table may hold more than 255 strings; beyond that no index fits.
+            return u8::try_from(i + 1).map_err(|_| {
+                SiiError::Encode(format!(
+                    "string {s:?} is number {} of the table; at most 255",
+                    i + 1
+                ))
+            });
         }
         if strings.len() >= 255 {
             return Err(SiiError::Encode(format!(
