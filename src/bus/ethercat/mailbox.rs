@@ -6,7 +6,8 @@
 //! ([`CoeClient::take_emergencies`]) while the client keeps waiting for the real response.
 //! Mailbox handling follows notes §2.4: SM1 status (0x080D bit 3 = mailbox full) is read
 //! before the read mailbox, requests are padded to the full SM0 length, the mailbox counter
-//! runs 1..7. Every wait is bounded by [`CoeClient::timeout`].
+//! runs 1..7. Every wait is bounded by [`CoeClient::timeout`]. That mailbox handling is the
+//! protocol-neutral [`MailboxTransport`], shared with the SoE client ([`super::soe`]).
 
 use std::time::{Duration, Instant};
 
@@ -23,7 +24,7 @@ const SM1_STATUS: u16 = 0x080D;
 /// Mailbox-full bit of a sync manager status register.
 const MBX_FULL: u8 = 0x08;
 
-/// Errors of [`CoeClient`].
+/// Errors of the mailbox clients ([`CoeClient`], [`super::soe::SoeClient`]).
 #[derive(Debug, thiserror::Error)]
 pub enum MailboxError {
     /// The device aborted the transfer.
@@ -53,6 +54,36 @@ pub enum MailboxError {
     /// Request does not fit the write mailbox.
     #[error("request does not fit the write mailbox ({0} bytes)")]
     TooLarge(usize),
+    /// SoE error reply (SoE header error bit; notes `ethercat.md` §7.3) with its SERCOS error
+    /// code.
+    #[error(
+        "SoE {name} (drive {drive_no}): error {code:#06x} ({text})",
+        name = crate::drive::sercos::idn_name(*.idn)
+    )]
+    Soe {
+        /// IDN of the request.
+        idn: u16,
+        /// Drive number of the request.
+        drive_no: u8,
+        /// SERCOS error code (IEC 61800-7-204).
+        code: u16,
+        /// The error code in words ([`super::soe::error_text`]).
+        text: &'static str,
+    },
+    /// A value does not fit the data length / signedness of its target (checked before
+    /// anything is sent).
+    #[error(
+        "value {value} does not fit {len} byte(s) {}",
+        if *.signed { "signed" } else { "unsigned" }
+    )]
+    ValueOutOfRange {
+        /// The value.
+        value: i64,
+        /// Data length in bytes.
+        len: usize,
+        /// Signed data type.
+        signed: bool,
+    },
 }
 
 /// A CoE emergency message received while waiting for an SDO response.
@@ -99,9 +130,17 @@ pub fn abort_text(code: u32) -> &'static str {
     }
 }
 
-/// CoE (SDO) client for one SubDevice.
+/// Standard mailbox transport to one SubDevice over ethercrab's raw commands (notes §2.4): the
+/// write mailbox (SM0) and read mailbox (SM1) areas, the mailbox counter (1..7), a stale read
+/// mailbox flushed before each request, requests padded to the full SM0 length, replies
+/// awaited by polling the SM1 status (bit 3 = mailbox full) and read with the full SM1 length.
+///
+/// The protocol clients ([`CoeClient`], [`super::soe::SoeClient`]) are built on it; they can
+/// share one transport (and so one counter) through their `from_transport` /
+/// `into_transport`. CoE emergencies arriving in the read mailbox, whatever protocol the
+/// caller waits for, are collected ([`MailboxTransport::take_emergencies`]).
 #[derive(Debug)]
-pub struct CoeClient {
+pub struct MailboxTransport {
     station: u16,
     mbx_out: (u16, u16),
     mbx_in: (u16, u16),
@@ -115,9 +154,9 @@ fn dg(e: ethercrab::error::Error) -> MailboxError {
     MailboxError::Datagram(e.to_string())
 }
 
-impl CoeClient {
-    /// Client for the SubDevice at configured `station_address`, with the write mailbox
-    /// (SM0) and read mailbox (SM1) as (start address, length).
+impl MailboxTransport {
+    /// Transport to the SubDevice at configured `station_address`, with the write mailbox
+    /// (SM0) and read mailbox (SM1) as (start address, length). Timeout 2 s.
     pub fn new(station_address: u16, mbx_out: (u16, u16), mbx_in: (u16, u16)) -> Self {
         Self {
             station: station_address,
@@ -127,6 +166,26 @@ impl CoeClient {
             emergencies: Vec::new(),
             timeout: Duration::from_secs(2),
         }
+    }
+
+    /// Configured station address of the SubDevice.
+    pub fn station_address(&self) -> u16 {
+        self.station
+    }
+
+    /// Write mailbox (SM0) length in bytes, mailbox header included.
+    pub fn write_mailbox_len(&self) -> usize {
+        usize::from(self.mbx_out.1)
+    }
+
+    /// Read mailbox (SM1) length in bytes, mailbox header included.
+    pub fn read_mailbox_len(&self) -> usize {
+        usize::from(self.mbx_in.1)
+    }
+
+    /// Largest service body ([`send`](Self::send)) that fits the write mailbox.
+    pub fn max_body_len(&self) -> usize {
+        self.write_mailbox_len().saturating_sub(MailboxHeader::LEN)
     }
 
     /// Emergencies received so far (drains the list).
@@ -158,10 +217,16 @@ impl CoeClient {
         Ok(r.to_vec())
     }
 
-    /// Flush a stale read mailbox, wait for the write mailbox to be free, write `body`
-    /// (CoE header + service data) padded to the full SM0 length.
-    async fn send(&mut self, md: &MainDevice<'_>, body: &[u8]) -> Result<(), MailboxError> {
-        let len = usize::from(self.mbx_out.1);
+    /// Flush a stale read mailbox (emergencies in it are collected), wait for the write
+    /// mailbox to be free, write `body` (service header + data) of protocol `mailbox_type`
+    /// behind a mailbox header, padded to the full SM0 length.
+    pub async fn send(
+        &mut self,
+        md: &MainDevice<'_>,
+        mailbox_type: MailboxType,
+        body: &[u8],
+    ) -> Result<(), MailboxError> {
+        let len = self.write_mailbox_len();
         if body.len() + MailboxHeader::LEN > len {
             return Err(MailboxError::TooLarge(body.len()));
         }
@@ -184,7 +249,7 @@ impl CoeClient {
             address: 0,
             channel: 0,
             priority: 0,
-            mailbox_type: MailboxType::Coe,
+            mailbox_type,
             counter: self.next_counter(),
         };
         let mut buf = vec![0u8; len];
@@ -228,13 +293,21 @@ impl CoeClient {
         true
     }
 
-    /// Wait for the SDO response (SM1 full → read); emergencies are collected and skipped.
-    /// Returns the SDO bytes (after the CoE header).
-    async fn receive_sdo(&mut self, md: &MainDevice<'_>) -> Result<Vec<u8>, MailboxError> {
+    /// Wait for the next message of protocol `mailbox_type` (SM1 full → read) and return its
+    /// body (after the mailbox header, cut to the header's length). CoE emergencies are
+    /// collected and skipped; a mailbox error reply (type 0) becomes
+    /// [`MailboxError::MailboxErrorReply`], any other protocol a [`MailboxError::Protocol`].
+    /// `what` names the awaited reply in a timeout error.
+    pub async fn receive(
+        &mut self,
+        md: &MainDevice<'_>,
+        mailbox_type: MailboxType,
+        what: &'static str,
+    ) -> Result<Vec<u8>, MailboxError> {
         let deadline = Instant::now() + self.timeout;
         loop {
             if Instant::now() > deadline {
-                return Err(MailboxError::Timeout(self.timeout, "SDO response"));
+                return Err(MailboxError::Timeout(self.timeout, what));
             }
             if self.sm_status(md, SM1_STATUS).await? & MBX_FULL == 0 {
                 continue;
@@ -245,35 +318,89 @@ impl CoeClient {
             }
             let (h, body) = MailboxHeader::parse(&m)
                 .map_err(|e| MailboxError::Protocol(format!("mailbox header: {e}")))?;
-            match h.mailbox_type {
-                MailboxType::Error => {
-                    let d = body
-                        .get(2..4)
-                        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                        .unwrap_or(0);
-                    return Err(MailboxError::MailboxErrorReply(d));
-                }
-                MailboxType::Coe => {}
-                other => {
-                    return Err(MailboxError::Protocol(format!(
-                        "unexpected mailbox type {other:?}"
-                    )))
-                }
+            if h.mailbox_type == MailboxType::Error {
+                let d = body
+                    .get(2..4)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .unwrap_or(0);
+                return Err(MailboxError::MailboxErrorReply(d));
             }
-            let (coe, rest) = CoeHeader::parse(body)
-                .map_err(|e| MailboxError::Protocol(format!("CoE header: {e}")))?;
-            // An abort comes as an SDO *request* (CoE service 2, command specifier 4 = 0x80;
-            // ETG.1000.6 "Abort SDO Transfer Request") in both directions.
-            let abort = coe.service == CoeService::SdoRequest
-                && rest.first().is_some_and(|b| b & 0xE0 == 0x80);
-            if coe.service != CoeService::SdoResponse && !abort {
+            if h.mailbox_type != mailbox_type {
                 return Err(MailboxError::Protocol(format!(
-                    "unexpected CoE service {:?}",
-                    coe.service
+                    "unexpected mailbox type {:?} (waiting for {mailbox_type:?})",
+                    h.mailbox_type
                 )));
             }
-            return Ok(rest.to_vec());
+            return Ok(body.to_vec());
         }
+    }
+}
+
+/// CoE (SDO) client for one SubDevice, on a [`MailboxTransport`].
+#[derive(Debug)]
+pub struct CoeClient {
+    transport: MailboxTransport,
+    /// Bound for each wait (mailbox free, response).
+    pub timeout: Duration,
+}
+
+impl CoeClient {
+    /// Client for the SubDevice at configured `station_address`, with the write mailbox
+    /// (SM0) and read mailbox (SM1) as (start address, length).
+    pub fn new(station_address: u16, mbx_out: (u16, u16), mbx_in: (u16, u16)) -> Self {
+        Self::from_transport(MailboxTransport::new(station_address, mbx_out, mbx_in))
+    }
+
+    /// Client on an existing transport (e.g. shared with an SoE client); the timeout is the
+    /// transport's.
+    pub fn from_transport(transport: MailboxTransport) -> Self {
+        Self {
+            timeout: transport.timeout,
+            transport,
+        }
+    }
+
+    /// The transport back (with this client's timeout).
+    pub fn into_transport(mut self) -> MailboxTransport {
+        self.transport.timeout = self.timeout;
+        self.transport
+    }
+
+    /// Emergencies received so far (drains the list).
+    pub fn take_emergencies(&mut self) -> Vec<Emergency> {
+        self.transport.take_emergencies()
+    }
+
+    /// The transport with this client's current timeout.
+    fn tp(&mut self) -> &mut MailboxTransport {
+        self.transport.timeout = self.timeout;
+        &mut self.transport
+    }
+
+    async fn send(&mut self, md: &MainDevice<'_>, body: &[u8]) -> Result<(), MailboxError> {
+        self.tp().send(md, MailboxType::Coe, body).await
+    }
+
+    /// Wait for the SDO response (SM1 full → read); emergencies are collected and skipped.
+    /// Returns the SDO bytes (after the CoE header).
+    async fn receive_sdo(&mut self, md: &MainDevice<'_>) -> Result<Vec<u8>, MailboxError> {
+        let body = self
+            .tp()
+            .receive(md, MailboxType::Coe, "SDO response")
+            .await?;
+        let (coe, rest) = CoeHeader::parse(&body)
+            .map_err(|e| MailboxError::Protocol(format!("CoE header: {e}")))?;
+        // An abort comes as an SDO *request* (CoE service 2, command specifier 4 = 0x80;
+        // ETG.1000.6 "Abort SDO Transfer Request") in both directions.
+        let abort =
+            coe.service == CoeService::SdoRequest && rest.first().is_some_and(|b| b & 0xE0 == 0x80);
+        if coe.service != CoeService::SdoResponse && !abort {
+            return Err(MailboxError::Protocol(format!(
+                "unexpected CoE service {:?}",
+                coe.service
+            )));
+        }
+        Ok(rest.to_vec())
     }
 
     fn sdo_body(sdo: &[u8]) -> Vec<u8> {
@@ -435,7 +562,7 @@ impl CoeClient {
             sdo.resize(8, 0);
         } else {
             // Mailbox header 6 + CoE 2 + command/index/sub 4 + size 4.
-            let cap = usize::from(self.mbx_out.1).saturating_sub(16);
+            let cap = self.transport.write_mailbox_len().saturating_sub(16);
             if cap == 0 {
                 return Err(MailboxError::TooLarge(data.len()));
             }
@@ -465,7 +592,7 @@ impl CoeClient {
             )));
         }
         // Segments: mailbox header 6 + CoE 2 + command 1.
-        let seg_cap = usize::from(self.mbx_out.1).saturating_sub(9).max(7);
+        let seg_cap = self.transport.write_mailbox_len().saturating_sub(9).max(7);
         let mut toggle = false;
         while !rest.is_empty() {
             let n = rest.len().min(seg_cap);

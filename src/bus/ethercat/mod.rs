@@ -2,4 +2,5 @@
 
 pub mod mailbox;
 pub mod pcap;
+pub mod soe;
 pub mod wire;

@@ -313,6 +313,8 @@ impl SoeServer {
                     self.write = Some(frag);
                     return None;
                 }
+                // Only the last fragment carries the IDN (the others: fragments left).
+                frag.idn = h.idn;
                 let r = self.write_value(frag.idn, frag.elements, &frag.data);
                 let reply = match r {
                     Ok(()) => {
