@@ -17,6 +17,7 @@ use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
 use crate::drive::catalogue;
 use crate::drive::DriveError;
 use crate::drive::ProbeEdge;
+use crate::link::ethercat::{EthercatLink, EthercatSpec, Wire};
 use crate::link::sim::SimLink;
 use crate::link::{Link, ProcessImage};
 use crate::messages::{ids, CncMessage};
@@ -121,11 +122,32 @@ impl RunReport {
 /// Upper bound on the cycles of one run (virtual time; 1 h at 1 ms).
 pub const DEFAULT_MAX_CYCLES: u64 = 3_600_000;
 
-/// A machine on the in-memory link (`--link sim`).
-#[derive(Debug)]
+/// Which link carries the machine's process data.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct LinkChoice {
+    /// `sim` (default), `ethercat-emu` or `ethercat:IFACE`.
+    pub link: String,
+    /// Capture every EtherCAT frame into this pcap file.
+    pub pcap: Option<std::path::PathBuf>,
+}
+
+impl LinkChoice {
+    /// The `--link` value `link`, no capture.
+    pub fn new(link: &str) -> Self {
+        LinkChoice {
+            link: link.to_string(),
+            pcap: None,
+        }
+    }
+}
+
+/// `--link` values this build knows, for messages.
+pub const LINKS: &str = "sim (drive models in memory), ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
+
+/// A machine: channel, axes, and the link to their drives.
 pub struct Machine {
     channel: Channel,
-    link: SimLink,
+    link: Box<dyn Link>,
     images: Vec<ProcessImage>,
     now: Nanos,
     cycle: Nanos,
@@ -139,6 +161,17 @@ pub struct Machine {
     startup: Vec<CncMessage>,
     /// Recorded trace (`--trace`), when enabled.
     trace: Option<Trace>,
+}
+
+impl std::fmt::Debug for Machine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Machine")
+            .field("channel", &self.channel)
+            .field("now", &self.now)
+            .field("cycle", &self.cycle)
+            .field("exchanges", &self.link.exchanges())
+            .finish_non_exhaustive()
+    }
 }
 
 /// A recorded run: positions per cycle, probe edges and latched values (for `--trace`).
@@ -161,6 +194,11 @@ pub struct Trace {
 impl Machine {
     /// Build the machine of `cfg` with drive models on the in-memory link.
     pub fn new(cfg: &MachineConfig) -> Result<Self, MachineError> {
+        Machine::with_link(cfg, &LinkChoice::new("sim"))
+    }
+
+    /// Build the machine of `cfg` on the link `choice` (see [`LINKS`]).
+    pub fn with_link(cfg: &MachineConfig, choice: &LinkChoice) -> Result<Self, MachineError> {
         if cfg.axes.is_empty() {
             return Err(MachineError::Config(format!(
                 "{}: the machine has no axes",
@@ -170,6 +208,7 @@ impl Machine {
         let cycle = Nanos::from_micros(u64::from(cfg.cycle_time_us));
         let mut axes = Vec::new();
         let mut models = Vec::new();
+        let mut defs = Vec::new();
         let mut images = Vec::new();
         let mut axis_cfgs = Vec::new();
         for a in &cfg.axes {
@@ -188,8 +227,10 @@ impl Machine {
             let model = crate::drive::model::for_definition(&def).map_err(drive_err)?;
             let scaling = def.scaling;
             let sercos = def.profile == catalogue::Profile::Sercos;
-            let axis = Axis::new(a.name.clone(), adapter, scaling, a.referenced)
-                .with_definition(std::sync::Arc::new(def));
+            let def = std::sync::Arc::new(def);
+            defs.push(def.clone());
+            let axis =
+                Axis::new(a.name.clone(), adapter, scaling, a.referenced).with_definition(def);
             images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
             axes.push(axis);
             models.push(model);
@@ -228,9 +269,32 @@ impl Machine {
                 (*g, v)
             })
             .collect();
+        let link: Box<dyn Link> = match choice.link.as_str() {
+            "sim" => Box::new(SimLink::from_models(models, cycle)),
+            other => {
+                let wire = Wire::from_link(other).ok_or_else(|| {
+                    MachineError::Config(format!(
+                        "--link {other}: unknown link; available: {LINKS}"
+                    ))
+                })?;
+                let spec = EthercatSpec {
+                    drives: defs,
+                    cycle,
+                    pcap: choice.pcap.clone(),
+                };
+                let link = EthercatLink::open(&wire, &spec)
+                    .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?;
+                Box::new(link)
+            }
+        };
+        if choice.link == "sim" && choice.pcap.is_some() {
+            return Err(MachineError::Config(
+                "--pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE)".into(),
+            ));
+        }
         Ok(Machine {
             channel,
-            link: SimLink::from_models(models, cycle),
+            link,
             images,
             now: Nanos::ZERO,
             cycle,
@@ -253,9 +317,22 @@ impl Machine {
         &mut self.channel
     }
 
-    /// The in-memory link with its drive models (test and plant knobs).
-    pub fn link_mut(&mut self) -> &mut SimLink {
-        &mut self.link
+    /// The link with its drive models (test, fault and plant knobs).
+    pub fn link_mut(&mut self) -> &mut dyn Link {
+        self.link.as_mut()
+    }
+
+    /// The link.
+    pub fn link(&self) -> &dyn Link {
+        self.link.as_ref()
+    }
+
+    fn plant_mut(&mut self) -> Result<&mut crate::sim::plant::Plant, MachineError> {
+        self.link.plant_mut().ok_or_else(|| {
+            MachineError::Config(
+                "this link reaches real drives; a simulated probe or stop needs --link sim or ethercat-emu".into(),
+            )
+        })
     }
 
     /// Virtual time now.
@@ -280,13 +357,13 @@ impl Machine {
             .collect();
         let mut surface = ProbeSurface::new(i, inc, wired);
         surface.active_high = cfg.axes[i].meas.edge == ProbeEdge::Positive;
-        let probe = self.link.plant_mut().add_probe_surface(surface);
-        let cycle = self.cycle;
         let signals: Vec<(SignalSource, ProbeEdge)> = cfg
             .axes
             .iter()
             .map(|c| (c.meas.signal, c.meas.edge))
             .collect();
+        let probe = self.plant_mut()?.add_probe_surface(surface);
+        let cycle = self.cycle;
         for (j, (signal, edge)) in signals.into_iter().enumerate() {
             if self.plcs[j].is_some() {
                 continue;
@@ -310,7 +387,7 @@ impl Machine {
     pub fn add_fixed_stop(&mut self, axis: &str, position: f64) -> Result<(), MachineError> {
         let i = self.axis_index(axis)?;
         let inc = self.increments(i, position)?;
-        self.link.plant_mut().add_fixed_stop(FixedStop {
+        self.plant_mut()?.add_fixed_stop(FixedStop {
             device: i,
             position: inc,
         });
@@ -387,7 +464,7 @@ impl Machine {
                     if let Some(plc) = self.plcs[i].as_mut() {
                         let sc = self.channel.axes()[i].scaling();
                         let inputs = AxisInputs {
-                            link: &self.link,
+                            link: self.link.as_ref(),
                             device: i,
                             scaling: sc,
                         };
@@ -406,8 +483,10 @@ impl Machine {
                 tr.command[i].push(a.command());
                 tr.actual[i].push(a.actual());
             }
-            for e in self.link.plant().last_edges() {
-                tr.edges.push((e.at.as_secs_f64(), e.rising));
+            if let Some(plant) = self.link.plant() {
+                for e in plant.last_edges() {
+                    tr.edges.push((e.at.as_secs_f64(), e.rising));
+                }
             }
             for (t, axis, p) in self.channel.take_latch_log() {
                 tr.latches.push((t.as_secs_f64(), axis, p));
@@ -630,22 +709,24 @@ pub const ACHSMODE_MODULO: i64 = 0x4;
 /// The plant's probe signals as one axis's simulated PLC sees them; the "true" crossing
 /// position it reports for external measuring hardware is that axis's own position at the edge.
 struct AxisInputs<'a> {
-    link: &'a SimLink,
+    link: &'a dyn Link,
     device: usize,
     scaling: crate::units::Scaling,
 }
 
 impl ProbeInputs for AxisInputs<'_> {
     fn for_each_edge(&self, f: &mut dyn FnMut(InputEdge)) {
-        self.link.plant().for_each_edge(f);
+        if let Some(p) = self.link.plant() {
+            p.for_each_edge(f);
+        }
     }
 
     fn level(&self, probe: usize, at: Nanos) -> bool {
-        self.link.plant().level(probe, at)
+        self.link.plant().is_some_and(|p| p.level(probe, at))
     }
 
     fn crossing_position(&self, edge: &InputEdge) -> Option<f64> {
-        let inc = self.link.models().get(self.device)?.position_at(edge.at)?;
+        let inc = self.link.model(self.device)?.position_at(edge.at)?;
         Some(inc / self.scaling.increments_per_unit + self.scaling.offset)
     }
 }
@@ -686,7 +767,7 @@ impl Machine {
             let signal = SignalSource::from_text(p.text("P-AXIS-00516"))
                 .unwrap_or(SignalSource::DriveTypeDefault);
             let measures = p.int("P-AXIS-00118") != 0;
-            let link = std::cell::RefCell::new(&mut self.link);
+            let link = std::cell::RefCell::new(self.link.as_mut());
             let read = |index: u16, sub: u8| link.borrow_mut().read_object(i, index, sub).ok();
             findings.extend(crate::drive::commissioning_check(&def, p, &read));
             if measures

@@ -66,7 +66,7 @@ fn command(m: &Machine, axis: usize) -> f64 {
 
 /// Rewire probe `probe` to the digital input 1 of the given devices only.
 fn wire(m: &mut Machine, probe: usize, axes: &[usize]) {
-    m.link_mut().plant_mut().probe_surfaces_mut()[probe].wired =
+    m.link_mut().plant_mut().unwrap().probe_surfaces_mut()[probe].wired =
         axes.iter().map(|a| (*a, 1)).collect();
 }
 

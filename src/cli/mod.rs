@@ -7,6 +7,7 @@
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
 //! 1 aborted by a CNC error, 2 bad input.
 
+mod bus;
 mod check;
 mod esi;
 mod jog;
@@ -49,6 +50,12 @@ enum Command {
     Esi(esi::EsiArgs),
     /// Emulate EtherCAT devices (from ESI files) on a network interface for a real master.
     Sim(sim::SimArgs),
+    /// List the EtherCAT SubDevices: position, address, identity, AL state, DC, name.
+    Scan(bus::ScanArgs),
+    /// Read or write a CoE object (SDO) of an EtherCAT SubDevice.
+    Sdo(bus::SdoArgs),
+    /// Read or write a SERCOS IDN (SoE) of an EtherCAT SubDevice.
+    Idn(bus::IdnArgs),
 }
 
 /// Parse arguments, run, return the exit code.
@@ -72,6 +79,9 @@ pub fn main() -> i32 {
         Command::Check(a) => check::run(a),
         Command::Esi(a) => esi::run(a),
         Command::Sim(a) => sim::run(a),
+        Command::Scan(a) => bus::scan(a),
+        Command::Sdo(a) => bus::sdo(a),
+        Command::Idn(a) => bus::idn(a),
     };
     match result {
         Ok(code) => code,
@@ -97,12 +107,47 @@ fn load_machine(
     Ok(cfg)
 }
 
-/// `--link` values this build knows.
-fn check_link(link: &str) -> anyhow::Result<()> {
-    match link {
-        "sim" => Ok(()),
-        other => anyhow::bail!(
-            "--link {other}: not available in this build; available links: sim (drive models in memory)"
-        ),
+/// `--link` / `--pcap` of the commands that run a machine.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LinkArgs {
+    /// Link to the drives: `sim` (drive models in memory), `ethercat-emu` (ethercrab against
+    /// emulated EtherCAT drives in-process) or `ethercat:IFACE` (ethercrab on a network
+    /// interface). Default: `ethercat-emu` when every axis has a CiA 402 or SERCOS drive (the
+    /// families the EtherCAT emulator plays), else `sim`.
+    #[arg(long, value_name = "LINK")]
+    link: Option<String>,
+    /// Write every EtherCAT frame (both directions) into this pcap file (EtherCAT links).
+    #[arg(long, value_name = "FILE.pcap")]
+    pcap: Option<std::path::PathBuf>,
+}
+
+impl LinkArgs {
+    /// The link for `cfg`.
+    pub fn choice(
+        &self,
+        cfg: &fieldprobe::params::MachineConfig,
+    ) -> fieldprobe::machine::LinkChoice {
+        let link = match &self.link {
+            Some(l) => l.clone(),
+            None => default_link(cfg).to_string(),
+        };
+        fieldprobe::machine::LinkChoice {
+            link,
+            pcap: self.pcap.clone(),
+        }
+    }
+}
+
+/// `ethercat-emu` when every axis's drive is one the EtherCAT emulator plays, else `sim`.
+fn default_link(cfg: &fieldprobe::params::MachineConfig) -> &'static str {
+    use fieldprobe::drive::catalogue;
+    let emulated = cfg.axes.iter().all(|a| {
+        catalogue::load(&a.drive)
+            .is_ok_and(|d| fieldprobe::link::ethercat::esi_for(d.profile).is_some())
+    });
+    if emulated {
+        "ethercat-emu"
+    } else {
+        "sim"
     }
 }

@@ -1,6 +1,6 @@
 //! `fieldprobe run`.
 
-use super::{check_link, load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use super::{load_machine, LinkArgs, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus};
 use fieldprobe::nc::exec::Executor;
@@ -16,9 +16,8 @@ pub struct RunArgs {
     /// Machine file (TOML); default: axes X, Y, Z on emulated CiA 402 drives.
     #[arg(long)]
     machine: Option<PathBuf>,
-    /// Link: `sim` (default).
-    #[arg(long, default_value = "sim")]
-    link: String,
+    #[command(flatten)]
+    link: LinkArgs,
     /// Parameter assignment in seed units, e.g. `P-CHAN-00498=1`, `X.P-AXIS-00178=2000000`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     sets: Vec<String>,
@@ -62,8 +61,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         }
     };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
-    check_link(&a.link)?;
-    let mut machine = Machine::new(&cfg)?;
+    let mut machine = Machine::with_link(&cfg, &a.link.choice(&cfg))?;
     for p in &a.probe_at {
         let (ax, pos) = parse_axis_pos("--probe-at", p)?;
         machine

@@ -326,6 +326,23 @@ impl DriveDefinition {
         self.functions.iter().find(|f| f.key == key)
     }
 
+    /// Data type of object `index:sub` as the definition knows it: its `[functions]`, `[idn]`,
+    /// RxPDO or TxPDO entries, first match.
+    pub fn object_type(&self, index: u16, sub: u8) -> Option<DataType> {
+        self.functions
+            .iter()
+            .find(|f| f.index == index && f.sub == sub)
+            .map(|f| f.ty)
+            .or_else(|| {
+                self.idns
+                    .iter()
+                    .find(|m| m.index == index && m.sub == sub)
+                    .map(|m| m.ty)
+            })
+            .or_else(|| self.rxpdo.find(index, sub).map(|e| e.ty))
+            .or_else(|| self.txpdo.find(index, sub).map(|e| e.ty))
+    }
+
     /// The object a SERCOS IDN maps to (`[idn]`); the name is normalised first, so `s-0-92`
     /// finds `S-0-0092`.
     pub fn idn(&self, idn: &str) -> Option<&IdnMapping> {

@@ -55,6 +55,11 @@ impl DataType {
         }
     }
 
+    /// Whether the type is signed.
+    pub const fn is_signed(self) -> bool {
+        matches!(self, DataType::I8 | DataType::I16 | DataType::I32)
+    }
+
     /// Bit length as written into a CiA 301 mapping entry (`index << 16 | sub << 8 | bits`).
     pub const fn bits(self) -> u8 {
         match self {

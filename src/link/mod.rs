@@ -4,9 +4,13 @@
 //! | link | where |
 //! |---|---|
 //! | `sim` | [`sim::SimLink`]: drive models in memory, images laid out as the PDO mapping |
+//! | `ethercat-emu`, `ethercat:IFACE` | [`ethercat::EthercatLink`]: ethercrab MainDevice, emulated segment in-process or a raw socket |
 
+pub mod ethercat;
 pub mod sim;
 
+use crate::drive::model::DriveModel;
+use crate::sim::plant::Plant;
 use crate::units::Nanos;
 
 /// One axis's process image, as the bus carries it.
@@ -49,7 +53,7 @@ pub enum LinkError {
         images: usize,
     },
     /// An acyclic access was refused by the device (CiA 301 SDO abort code).
-    #[error("device {device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x}")]
+    #[error("device {device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x} ({})", crate::bus::ethercat::mailbox::abort_text(*code))]
     Abort {
         /// Device (axis) index on the link.
         device: usize,
@@ -91,5 +95,45 @@ pub trait Link: Send {
         Err(LinkError::Other(
             "this link has no acyclic (mailbox) access".into(),
         ))
+    }
+
+    /// The simulated plant (probe surfaces, fixed stops) behind the link, if it has one
+    /// (`sim`, `ethercat-emu`; not a real bus).
+    fn plant(&self) -> Option<&Plant> {
+        None
+    }
+
+    /// The simulated plant, mutable.
+    fn plant_mut(&mut self) -> Option<&mut Plant> {
+        None
+    }
+
+    /// The drive model of device `device`, if the link hosts models.
+    fn model(&self, device: usize) -> Option<&dyn DriveModel> {
+        let _ = device;
+        None
+    }
+
+    /// The drive model of device `device`, mutable (fault and plant knobs).
+    fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
+        let _ = device;
+        None
+    }
+
+    /// Fault knob: lose the `n`-th exchange (0-based). Links that cannot inject ignore it.
+    fn lose_exchange_at(&mut self, n: u64) {
+        let _ = n;
+    }
+
+    /// Exchanges attempted so far.
+    fn exchanges(&self) -> u64 {
+        0
+    }
+}
+
+impl<'a> dyn Link + 'a {
+    /// The model of device `device` as its concrete type `T`, if it is one.
+    pub fn model_as<T: 'static>(&mut self, device: usize) -> Option<&mut T> {
+        self.model_mut(device)?.as_any_mut().downcast_mut::<T>()
     }
 }

@@ -7,16 +7,9 @@
 //!
 //! # One exchange at `now`
 //!
-//! The exchange covers the cycle `[now − cycle, now]` (see the drive model's "Time"):
-//!
-//! 1. the [`Plant`]'s fixed stops are applied to the models when they changed, and every wired
-//!    input gets its surface's level at the cycle start as a static level (no edge);
-//! 2. every model runs [`DriveModel::begin_step`] (RxPDO decoded, position loop advanced,
-//!    trajectory recorded);
-//! 3. the plant finds the probe-surface edges inside the cycle from the probed devices'
-//!    trajectories ([`Plant::advance`]) and every edge goes to every wired `(device, input)` with
-//!    [`DriveModel::input_edge`], in time order;
-//! 4. every model runs [`DriveModel::finish_step`] (TxPDO written).
+//! One [`World::step`] over the cycle `[now − cycle, now]`: fixed stops and static input levels,
+//! every model's `begin_step`, the plant's probe edges, every model's `finish_step` (see
+//! [`crate::sim::world`]; the emulated EtherCAT segment runs the same step at SYNC0).
 //!
 //! Acyclic access ([`Link::read_object`] / [`Link::write_object`]) goes straight to the model's
 //! object dictionary, as an SDO / CoE mailbox transfer between two cycles would; refusals come
@@ -29,6 +22,7 @@
 use super::{Link, LinkError, ProcessImage};
 use crate::drive::model::DriveModel;
 use crate::sim::plant::Plant;
+use crate::sim::world::{Port, World};
 use crate::units::Nanos;
 use std::collections::BTreeSet;
 
@@ -39,10 +33,7 @@ pub struct SimLink {
     cycle: Nanos,
     exchanges: u64,
     lose: BTreeSet<u64>,
-    plant: Plant,
-    /// Wall the plant last put into each model (so direct model knobs are not overridden
-    /// every cycle).
-    applied_stops: Vec<Option<f64>>,
+    world: World,
 }
 
 impl SimLink {
@@ -69,16 +60,16 @@ impl SimLink {
 
     /// [`with_plant`](Self::with_plant) for boxed models of any profile.
     pub fn boxed_with_plant(models: Vec<Box<dyn DriveModel>>, cycle: Nanos, plant: Plant) -> Self {
-        let n = models.len();
         let mut link = SimLink {
             models,
             cycle,
             exchanges: 0,
             lose: BTreeSet::new(),
-            plant,
-            applied_stops: vec![None; n],
+            world: World::new(plant),
         };
-        link.apply_fixed_stops();
+        let models = &mut link.models;
+        link.world
+            .apply_fixed_stops(models.len(), |d, wall| models[d].set_fixed_stop(wall));
         link
     }
 
@@ -126,12 +117,12 @@ impl SimLink {
 
     /// The plant (probe surfaces, fixed stops, the last cycle's probe edges).
     pub fn plant(&self) -> &Plant {
-        &self.plant
+        self.world.plant()
     }
 
     /// The plant, mutable; changed fixed stops reach the models at the next exchange.
     pub fn plant_mut(&mut self) -> &mut Plant {
-        &mut self.plant
+        self.world.plant_mut()
     }
 
     /// Zeroed process images sized for every model, in order.
@@ -140,34 +131,6 @@ impl SimLink {
             .iter()
             .map(|m| ProcessImage::new(m.rx_len(), m.tx_len()))
             .collect()
-    }
-
-    /// Put each device's plant wall into its model when it differs from what the plant put
-    /// there last.
-    fn apply_fixed_stops(&mut self) {
-        for (device, model) in self.models.iter_mut().enumerate() {
-            let wanted = self.plant.fixed_stop_for(device);
-            if self.applied_stops.get(device) != Some(&wanted) {
-                model.set_fixed_stop(wanted);
-                if let Some(slot) = self.applied_stops.get_mut(device) {
-                    *slot = wanted;
-                }
-            }
-        }
-    }
-
-    /// Static level of every wired input = its surface's level at the start of the cycle.
-    fn apply_input_levels(&mut self) {
-        for (i, surface) in self.plant.probe_surfaces().iter().enumerate() {
-            let level = self.plant.current_level(i);
-            for &(device, input) in &surface.wired {
-                if let Some(m) = self.models.get_mut(device) {
-                    if m.input_level(input) == Some(!level) {
-                        m.set_input_level(input, level);
-                    }
-                }
-            }
-        }
     }
 
     fn device(&mut self, device: usize) -> Result<&mut Box<dyn DriveModel>, LinkError> {
@@ -195,33 +158,44 @@ impl Link for SimLink {
                 reason: format!("frame lost (injected at exchange {n})"),
             });
         }
-        self.apply_fixed_stops();
-        self.apply_input_levels();
-        let dt = self.cycle.as_secs_f64();
-        for (model, image) in self.models.iter_mut().zip(images.iter()) {
-            model.begin_step(now, dt, &image.outputs);
-        }
-        let start = Nanos(now.0.saturating_sub(self.cycle.0));
-        let models = &mut self.models;
-        let edges = {
-            let view: &[Box<dyn DriveModel>] = models;
-            self.plant
-                .advance(start, now, |d| view.get(d).map(|m| m.trajectory()))
-                .to_vec()
-        };
-        for e in &edges {
-            if let Some(surface) = self.plant.probe_surfaces().get(e.probe) {
-                for &(device, input) in &surface.wired {
-                    if let Some(m) = models.get_mut(device) {
-                        m.input_edge(input, e.rising, e.at);
-                    }
-                }
-            }
-        }
-        for (model, image) in models.iter_mut().zip(images.iter_mut()) {
-            model.finish_step(&mut image.inputs);
-        }
+        let mut ports: Vec<Port<'_>> = self
+            .models
+            .iter_mut()
+            .zip(images.iter_mut())
+            .map(|(m, img)| Port {
+                model: m.as_mut(),
+                outputs: &img.outputs,
+                inputs: &mut img.inputs,
+            })
+            .collect();
+        self.world.step(now, self.cycle, &mut ports);
         Ok(())
+    }
+
+    fn plant(&self) -> Option<&Plant> {
+        Some(self.world.plant())
+    }
+
+    fn plant_mut(&mut self) -> Option<&mut Plant> {
+        Some(self.world.plant_mut())
+    }
+
+    fn model(&self, device: usize) -> Option<&dyn DriveModel> {
+        self.models.get(device).map(|m| m.as_ref())
+    }
+
+    fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
+        self.models
+            .get_mut(device)
+            .map(|m| m.as_mut() as &mut dyn DriveModel)
+    }
+
+    fn lose_exchange_at(&mut self, n: u64) {
+        self.lose.insert(n);
+    }
+
+    fn exchanges(&self) -> u64 {
+        self.exchanges
     }
 
     fn read_object(&mut self, device: usize, index: u16, sub: u8) -> Result<i64, LinkError> {

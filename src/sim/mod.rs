@@ -3,3 +3,4 @@
 pub mod esc;
 pub mod plant;
 pub mod plc;
+pub mod world;

@@ -1,6 +1,8 @@
 //! The application (PDI side) behind an emulated ESC: mailbox server, process data, state hooks.
 
 use super::types::{AlState, AlStatusCode};
+use crate::drive::model::DriveModel;
+use crate::sim::world::Port;
 
 /// Process-data image sizes the application currently expects (bytes), checked against the
 /// process-data sync managers on PRE-OP → SAFE-OP.
@@ -24,6 +26,13 @@ pub trait EscApplication: Send {
         None
     }
 
+    /// Device-initiated mailbox messages waiting to be sent (further fragments of a reply,
+    /// emergencies); the ESC queues them for the read mailbox after every mailbox write and
+    /// after a segment step.
+    fn take_outgoing(&mut self) -> Vec<Vec<u8>> {
+        Vec::new()
+    }
+
     /// The master completed writing output SM `sm` (only called in OP).
     fn outputs_written(&mut self, sm: u8, data: &[u8]) {
         let _ = (sm, data);
@@ -37,6 +46,29 @@ pub trait EscApplication: Send {
     /// Process-data sizes the current PDO mapping needs.
     fn process_data_sizes(&self) -> ProcessDataSizes {
         ProcessDataSizes::default()
+    }
+
+    /// The drive model behind the process data, if the application hosts one.
+    fn model(&self) -> Option<&dyn DriveModel> {
+        None
+    }
+
+    /// The drive model, mutable.
+    fn model_mut(&mut self) -> Option<&mut dyn DriveModel> {
+        None
+    }
+
+    /// The model with its process images (model layout) for one synchronous step of the
+    /// segment's [`World`](crate::sim::world::World) (SYNC0). `None` if there is no model.
+    fn port(&mut self) -> Option<Port<'_>> {
+        None
+    }
+
+    /// `true`: the model is stepped by the segment at SYNC0 ([`Self::port`]) and reads of the
+    /// input SM return the image of the last step. `false` (default): the application steps its
+    /// model itself when the inputs are read (free-running, no plant).
+    fn set_synchronized(&mut self, on: bool) {
+        let _ = on;
     }
 
     /// A state transition passed the ESC checks; the application may refuse it with an AL

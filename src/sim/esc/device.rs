@@ -21,21 +21,26 @@
 //!   [`emulated_servo_with_cycle`]). Model time therefore advances by one cycle per process-data
 //!   exchange, independent of the master's wall clock.
 //!
-//! The drive definition's PDO layout must equal the ESI's default mapping: the same entries
-//! (index, sub-index, bit length, gaps excluded) in the same order and the same image lengths;
-//! otherwise [`emulated_servo`] fails with [`ServoError::PdoMismatch`].
+//! The drive definition's PDO layout must hold the same entries as the ESI's default mapping
+//! (index, sub-index, bit length, gaps excluded; the order may differ) with the same image
+//! lengths; otherwise [`emulated_servo`] fails with [`ServoError::PdoMismatch`]. The model keeps
+//! the drive definition's layout; the bus image follows the PDO mapping objects (ESI default at
+//! start, rewritten by the master in PRE-OP), and the copy plan between the two is rebuilt on
+//! PRE-OP → SAFE-OP.
 
 use std::time::Duration;
 
 use super::app::{EscApplication, ProcessDataSizes};
-use super::coe::{ds402_objects, CoeServer, DataType, ObjectEntry};
+use super::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
+use super::soe::{sercos_idns, SoeServer};
+use super::types::{AlState, AlStatusCode};
 use super::{Esc, EscConfig};
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::model::ds402::Ds402Model;
 use crate::drive::model::DriveModel;
 use crate::esi::sii::{self, SiiError};
 use crate::esi::to_sii::sii_from_device;
 use crate::esi::{Device, EsiFile, Pdo};
+use crate::sim::world::Port;
 use crate::units::Nanos;
 
 /// Cycle time [`emulated_servo`] uses for the model's `now`/`dt` (1 ms).
@@ -66,68 +71,256 @@ pub enum ServoError {
         /// Bits of the ESI mapping (gaps included).
         esi_bits: u32,
     },
+    /// The drive model could not be built from the definition.
+    #[error("drive model: {0}")]
+    Model(String),
     /// The cycle time is zero.
     #[error("cycle time must be > 0")]
     ZeroCycle,
 }
 
-/// The application of the emulated servo: CoE server (owning the drive model) plus the
+/// The mailbox server of an emulated drive: CoE for CiA 402 (and every object-dictionary
+/// family), SoE for SERCOS. Either owns the drive model.
+#[derive(Debug)]
+pub enum MailboxServer {
+    /// CoE (SDO, EMCY).
+    Coe(CoeServer),
+    /// SoE (IDN read / write).
+    Soe(SoeServer),
+}
+
+impl MailboxServer {
+    fn model(&self) -> &dyn DriveModel {
+        match self {
+            MailboxServer::Coe(c) => c.model(),
+            MailboxServer::Soe(s) => s.model(),
+        }
+    }
+
+    fn model_mut(&mut self) -> &mut dyn DriveModel {
+        match self {
+            MailboxServer::Coe(c) => c.model_mut(),
+            MailboxServer::Soe(s) => s.model_mut(),
+        }
+    }
+}
+
+/// One mapped entry: bytes `len` at `bus` in the bus image are bytes at `model` in the
+/// model's image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Span {
+    bus: usize,
+    model: usize,
+    len: usize,
+}
+
+/// The application of an emulated drive: the mailbox server (owning the drive model) plus the
 /// process-data glue. See the module documentation for the time base.
 #[derive(Debug)]
 pub struct ServoApp {
-    coe: CoeServer,
-    sizes: ProcessDataSizes,
+    server: MailboxServer,
+    /// Drive definition's images (the model's layout).
+    model_rx: crate::drive::pdo::PdoLayout,
+    model_tx: crate::drive::pdo::PdoLayout,
+    /// Model-layout images.
     outputs: Vec<u8>,
+    inputs: Vec<u8>,
+    /// Bus images (the current PDO mapping's layout) and the copy plans between them.
+    bus_rx_len: usize,
+    bus_tx_len: usize,
+    rx_plan: Vec<Span>,
+    tx_plan: Vec<Span>,
     exchanges: u64,
     cycle_ns: u64,
+    synchronized: bool,
 }
 
 impl ServoApp {
-    /// The CoE server (and through it the drive model).
-    pub fn coe(&self) -> &CoeServer {
-        &self.coe
+    /// The CoE server, if the drive speaks CoE.
+    pub fn coe(&self) -> Option<&CoeServer> {
+        match &self.server {
+            MailboxServer::Coe(c) => Some(c),
+            MailboxServer::Soe(_) => None,
+        }
     }
 
     /// The CoE server, mutable.
-    pub fn coe_mut(&mut self) -> &mut CoeServer {
-        &mut self.coe
+    pub fn coe_mut(&mut self) -> Option<&mut CoeServer> {
+        match &mut self.server {
+            MailboxServer::Coe(c) => Some(c),
+            MailboxServer::Soe(_) => None,
+        }
     }
 
-    /// Process-data exchanges (input image reads) so far.
+    /// Process-data steps so far (free-running: input image reads; synchronized: SYNC0 steps).
     pub fn exchanges(&self) -> u64 {
         self.exchanges
     }
 
-    /// The last output image the master wrote (zeros before the first write).
+    /// The last output image the master wrote, in the drive model's layout (zeros before the
+    /// first write).
     pub fn outputs(&self) -> &[u8] {
         &self.outputs
     }
+
+    /// Recompute the copy plans from the PDO mapping objects (CoE devices; SoE devices keep the
+    /// ESI mapping). Errors name the first entry the model cannot map.
+    fn remap(&mut self) -> Result<(), AlStatusCode> {
+        let MailboxServer::Coe(coe) = &self.server else {
+            return Ok(());
+        };
+        let (rx_len, rx_plan) = plan_from_objects(coe, 0x1C12, &self.model_rx)
+            .ok_or(AlStatusCode::INVALID_OUTPUT_MAPPING)?;
+        let (tx_len, tx_plan) = plan_from_objects(coe, 0x1C13, &self.model_tx)
+            .ok_or(AlStatusCode::INVALID_INPUT_MAPPING)?;
+        self.bus_rx_len = rx_len;
+        self.bus_tx_len = tx_len;
+        self.rx_plan = rx_plan;
+        self.tx_plan = tx_plan;
+        Ok(())
+    }
+
+    fn model_step(&mut self, now: Nanos) {
+        let dt = self.cycle_ns as f64 * 1e-9;
+        let model = self.server.model_mut();
+        model.begin_step(now, dt, &self.outputs);
+        model.finish_step(&mut self.inputs);
+    }
+}
+
+/// Bus image length and copy plan of the PDOs assigned in `assign` (0x1C12 / 0x1C13) as the
+/// CoE objects say now; `None` if an assigned PDO or a mapped object is missing or not in the
+/// model's `layout` (with the same size), or an entry is not whole bytes.
+fn plan_from_objects(
+    coe: &CoeServer,
+    assign: u16,
+    layout: &crate::drive::pdo::PdoLayout,
+) -> Option<(usize, Vec<Span>)> {
+    let value = |index: u16, sub: u8| -> Option<i64> {
+        let e = coe
+            .entries()
+            .iter()
+            .find(|e| e.index == index && e.sub == sub)?;
+        e.ty.decode(e.data.as_deref()?)
+    };
+    let mut plan = Vec::new();
+    let mut bus = 0usize;
+    let n = value(assign, 0)?;
+    for k in 1..=n {
+        let pdo = u16::try_from(value(assign, u8::try_from(k).ok()?)?).ok()?;
+        let m = value(pdo, 0)?;
+        for j in 1..=m {
+            let v = u32::try_from(value(pdo, u8::try_from(j).ok()?)?).ok()?;
+            let (index, sub, bits) = (
+                (v >> 16) as u16,
+                ((v >> 8) & 0xFF) as u8,
+                (v & 0xFF) as usize,
+            );
+            if bits % 8 != 0 {
+                return None;
+            }
+            let len = bits / 8;
+            if index != 0 {
+                let e = layout.find(index, sub)?;
+                if e.ty.size() != len {
+                    return None;
+                }
+                plan.push(Span {
+                    bus,
+                    model: e.offset,
+                    len,
+                });
+            }
+            bus += len;
+        }
+    }
+    Some((bus, plan))
 }
 
 impl EscApplication for ServoApp {
     fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
-        self.coe.handle(data)
+        match &mut self.server {
+            MailboxServer::Coe(c) => c.handle(data),
+            MailboxServer::Soe(s) => s.handle(data),
+        }
+    }
+
+    fn take_outgoing(&mut self) -> Vec<Vec<u8>> {
+        match &mut self.server {
+            MailboxServer::Coe(c) => c.poll(),
+            MailboxServer::Soe(s) => s.take_outgoing(),
+        }
     }
 
     fn outputs_written(&mut self, _sm: u8, data: &[u8]) {
-        let n = data.len().min(self.outputs.len());
-        self.outputs[..n].copy_from_slice(&data[..n]);
+        for s in &self.rx_plan {
+            if let (Some(dst), Some(src)) = (
+                self.outputs.get_mut(s.model..s.model + s.len),
+                data.get(s.bus..s.bus + s.len),
+            ) {
+                dst.copy_from_slice(src);
+            }
+        }
     }
 
     fn inputs(&mut self, _sm: u8, buf: &mut [u8]) {
-        self.exchanges += 1;
-        let now = Nanos(self.exchanges.saturating_mul(self.cycle_ns));
-        let dt = self.cycle_ns as f64 * 1e-9;
-        let model = self.coe.model_mut();
-        model.begin_step(now, dt, &self.outputs);
-        let mut tx = vec![0u8; model.tx_len()];
-        model.finish_step(&mut tx);
-        let n = buf.len().min(tx.len());
-        buf[..n].copy_from_slice(&tx[..n]);
+        if !self.synchronized {
+            self.exchanges += 1;
+            let now = Nanos(self.exchanges.saturating_mul(self.cycle_ns));
+            self.model_step(now);
+        }
+        for s in &self.tx_plan {
+            if let (Some(dst), Some(src)) = (
+                buf.get_mut(s.bus..s.bus + s.len),
+                self.inputs.get(s.model..s.model + s.len),
+            ) {
+                dst.copy_from_slice(src);
+            }
+        }
     }
 
     fn process_data_sizes(&self) -> ProcessDataSizes {
-        self.sizes
+        let MailboxServer::Coe(coe) = &self.server else {
+            return ProcessDataSizes {
+                outputs: self.bus_rx_len as u16,
+                inputs: self.bus_tx_len as u16,
+            };
+        };
+        let len = |assign, layout| {
+            plan_from_objects(coe, assign, layout).map_or(0, |(n, _)| u16::try_from(n).unwrap_or(0))
+        };
+        ProcessDataSizes {
+            outputs: len(0x1C12, &self.model_rx),
+            inputs: len(0x1C13, &self.model_tx),
+        }
+    }
+
+    fn state_change(&mut self, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
+        if from == AlState::PreOp && to >= AlState::SafeOp {
+            self.remap()?;
+        }
+        Ok(())
+    }
+
+    fn model(&self) -> Option<&dyn DriveModel> {
+        Some(self.server.model())
+    }
+
+    fn model_mut(&mut self) -> Option<&mut dyn DriveModel> {
+        Some(self.server.model_mut())
+    }
+
+    fn port(&mut self) -> Option<Port<'_>> {
+        self.exchanges += 1;
+        Some(Port {
+            model: self.server.model_mut(),
+            outputs: &self.outputs,
+            inputs: &mut self.inputs,
+        })
+    }
+
+    fn set_synchronized(&mut self, on: bool) {
+        self.synchronized = on;
     }
 }
 
@@ -156,7 +349,16 @@ fn check_layout(
         .collect();
     let esi_bits: u32 = pdos.iter().map(|p| p.bit_len()).sum();
     let drive_bytes = layout.len();
-    if drive_entries != esi_entries || esi_bits % 8 != 0 || (esi_bits / 8) as usize != drive_bytes {
+    // The same objects with the same sizes; the order may differ (the master remaps in PRE-OP).
+    let sorted = |v: &[(u16, u8, u32)]| {
+        let mut v = v.to_vec();
+        v.sort_unstable();
+        v
+    };
+    if sorted(&drive_entries) != sorted(&esi_entries)
+        || esi_bits % 8 != 0
+        || (esi_bits / 8) as usize != drive_bytes
+    {
         return Err(ServoError::PdoMismatch {
             direction,
             drive: def.name.clone(),
@@ -169,51 +371,65 @@ fn check_layout(
     Ok(drive_bytes)
 }
 
+/// Sub-indices each PDO mapping object offers (a master may map up to this many entries).
+pub const MAPPING_CAPACITY: u8 = 16;
+/// Sub-indices each PDO assignment object offers.
+pub const ASSIGN_CAPACITY: u8 = 4;
+
 /// Assignment object (0x1C12/0x1C13) and mapping objects of `pdos`: the CoE entries a master
-/// reads to discover the PDO mapping.
+/// reads to discover the PDO mapping, and writes in PRE-OP to change it (CiA 301 procedure:
+/// sub 0 = 0, entries, sub 0 = count). They hold the ESI default mapping at start; the
+/// application checks the mapping against the drive model on PRE-OP → SAFE-OP (AL status
+/// 0x0024 / 0x0025 if an entry cannot be mapped).
 pub fn pdo_objects(assign_index: u16, pdos: &[&Pdo]) -> Vec<ObjectEntry> {
-    let mut v = vec![ObjectEntry::constant(
-        assign_index,
-        0,
-        DataType::U8,
-        pdos.len() as i64,
-    )];
-    for (i, p) in pdos.iter().enumerate() {
-        v.push(ObjectEntry::constant(
-            assign_index,
-            (i + 1) as u8,
-            DataType::U16,
-            i64::from(p.index),
-        ));
-        v.push(ObjectEntry::constant(
-            p.index,
-            0,
-            DataType::U8,
-            p.entries.len() as i64,
-        ));
-        for (j, e) in p.entries.iter().enumerate() {
-            v.push(ObjectEntry::constant(
-                p.index,
-                (j + 1) as u8,
-                DataType::U32,
-                i64::from(e.mapping_value()),
-            ));
+    let rw = |index, sub, ty: DataType, value: i64| ObjectEntry {
+        access: Access::Rw,
+        ..ObjectEntry::constant(index, sub, ty, value)
+    };
+    let mut v = vec![rw(assign_index, 0, DataType::U8, pdos.len() as i64)];
+    for k in 1..=ASSIGN_CAPACITY.max(pdos.len() as u8) {
+        let pdo = pdos
+            .get(usize::from(k) - 1)
+            .map_or(0, |p| i64::from(p.index));
+        v.push(rw(assign_index, k, DataType::U16, pdo));
+    }
+    for p in pdos {
+        v.push(rw(p.index, 0, DataType::U8, p.entries.len() as i64));
+        for j in 1..=MAPPING_CAPACITY.max(p.entries.len() as u8) {
+            let m = p
+                .entries
+                .get(usize::from(j) - 1)
+                .map_or(0, |e| i64::from(e.mapping_value()));
+            v.push(rw(p.index, j, DataType::U32, m));
         }
     }
     v
 }
 
-/// Emulated servo with the [`DEFAULT_CYCLE`] time base. See the module documentation.
+/// Emulated CiA 402 servo with the [`DEFAULT_CYCLE`] time base. See the module documentation.
 pub fn emulated_servo(
     esi: &EsiFile,
     device: &Device,
     def: &DriveDefinition,
 ) -> Result<Esc, ServoError> {
-    emulated_servo_with_cycle(esi, device, def, DEFAULT_CYCLE)
+    emulated_drive(esi, device, def, DEFAULT_CYCLE)
 }
 
-/// Emulated servo whose model advances by `cycle` per process-data exchange.
+/// Emulated CiA 402 servo whose model advances by `cycle` per process-data exchange.
 pub fn emulated_servo_with_cycle(
+    esi: &EsiFile,
+    device: &Device,
+    def: &DriveDefinition,
+    cycle: Duration,
+) -> Result<Esc, ServoError> {
+    emulated_drive(esi, device, def, cycle)
+}
+
+/// Emulated drive of any family with a mailbox: the drive model of `def` behind a CoE server
+/// (object-dictionary families) or an SoE server (SERCOS), process data laid out as the ESI's
+/// default PDOs, which must carry exactly the drive definition's entries (CiA 402) or its
+/// image sizes (SERCOS, whose ESI entries are IDNs).
+pub fn emulated_drive(
     esi: &EsiFile,
     device: &Device,
     def: &DriveDefinition,
@@ -231,34 +447,92 @@ pub fn emulated_servo_with_cycle(
 
     let rx_pdos = assigned(&device.rx_pdos, cfg.output_sm);
     let tx_pdos = assigned(&device.tx_pdos, cfg.input_sm);
-    let rx_len = check_layout("rx", def, &def.rxpdo, &rx_pdos)?;
-    let tx_len = check_layout("tx", def, &def.txpdo, &tx_pdos)?;
-
-    let model = Ds402Model::new(def);
-    debug_assert_eq!(DriveModel::rx_len(&model), rx_len);
-    debug_assert_eq!(DriveModel::tx_len(&model), tx_len);
-
-    let mut entries = ds402_objects(device.name());
-    entries.extend([
-        ObjectEntry::constant(0x1018, 0, DataType::U8, 4),
-        ObjectEntry::constant(0x1018, 1, DataType::U32, i64::from(esi.vendor.id)),
-        ObjectEntry::constant(0x1018, 2, DataType::U32, i64::from(device.product_code)),
-        ObjectEntry::constant(0x1018, 3, DataType::U32, i64::from(device.revision_no)),
-        ObjectEntry::constant(0x1018, 4, DataType::U32, 0),
-    ]);
-    entries.extend(pdo_objects(0x1C12, &rx_pdos));
-    entries.extend(pdo_objects(0x1C13, &tx_pdos));
-
-    let coe = CoeServer::new(Box::new(model), entries, usize::from(mbx.tx_size));
-    let app = ServoApp {
-        coe,
-        sizes: ProcessDataSizes {
-            outputs: rx_len as u16,
-            inputs: tx_len as u16,
-        },
+    let model =
+        crate::drive::model::for_definition(def).map_err(|e| ServoError::Model(e.to_string()))?;
+    let (rx_len, tx_len) = (model.rx_len(), model.tx_len());
+    let sercos = def.profile == crate::drive::catalogue::Profile::Sercos;
+    if sercos {
+        check_sizes("rx", def, rx_len, &rx_pdos)?;
+        check_sizes("tx", def, tx_len, &tx_pdos)?;
+    } else {
+        check_layout("rx", def, &def.rxpdo, &rx_pdos)?;
+        check_layout("tx", def, &def.txpdo, &tx_pdos)?;
+    }
+    let identity = |first: u16| {
+        [
+            ObjectEntry::constant(first, 0, DataType::U8, 4),
+            ObjectEntry::constant(first, 1, DataType::U32, i64::from(esi.vendor.id)),
+            ObjectEntry::constant(first, 2, DataType::U32, i64::from(device.product_code)),
+            ObjectEntry::constant(first, 3, DataType::U32, i64::from(device.revision_no)),
+            ObjectEntry::constant(first, 4, DataType::U32, 0),
+        ]
+    };
+    let server = if sercos {
+        MailboxServer::Soe(SoeServer::new(
+            model,
+            sercos_idns(),
+            usize::from(mbx.tx_size),
+        ))
+    } else {
+        let mut entries = ds402_objects(device.name());
+        entries.extend(identity(0x1018));
+        entries.extend(pdo_objects(0x1C12, &rx_pdos));
+        entries.extend(pdo_objects(0x1C13, &tx_pdos));
+        MailboxServer::Coe(CoeServer::new(model, entries, usize::from(mbx.tx_size)))
+    };
+    let identity_plan = |len: usize| {
+        vec![Span {
+            bus: 0,
+            model: 0,
+            len,
+        }]
+    };
+    let mut app = ServoApp {
+        server,
+        model_rx: def.rxpdo.clone(),
+        model_tx: def.txpdo.clone(),
         outputs: vec![0; rx_len],
+        inputs: vec![0; tx_len],
+        bus_rx_len: rx_len,
+        bus_tx_len: tx_len,
+        rx_plan: identity_plan(rx_len),
+        tx_plan: identity_plan(tx_len),
         exchanges: 0,
         cycle_ns,
+        synchronized: false,
     };
+    app.remap().map_err(|_| ServoError::PdoMismatch {
+        direction: "rx/tx",
+        drive: def.name.clone(),
+        drive_entries: Vec::new(),
+        drive_bytes: rx_len + tx_len,
+        esi_entries: Vec::new(),
+        esi_bits: 0,
+    })?;
     Ok(Esc::new(cfg, Box::new(app)))
+}
+
+/// SERCOS: the ESI telegram sizes must equal the model's image sizes.
+fn check_sizes(
+    direction: &'static str,
+    def: &DriveDefinition,
+    model_bytes: usize,
+    pdos: &[&Pdo],
+) -> Result<(), ServoError> {
+    let esi_bits: u32 = pdos.iter().map(|p| p.bit_len()).sum();
+    if esi_bits % 8 != 0 || (esi_bits / 8) as usize != model_bytes {
+        return Err(ServoError::PdoMismatch {
+            direction,
+            drive: def.name.clone(),
+            drive_entries: Vec::new(),
+            drive_bytes: model_bytes,
+            esi_entries: pdos
+                .iter()
+                .flat_map(|p| p.entries.iter())
+                .map(|e| (e.index, e.subindex, u32::from(e.bit_len)))
+                .collect(),
+            esi_bits,
+        });
+    }
+    Ok(())
 }

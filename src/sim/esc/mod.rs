@@ -412,6 +412,16 @@ impl Esc {
         self.load_read_mailbox();
     }
 
+    /// Move the application's device-initiated messages ([`EscApplication::take_outgoing`])
+    /// into the read-mailbox queue.
+    pub fn poll_app_mailbox(&mut self) {
+        let msgs = self.app.take_outgoing();
+        if !msgs.is_empty() {
+            self.mbx_queue.extend(msgs);
+            self.load_read_mailbox();
+        }
+    }
+
     /// Application-initiated error: go to `state` (if lower than the current one) and set the
     /// error indication with `code` (e.g. SM watchdog → SAFE-OP + 0x001B).
     pub fn raise_al_error(&mut self, state: AlState, code: AlStatusCode) {
@@ -873,6 +883,7 @@ impl Esc {
                 if let Some(r) = reply {
                     self.mbx_queue.push_back(r);
                 }
+                self.mbx_queue.extend(self.app.take_outgoing());
                 self.load_read_mailbox();
             } else {
                 if sm.control & 0x40 != 0 {

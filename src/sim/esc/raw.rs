@@ -127,9 +127,14 @@ impl RawPort {
     /// Open a raw packet socket bound to `iface` (receive timeout [`POLL_INTERVAL`]).
     /// Frames sent to the interface after this returns are queued for [`RawPort::serve`].
     pub fn open(iface: &str) -> Result<Self, RawError> {
+        Self::open_with_timeout(iface, POLL_INTERVAL)
+    }
+
+    /// [`open`](Self::open) with another receive timeout (a master polls more often).
+    pub fn open_with_timeout(iface: &str, read_timeout: Duration) -> Result<Self, RawError> {
         let ni = find_interface(iface)?;
         let config = Config {
-            read_timeout: Some(POLL_INTERVAL),
+            read_timeout: Some(read_timeout),
             write_timeout: Some(Duration::from_secs(1)),
             channel_type: ChannelType::Layer2,
             promiscuous: false,
@@ -154,6 +159,28 @@ impl RawPort {
     /// Interface name.
     pub fn iface(&self) -> &str {
         &self.iface
+    }
+
+    /// Send one Ethernet frame.
+    pub fn send(&mut self, frame: &[u8]) -> Result<(), RawError> {
+        match self.tx.send_to(frame, None) {
+            Some(Ok(())) => Ok(()),
+            Some(Err(source)) => Err(RawError::Send {
+                iface: self.iface.clone(),
+                source,
+            }),
+            None => Err(RawError::Send {
+                iface: self.iface.clone(),
+                source: std::io::Error::other("send_to not supported by the channel"),
+            }),
+        }
+    }
+
+    /// The next EtherCAT frame (EtherType 0x88A4) that arrived, waiting at most the receive
+    /// timeout; `None` if none came. Frames of other types are skipped.
+    pub fn try_receive(&mut self) -> Option<Vec<u8>> {
+        let frame = self.rx.next().ok()?;
+        (frame.len() >= 14 && frame[12..14] == [0x88, 0xA4]).then(|| frame.to_vec())
     }
 
     /// Serve `segment` until `stop` is set or `deadline` passes (whichever first).
@@ -210,10 +237,14 @@ impl RawPort {
                 }
             }
             let now = t0.elapsed().as_nanos() as u64;
-            if let Err(e) = segment.process_frame(&mut buf, now) {
-                tracing::debug!(iface, error = %e, "invalid EtherCAT frame dropped");
-                stats.invalid += 1;
-                continue;
+            match segment.process_frame(&mut buf, now) {
+                Ok(true) => {}
+                Ok(false) => continue, // dropped on purpose (fault knob)
+                Err(e) => {
+                    tracing::debug!(iface, error = %e, "invalid EtherCAT frame dropped");
+                    stats.invalid += 1;
+                    continue;
+                }
             }
             match self.tx.send_to(&buf, None) {
                 Some(Ok(())) => stats.answered += 1,

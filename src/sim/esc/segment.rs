@@ -8,7 +8,10 @@
 //! as returned (notes `ethercat.md` §1.1, §2.1).
 
 use super::{Esc, EscChain};
-use crate::bus::ethercat::wire::{self, WireError};
+use crate::bus::ethercat::wire::{self, Command, WireError};
+use crate::drive::model::DriveModel;
+use crate::sim::world::{Port, World};
+use crate::units::Nanos;
 
 /// An emulated segment: devices in ring order plus a frame-level entry point.
 #[derive(Debug)]
@@ -19,6 +22,13 @@ pub struct Segment {
     pub frames: u64,
     /// Number of datagrams processed so far.
     pub datagrams: u64,
+    world: Option<World>,
+    cycle: Nanos,
+    auto_sync: bool,
+    sync_time: Nanos,
+    syncs: u64,
+    drop_frames: std::collections::BTreeSet<u64>,
+    offered: u64,
 }
 
 impl Segment {
@@ -33,7 +43,111 @@ impl Segment {
             chain,
             frames: 0,
             datagrams: 0,
+            world: None,
+            cycle: Nanos::ZERO,
+            auto_sync: false,
+            sync_time: Nanos::ZERO,
+            syncs: 0,
+            drop_frames: std::collections::BTreeSet::new(),
+            offered: 0,
         }
+    }
+
+    /// Put the devices' drive models into `world` (probe surfaces, fixed stops) with cycle time
+    /// `cycle`: from now on the models are stepped together by [`Self::sync0`] (the SYNC0
+    /// event), not when their inputs are read. World device `i` is the `i`-th ESC (ring order)
+    /// whose application hosts a drive model.
+    pub fn set_world(&mut self, world: World, cycle: Nanos) {
+        for esc in &mut self.chain.escs {
+            esc.app_mut().set_synchronized(true);
+        }
+        self.world = Some(world);
+        self.cycle = cycle;
+    }
+
+    /// The world, if one is installed.
+    pub fn world(&self) -> Option<&World> {
+        self.world.as_ref()
+    }
+
+    /// The world, mutable.
+    pub fn world_mut(&mut self) -> Option<&mut World> {
+        self.world.as_mut()
+    }
+
+    /// Step the world after every frame that wrote process data (a logical write: LWR / LRW),
+    /// with the segment's own time advancing by the cycle time per step. For masters on a
+    /// network interface, which bring their own cycle; in-process links call [`Self::sync0`].
+    pub fn set_auto_sync(&mut self, on: bool) {
+        self.auto_sync = on;
+    }
+
+    /// Frames offered to [`Self::process_frame`] so far (including dropped ones).
+    pub fn offered_frames(&self) -> u64 {
+        self.offered
+    }
+
+    /// World steps so far.
+    pub fn syncs(&self) -> u64 {
+        self.syncs
+    }
+
+    /// Drop the `n`-th frame (0-based count of frames offered to [`Self::process_frame`]) as a
+    /// broken cable would: it is not processed and never comes back. May be called for several.
+    pub fn drop_frame_at(&mut self, n: u64) {
+        self.drop_frames.insert(n);
+    }
+
+    /// SYNC0 at `now`: one [`World::step`] of every hosted drive model over `[now − cycle, now]`
+    /// with the outputs the master wrote last; the inputs the master reads next are the result.
+    /// Device-initiated mailbox messages (e.g. an EMCY for a new fault) are queued afterwards.
+    /// Without a world, nothing happens.
+    pub fn sync0(&mut self, now: Nanos) {
+        let Some(world) = self.world.as_mut() else {
+            return;
+        };
+        let mut ports: Vec<Port<'_>> = self
+            .chain
+            .escs
+            .iter_mut()
+            .filter_map(|e| e.app_mut().port())
+            .collect();
+        world.step(now, self.cycle, &mut ports);
+        drop(ports);
+        for esc in &mut self.chain.escs {
+            esc.poll_app_mailbox();
+        }
+        self.syncs += 1;
+        self.sync_time = now;
+    }
+
+    /// Drive model of world device `device` (the `device`-th ESC hosting a model).
+    pub fn model(&self, device: usize) -> Option<&dyn DriveModel> {
+        self.chain
+            .escs
+            .iter()
+            .filter_map(|e| e.app().model())
+            .nth(device)
+    }
+
+    /// Drive model of world device `device`, mutable.
+    pub fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
+        self.chain
+            .escs
+            .iter_mut()
+            .filter_map(|e| e.app_mut().model_mut())
+            .nth(device)
+    }
+
+    /// Ring position of world device `device`.
+    pub fn position_of(&self, device: usize) -> Option<usize> {
+        self.chain
+            .escs
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.app().model().is_some())
+            .map(|(p, _)| p)
+            .nth(device)
     }
 
     /// Number of devices.
@@ -62,10 +176,20 @@ impl Segment {
     ///
     /// An invalid frame (not EtherCAT, truncated, inconsistent lengths) is left unchanged and
     /// reported as an error — a real segment would drop it.
-    pub fn process_frame(&mut self, frame: &mut [u8], now_ns: u64) -> Result<(), WireError> {
+    ///
+    /// Returns `Ok(false)` for a frame dropped on purpose ([`Self::drop_frame_at`]): the caller
+    /// must not hand it back to the master.
+    pub fn process_frame(&mut self, frame: &mut [u8], now_ns: u64) -> Result<bool, WireError> {
+        let n = self.offered;
+        self.offered += 1;
+        if self.drop_frames.contains(&n) {
+            return Ok(false);
+        }
         let chain = &mut self.chain;
+        let mut logical_write = false;
         let count = wire::for_each_datagram_mut(frame, |mut dg| {
             let cmd = dg.command().code();
+            logical_write |= cmd == Command::Lwr.code() || cmd == Command::Lrw.code();
             let raw_addr = dg.address();
             let mut wkc = dg.wkc();
             let new_addr = chain.process_raw(cmd, raw_addr, dg.data_mut(), &mut wkc, now_ns);
@@ -77,7 +201,11 @@ impl Segment {
         wire::mark_processed(frame);
         self.frames += 1;
         self.datagrams += count as u64;
-        Ok(())
+        if logical_write && self.auto_sync {
+            let t = self.sync_time.saturating_add(self.cycle);
+            self.sync0(t);
+        }
+        Ok(true)
     }
 }
 

@@ -1,0 +1,999 @@
+//! EtherCAT link: the `ethercrab` MainDevice drives the axes' process data, our own mailbox
+//! clients carry the acyclic access (CoE SDO for object-dictionary drives, SoE for SERCOS).
+//!
+//! | `--link` | wire |
+//! |---|---|
+//! | `ethercat-emu` | in-process: frames go straight through an emulated [`Segment`] built from the machine file (an EK1100-kind coupler, then one emulated drive per axis from the embedded ESI files) |
+//! | `ethercat:IFACE` | a raw socket on a network interface (real devices, or `fieldprobe sim ethercat` on the other end of a veth pair) |
+//!
+//! # Start-up
+//!
+//! `init_single_group` (addresses, SII, mailbox SMs, DC delay measurement and static drift
+//! compensation) → in PRE-OP, for every axis on a CoE drive, the PDO mapping of the axis's drive
+//! definition (`drives/*.toml` `[rxpdo]` / `[txpdo]`) is written with the CiA 301 procedure
+//! (0x1C12:0 = 0, 0x1600:0 = 0, entries, counts) through our CoE client; SERCOS drives keep the
+//! telegrams of their ESI (S-0-0016 / S-0-0024 are fixed there) → DC SYNC0 with the link's cycle
+//! time on every device that supports DC → SAFE-OP → OP. The process images ethercrab then
+//! reports for each axis must have the drive definition's lengths, or the link refuses.
+//!
+//! # One exchange at `now`
+//!
+//! Outputs go into ethercrab's PDI and one LRW carries them to the devices; on `ethercat-emu`
+//! the emulated segment then runs SYNC0 at `now` (every drive model steps once, with the plant
+//! — probe surfaces and fixed stops — exactly as [`SimLink`](super::sim::SimLink) does) and a
+//! second LRW brings back the inputs of that step, so the axis layer sees the same numbers as
+//! over `--link sim`. On a real interface one LRW per cycle is sent (the devices' own SYNC0
+//! decides when they sample). A wrong working counter or a frame that does not come back is
+//! [`LinkError::Lost`]; the inputs are then left untouched.
+//!
+//! # Acyclic access
+//!
+//! [`Link::read_object`] / [`Link::write_object`] run between cycles: CoE uploads / downloads
+//! (expedited, normal or segmented) whose size comes from the drive definition's function and
+//! IDN tables or the CiA 402 object table (4 bytes otherwise); SoE reads / writes of the IDN
+//! (index = IDN number) whose length comes from the IDN's attribute.
+//!
+//! # Limits
+//!
+//! Each link leaks one ethercrab `PduStorage` (about 18 kB; ethercrab needs it `'static` and
+//! lets it be split once), which is fine for a process that opens a handful of links.
+
+use std::collections::BTreeSet;
+use std::future::Future;
+use std::path::Path;
+use std::sync::Arc;
+use std::task::Poll;
+use std::time::{Duration, Instant};
+
+use ethercrab::subdevice_group::{DcConfiguration, HasDc, NoDc, Op};
+use ethercrab::{
+    DcSync, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceGroup, Timeouts,
+};
+
+use super::{Link, LinkError, ProcessImage};
+use crate::bus::ethercat::mailbox::{CoeClient, MailboxError};
+use crate::bus::ethercat::pcap::{PcapWriter, TimestampResolution};
+use crate::bus::ethercat::soe::SoeClient;
+use crate::drive::catalogue::{DriveDefinition, Profile};
+use crate::drive::model::DriveModel;
+use crate::esi;
+use crate::sim::esc::device::emulated_drive;
+use crate::sim::esc::segment::Segment;
+use crate::sim::esc::{Esc, EscConfig, NullApp};
+use crate::sim::plant::Plant;
+use crate::sim::world::World;
+use crate::units::Nanos;
+
+/// SubDevices a link can hold.
+pub const MAX_SUBDEVICES: usize = 64;
+/// Process data image bytes a link can hold (inputs and outputs of all devices).
+pub const MAX_PDI: usize = 4096;
+const MAX_FRAMES: usize = 16;
+const PDU_DATA: usize = PduStorage::element_size(1100);
+
+type Storage = PduStorage<MAX_FRAMES, PDU_DATA>;
+
+/// ESI of the emulated CiA 402 servo (embedded).
+pub const SERVO_ESI: &str = include_str!("../../esi/fieldprobe-cia402-servo.xml");
+/// ESI of the emulated SERCOS drive (embedded).
+pub const SERCOS_ESI: &str = include_str!("../../esi/fieldprobe-ax5000-sercos.xml");
+/// ESI of the emulated coupler (embedded).
+pub const COUPLER_ESI: &str = include_str!("../../esi/fieldprobe-ek1100.xml");
+/// Forwarding delay between neighbouring emulated devices.
+const HOP_DELAY_NS: u64 = 500;
+
+/// Where the frames go.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Wire {
+    /// In-process emulated segment built from the machine.
+    Emulated,
+    /// A raw socket on this network interface.
+    Interface(String),
+}
+
+impl Wire {
+    /// Parse a `--link` value: `ethercat-emu` or `ethercat:IFACE`; `None` for other links.
+    pub fn from_link(link: &str) -> Option<Wire> {
+        if link == "ethercat-emu" {
+            return Some(Wire::Emulated);
+        }
+        link.strip_prefix("ethercat:")
+            .filter(|i| !i.is_empty())
+            .map(|i| Wire::Interface(i.to_string()))
+    }
+}
+
+/// What to build an EtherCAT link for: one entry per axis, in axis order.
+#[derive(Debug, Clone)]
+pub struct EthercatSpec {
+    /// Drive definition per axis.
+    pub drives: Vec<Arc<DriveDefinition>>,
+    /// Interpolation cycle (SYNC0 period).
+    pub cycle: Nanos,
+    /// Write every frame (both directions) into this pcap file.
+    pub pcap: Option<std::path::PathBuf>,
+}
+
+/// The ESI text the emulator uses for a drive family, if it emulates that family on EtherCAT.
+pub fn esi_for(profile: Profile) -> Option<&'static str> {
+    match profile {
+        Profile::Cia402 => Some(SERVO_ESI),
+        Profile::Sercos => Some(SERCOS_ESI),
+        _ => None,
+    }
+}
+
+/// The emulated segment for `spec`: a coupler, then one drive per axis (the ESI of its family,
+/// the model of its drive definition), with an empty plant, synchronised at SYNC0.
+pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
+    let other = |m: String| LinkError::Other(m);
+    let coupler_esi =
+        esi::parse(COUPLER_ESI, "esi/fieldprobe-ek1100.xml").map_err(|e| other(e.to_string()))?;
+    let coupler_dev = coupler_esi
+        .devices
+        .first()
+        .ok_or_else(|| other("coupler ESI has no device".into()))?;
+    let content = esi::to_sii::sii_from_device(&coupler_esi, coupler_dev)
+        .map_err(|e| other(format!("coupler SII: {e}")))?;
+    let image =
+        esi::sii::encode_padded(&content).map_err(|e| other(format!("coupler SII: {e}")))?;
+    let mut escs = vec![Esc::new(EscConfig::from_sii(image), Box::new(NullApp))];
+    let cycle = Duration::from_nanos(spec.cycle.0.max(1));
+    for (axis, def) in spec.drives.iter().enumerate() {
+        let text = esi_for(def.profile).ok_or_else(|| {
+            other(format!(
+                "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives only",
+                def.name,
+                def.profile.name()
+            ))
+        })?;
+        let file = esi::parse(text, "embedded ESI").map_err(|e| other(e.to_string()))?;
+        let device = file
+            .devices
+            .first()
+            .ok_or_else(|| other("ESI has no device".into()))?;
+        let esc = emulated_drive(&file, device, def, cycle)
+            .map_err(|e| other(format!("axis {axis}, drive '{}': {e}", def.name)))?;
+        escs.push(esc);
+    }
+    let mut seg = Segment::new(escs, HOP_DELAY_NS);
+    seg.set_world(World::new(Plant::new()), spec.cycle);
+    Ok(seg)
+}
+
+/// The cyclic group in OP, with or without DC.
+enum Group {
+    Dc(SubDeviceGroup<MAX_SUBDEVICES, MAX_PDI, ethercrab::DefaultLock, Op, HasDc>),
+    NoDc(SubDeviceGroup<MAX_SUBDEVICES, MAX_PDI, ethercrab::DefaultLock, Op, NoDc>),
+}
+
+/// Mailbox client of one axis's device.
+#[derive(Debug)]
+enum Mailbox {
+    Coe(CoeClient),
+    Soe(SoeClient),
+    None,
+}
+
+/// One axis on the bus.
+#[derive(Debug)]
+struct AxisDevice {
+    /// Index of the SubDevice in the group.
+    sub: usize,
+    def: Arc<DriveDefinition>,
+    mailbox: Mailbox,
+    name: String,
+}
+
+/// Frame tap: every frame sent and received goes into a pcap file.
+struct Tap {
+    writer: PcapWriter<std::io::BufWriter<std::fs::File>>,
+    t0: Instant,
+}
+
+impl Tap {
+    fn record(&mut self, frame: &[u8]) {
+        let t = self.t0.elapsed().as_nanos() as u64;
+        if let Err(e) = self.writer.write_packet(t, frame) {
+            tracing::warn!(target: "fieldprobe::link::ethercat", "pcap write failed: {e}");
+        }
+    }
+}
+
+/// The wire end of the PDU loop.
+struct WireEnd {
+    tx: PduTx<'static>,
+    rx: PduRx<'static>,
+    segment: Option<Segment>,
+    tap: Option<Tap>,
+    port: Option<crate::sim::esc::raw::RawPort>,
+    t0: Instant,
+}
+
+impl WireEnd {
+    /// Send every queued frame; emulated: process and hand back at once; interface: send.
+    fn pump(&mut self) {
+        while let Some(frame) = self.tx.next_sendable_frame() {
+            let mut buf = Vec::with_capacity(1514);
+            let sent = frame.send_blocking(|b| {
+                buf.extend_from_slice(b);
+                Ok(b.len())
+            });
+            if sent.is_err() {
+                continue;
+            }
+            if let Some(tap) = self.tap.as_mut() {
+                tap.record(&buf);
+            }
+            if let Some(seg) = self.segment.as_mut() {
+                let now = self.t0.elapsed().as_nanos() as u64;
+                // A dropped (fault knob) or invalid frame is lost on the wire.
+                if let Ok(true) = seg.process_frame(&mut buf, now) {
+                    if let Some(tap) = self.tap.as_mut() {
+                        tap.record(&buf);
+                    }
+                    let _ = self.rx.receive_frame(&buf);
+                }
+            } else if let Some(port) = self.port.as_mut() {
+                let _ = port.send(&buf);
+            }
+        }
+    }
+
+    /// Interface: take every frame that arrived.
+    fn receive(&mut self) {
+        let Some(port) = self.port.as_mut() else {
+            return;
+        };
+        while let Some(frame) = port.try_receive() {
+            if let Some(tap) = self.tap.as_mut() {
+                tap.record(&frame);
+            }
+            let _ = self.rx.receive_frame(&frame);
+        }
+    }
+}
+
+/// Run `fut` to completion while pumping frames through `wire` (single thread).
+fn drive<T>(wire: &mut WireEnd, fut: impl Future<Output = T>) -> T {
+    let pump = std::future::poll_fn(|cx| {
+        wire.tx.replace_waker(cx.waker());
+        wire.receive();
+        wire.pump();
+        if wire.port.is_some() {
+            // Nothing wakes us when a frame arrives on the socket: poll again soon.
+            cx.waker().wake_by_ref();
+        }
+        Poll::<T>::Pending
+    });
+    futures_lite::future::block_on(futures_lite::future::or(fut, pump))
+}
+
+/// The EtherCAT link (see the module documentation).
+pub struct EthercatLink {
+    md: &'static MainDevice<'static>,
+    group: Group,
+    wire: WireEnd,
+    axes: Vec<AxisDevice>,
+    cycle: Nanos,
+    expected_wkc: u16,
+    exchanges: u64,
+    lose: BTreeSet<u64>,
+    emulated: bool,
+}
+
+impl std::fmt::Debug for EthercatLink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EthercatLink")
+            .field("axes", &self.axes)
+            .field("cycle", &self.cycle)
+            .field("expected_wkc", &self.expected_wkc)
+            .field("exchanges", &self.exchanges)
+            .finish_non_exhaustive()
+    }
+}
+
+fn mbx_err(what: String) -> impl Fn(MailboxError) -> LinkError {
+    move |e| LinkError::Other(format!("{what}: {e}"))
+}
+
+fn ec_err(what: &'static str) -> impl Fn(ethercrab::error::Error) -> LinkError {
+    move |e| LinkError::Other(format!("EtherCAT {what}: {e}"))
+}
+
+impl EthercatLink {
+    /// Open the link on `wire` for the axes of `spec` and bring every device to OP.
+    pub fn open(wire: &Wire, spec: &EthercatSpec) -> Result<Self, LinkError> {
+        let (md, mut wire_end) = connect(wire, spec)?;
+        let emulated = wire_end.segment.is_some();
+        let now = ethercrab::std::ethercat_now;
+        let (group, axes) = drive(&mut wire_end, async {
+            let mut group = md
+                .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(now)
+                .await
+                .map_err(ec_err("init"))?;
+            let mut axes = assign_axes(md, &group, spec).await?;
+            for ax in axes.iter_mut() {
+                if let Mailbox::Coe(c) = &mut ax.mailbox {
+                    write_pdo_mapping(md, c, &ax.def, &ax.name).await?;
+                }
+            }
+            let cycle = Duration::from_nanos(spec.cycle.0);
+            let mut any_dc = false;
+            for mut sd in group.iter_mut(md) {
+                if sd.dc_support().any() {
+                    sd.set_dc_sync(DcSync::Sync0);
+                    any_dc = true;
+                }
+            }
+            let pdi = group
+                .into_pre_op_pdi(md)
+                .await
+                .map_err(ec_err("PDO configuration"))?;
+            let group = if any_dc {
+                let g = pdi
+                    .configure_dc_sync(
+                        md,
+                        DcConfiguration {
+                            start_delay: Duration::from_millis(1),
+                            sync0_period: cycle,
+                            sync0_shift: Duration::ZERO,
+                        },
+                    )
+                    .await
+                    .map_err(ec_err("DC SYNC0"))?;
+                let g = g.into_safe_op(md).await.map_err(ec_err("SAFE-OP"))?;
+                Group::Dc(g.into_op(md).await.map_err(ec_err("OP"))?)
+            } else {
+                let g = pdi.into_safe_op(md).await.map_err(ec_err("SAFE-OP"))?;
+                Group::NoDc(g.into_op(md).await.map_err(ec_err("OP"))?)
+            };
+            Ok::<_, LinkError>((group, axes))
+        })?;
+        let mut link = EthercatLink {
+            md,
+            group,
+            wire: wire_end,
+            axes,
+            cycle: spec.cycle,
+            expected_wkc: 0,
+            exchanges: 0,
+            lose: BTreeSet::new(),
+            emulated,
+        };
+        link.check_images()?;
+        Ok(link)
+    }
+
+    /// Compare ethercrab's image sizes with the drive definitions; compute the expected WKC.
+    fn check_images(&mut self) -> Result<(), LinkError> {
+        let mut wkc = 0u16;
+        let md = self.md;
+        let sizes: Vec<(usize, usize, String)> = match &self.group {
+            Group::Dc(g) => g
+                .iter(md)
+                .map(|sd| {
+                    let io = sd.io_raw();
+                    (io.outputs().len(), io.inputs().len(), sd.name().to_string())
+                })
+                .collect(),
+            Group::NoDc(g) => g
+                .iter(md)
+                .map(|sd| {
+                    let io = sd.io_raw();
+                    (io.outputs().len(), io.inputs().len(), sd.name().to_string())
+                })
+                .collect(),
+        };
+        for (o, i, _) in &sizes {
+            wkc += u16::from(*i > 0) + 2 * u16::from(*o > 0);
+        }
+        for ax in &self.axes {
+            let (o, i, name) = &sizes[ax.sub];
+            let (want_o, want_i) = image_lengths(&ax.def);
+            if (*o, *i) != (want_o, want_i) {
+                return Err(LinkError::Other(format!(
+                    "axis {}: SubDevice {} ({name}) has {o} output / {i} input bytes in OP, drive '{}' needs {want_o} / {want_i}",
+                    ax.name, ax.sub, ax.def.name
+                )));
+            }
+        }
+        self.expected_wkc = wkc;
+        Ok(())
+    }
+
+    /// Lose the `n`-th exchange (0-based): its frame is dropped on the wire, as a broken
+    /// cable would; the exchange returns [`LinkError::Lost`]. Emulated wire only.
+    pub fn lose_exchange_at(&mut self, n: u64) {
+        self.lose.insert(n);
+    }
+
+    /// Exchanges attempted so far.
+    pub fn exchanges(&self) -> u64 {
+        self.exchanges
+    }
+
+    /// Working counter a good cycle returns.
+    pub fn expected_wkc(&self) -> u16 {
+        self.expected_wkc
+    }
+
+    /// The emulated segment (`ethercat-emu`), if any.
+    pub fn segment(&self) -> Option<&Segment> {
+        self.wire.segment.as_ref()
+    }
+
+    /// The emulated segment, mutable (plant, fault knobs).
+    pub fn segment_mut(&mut self) -> Option<&mut Segment> {
+        self.wire.segment.as_mut()
+    }
+
+    /// One LRW; returns the working counter.
+    fn tx_rx(&mut self) -> Result<u16, ethercrab::error::Error> {
+        let md = self.md;
+        match &self.group {
+            Group::Dc(g) => drive(&mut self.wire, g.tx_rx_dc(md)).map(|r| r.working_counter),
+            Group::NoDc(g) => drive(&mut self.wire, g.tx_rx(md)).map(|r| r.working_counter),
+        }
+    }
+
+    fn copy_outputs(&self, images: &[ProcessImage]) -> Result<(), LinkError> {
+        let md = self.md;
+        for (ax, img) in self.axes.iter().zip(images) {
+            let put = |out: &mut [u8]| {
+                let n = out.len().min(img.outputs.len());
+                out[..n].copy_from_slice(&img.outputs[..n]);
+            };
+            match &self.group {
+                Group::Dc(g) => {
+                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
+                    put(&mut sd.outputs_raw_mut());
+                }
+                Group::NoDc(g) => {
+                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
+                    put(&mut sd.outputs_raw_mut());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn copy_inputs(&self, images: &mut [ProcessImage]) -> Result<(), LinkError> {
+        let md = self.md;
+        for (ax, img) in self.axes.iter().zip(images.iter_mut()) {
+            let mut get = |inp: &[u8]| {
+                let n = inp.len().min(img.inputs.len());
+                img.inputs[..n].copy_from_slice(&inp[..n]);
+            };
+            match &self.group {
+                Group::Dc(g) => {
+                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
+                    get(&sd.inputs_raw());
+                }
+                Group::NoDc(g) => {
+                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
+                    get(&sd.inputs_raw());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn lost(&self, now: Nanos, reason: String) -> LinkError {
+        LinkError::Lost { at: now, reason }
+    }
+
+    fn cycle_frame(&mut self, now: Nanos) -> Result<(), LinkError> {
+        match self.tx_rx() {
+            Ok(w) if w == self.expected_wkc => Ok(()),
+            Ok(w) => Err(self.lost(
+                now,
+                format!("working counter {w}, expected {}", self.expected_wkc),
+            )),
+            Err(e) => Err(self.lost(now, format!("frame lost: {e}"))),
+        }
+    }
+}
+
+/// Leak a PDU storage and a MainDevice for `wire` (emulated segment per `spec`).
+fn connect(
+    wire: &Wire,
+    spec: &EthercatSpec,
+) -> Result<(&'static MainDevice<'static>, WireEnd), LinkError> {
+    let storage: &'static Storage = Box::leak(Box::new(Storage::new()));
+    let (tx, rx, pdu_loop) = storage
+        .try_split()
+        .map_err(|()| LinkError::Other("EtherCAT PDU storage already in use".into()))?;
+    let tap = match &spec.pcap {
+        None => None,
+        Some(p) => Some(open_tap(p)?),
+    };
+    let (segment, port) = match wire {
+        Wire::Emulated => (Some(emulated_segment(spec)?), None),
+        Wire::Interface(i) => (
+            None,
+            Some(
+                crate::sim::esc::raw::RawPort::open_with_timeout(i, Duration::from_micros(200))
+                    .map_err(|e| LinkError::Other(format!("ethercat:{i}: {e}")))?,
+            ),
+        ),
+    };
+    let emulated = segment.is_some();
+    let wire_end = WireEnd {
+        tx,
+        rx,
+        segment,
+        tap,
+        port,
+        t0: Instant::now(),
+    };
+    let timeouts = Timeouts {
+        pdu: Duration::from_millis(if emulated { 20 } else { 30 }),
+        state_transition: Duration::from_secs(5),
+        mailbox_response: Duration::from_secs(2),
+        ..Timeouts::default()
+    };
+    let md: &'static MainDevice<'static> = Box::leak(Box::new(MainDevice::new(
+        pdu_loop,
+        timeouts,
+        MainDeviceConfig {
+            dc_static_sync_iterations: if emulated { 100 } else { 10_000 },
+            ..MainDeviceConfig::default()
+        },
+    )));
+    Ok((md, wire_end))
+}
+
+/// One SubDevice as [`Session::scan`] reports it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SubDeviceInfo {
+    /// Ring position (0 = next to the MainDevice).
+    pub position: usize,
+    /// Configured station address.
+    pub address: u16,
+    /// Vendor ID.
+    pub vendor: u32,
+    /// Product code.
+    pub product: u32,
+    /// Revision.
+    pub revision: u32,
+    /// Name from the SII.
+    pub name: String,
+    /// AL state.
+    pub state: String,
+    /// DC support (`none`, `32 bit`, `64 bit`).
+    pub dc: String,
+    /// Mailbox SMs (write SM0, read SM1) as (start, length); length 0 = no mailbox.
+    pub mailbox: ((u16, u16), (u16, u16)),
+}
+
+/// A bus in PRE-OP for commissioning commands: scan, SDO and IDN access by ring position.
+pub struct Session {
+    md: &'static MainDevice<'static>,
+    wire: WireEnd,
+    devices: Vec<SubDeviceInfo>,
+}
+
+impl std::fmt::Debug for Session {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Session")
+            .field("devices", &self.devices)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Session {
+    /// Initialise the bus on `wire` (`ethercat-emu`: the segment of `spec`) to PRE-OP and read
+    /// every SubDevice's identity, state, DC support and mailbox.
+    pub fn open(wire: &Wire, spec: &EthercatSpec) -> Result<Self, LinkError> {
+        let (md, mut wire_end) = connect(wire, spec)?;
+        let devices = drive(&mut wire_end, async {
+            let group = md
+                .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(ethercrab::std::ethercat_now)
+                .await
+                .map_err(ec_err("init"))?;
+            let mut out = Vec::new();
+            for (position, sd) in group.iter(md).enumerate() {
+                let id = sd.identity();
+                let state = match sd.status().await {
+                    Ok((st, ethercrab::AlStatusCode::NoError)) => format!("{st:?}"),
+                    Ok((st, code)) => format!("{st:?} (AL status {code})"),
+                    Err(e) => format!("unknown ({e})"),
+                };
+                let dc = match sd.dc_support() {
+                    ethercrab::DcSupport::None => "none",
+                    ethercrab::DcSupport::RefOnly => "reference only",
+                    ethercrab::DcSupport::Bits64 => "64 bit",
+                    ethercrab::DcSupport::Bits32 => "32 bit",
+                };
+                let regs = ethercrab::Command::fprd(sd.configured_address(), 0x0800)
+                    .receive::<[u8; 16]>(md)
+                    .await
+                    .map_err(ec_err("SM registers"))?;
+                let sm = |o: usize| {
+                    (
+                        u16::from_le_bytes([regs[o], regs[o + 1]]),
+                        u16::from_le_bytes([regs[o + 2], regs[o + 3]]),
+                    )
+                };
+                out.push(SubDeviceInfo {
+                    position,
+                    address: sd.configured_address(),
+                    vendor: id.vendor_id,
+                    product: id.product_id,
+                    revision: id.revision,
+                    name: sd.name().to_string(),
+                    state,
+                    dc: dc.to_string(),
+                    mailbox: (sm(0), sm(8)),
+                });
+            }
+            Ok::<_, LinkError>(out)
+        })?;
+        Ok(Session {
+            md,
+            wire: wire_end,
+            devices,
+        })
+    }
+
+    /// The SubDevices found, in ring order.
+    pub fn devices(&self) -> &[SubDeviceInfo] {
+        &self.devices
+    }
+
+    fn device(&self, position: usize) -> Result<&SubDeviceInfo, LinkError> {
+        let d = self.devices.get(position).ok_or_else(|| {
+            LinkError::Other(format!(
+                "device {position}: no such SubDevice ({} found, positions 0 … {})",
+                self.devices.len(),
+                self.devices.len().saturating_sub(1)
+            ))
+        })?;
+        if d.mailbox.0 .1 == 0 || d.mailbox.1 .1 == 0 {
+            return Err(LinkError::Other(format!(
+                "device {position} ({}): has no mailbox",
+                d.name
+            )));
+        }
+        Ok(d)
+    }
+
+    fn named(&self, position: usize, e: MailboxError) -> LinkError {
+        if let MailboxError::Abort {
+            index, sub, code, ..
+        } = e
+        {
+            return LinkError::Abort {
+                device: position,
+                index,
+                sub,
+                code,
+            };
+        }
+        let name = self.devices.get(position).map_or("?", |d| d.name.as_str());
+        LinkError::Other(format!("device {position} ({name}): {e}"))
+    }
+
+    /// SDO upload of `index:sub` from the SubDevice at `position` (any size, segmented too).
+    pub fn sdo_read(&mut self, position: usize, index: u16, sub: u8) -> Result<Vec<u8>, LinkError> {
+        let d = self.device(position)?;
+        let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        let md = self.md;
+        drive(&mut self.wire, c.sdo_upload(md, index, sub)).map_err(|e| self.named(position, e))
+    }
+
+    /// SDO download of `data` to `index:sub` of the SubDevice at `position`.
+    pub fn sdo_write(
+        &mut self,
+        position: usize,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), LinkError> {
+        let d = self.device(position)?;
+        let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        let md = self.md;
+        drive(&mut self.wire, c.sdo_download(md, index, sub, data))
+            .map_err(|e| self.named(position, e))
+    }
+
+    /// SoE read of IDN `idn` (value, with the length from its attribute) and its name.
+    pub fn idn_read(&mut self, position: usize, idn: u16) -> Result<(i64, String), LinkError> {
+        let d = self.device(position)?;
+        let mut c = SoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        let md = self.md;
+        let r = drive(&mut self.wire, async {
+            let v = c.read_value(md, 0, idn).await?;
+            let name = c.read_name(md, 0, idn).await.unwrap_or_default();
+            Ok::<_, MailboxError>((v, name))
+        });
+        r.map_err(|e| self.named(position, e))
+    }
+
+    /// SoE write of `value` to IDN `idn` (length from its attribute).
+    pub fn idn_write(&mut self, position: usize, idn: u16, value: i64) -> Result<(), LinkError> {
+        let d = self.device(position)?;
+        let mut c = SoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        let md = self.md;
+        drive(&mut self.wire, c.write_value(md, 0, idn, value)).map_err(|e| self.named(position, e))
+    }
+}
+
+/// (output, input) image bytes of a drive definition's process data.
+fn image_lengths(def: &DriveDefinition) -> (usize, usize) {
+    match crate::drive::model::for_definition(def) {
+        Ok(m) => (m.rx_len(), m.tx_len()),
+        Err(_) => (def.rxpdo.len(), def.txpdo.len()),
+    }
+}
+
+fn open_tap(path: &Path) -> Result<Tap, LinkError> {
+    let f = std::fs::File::create(path)
+        .map_err(|e| LinkError::Other(format!("--pcap {}: {e}", path.display())))?;
+    let writer = PcapWriter::new(std::io::BufWriter::new(f), TimestampResolution::Nano)
+        .map_err(|e| LinkError::Other(format!("--pcap {}: {e}", path.display())))?;
+    Ok(Tap {
+        writer,
+        t0: Instant::now(),
+    })
+}
+
+/// Match axes to SubDevices: axis `k` takes the next SubDevice (ring order) with the identity of
+/// its family's ESI device, or — for drives the emulator does not describe — the next SubDevice
+/// with process data. Mailbox clients from the SM0 / SM1 registers the MainDevice configured.
+async fn assign_axes(
+    md: &MainDevice<'static>,
+    group: &SubDeviceGroup<
+        MAX_SUBDEVICES,
+        MAX_PDI,
+        ethercrab::DefaultLock,
+        ethercrab::subdevice_group::PreOp,
+    >,
+    spec: &EthercatSpec,
+) -> Result<Vec<AxisDevice>, LinkError> {
+    let subs: Vec<(u16, u32, u32, String)> = group
+        .iter(md)
+        .map(|sd| {
+            let id = sd.identity();
+            (
+                sd.configured_address(),
+                id.vendor_id,
+                id.product_id,
+                sd.name().to_string(),
+            )
+        })
+        .collect();
+    let mut next = 0usize;
+    let mut axes = Vec::new();
+    for (axis, def) in spec.drives.iter().enumerate() {
+        let want = esi_for(def.profile)
+            .and_then(|t| esi::parse(t, "embedded ESI").ok())
+            .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)));
+        let found = subs
+            .iter()
+            .enumerate()
+            .skip(next)
+            .find(|(_, (_, v, p, _))| want.map_or(true, |(wv, wp)| (*v, *p) == (wv, wp)));
+        let Some((i, (station, _, _, name))) = found else {
+            return Err(LinkError::Other(format!(
+                "axis {axis} (drive '{}'): no matching SubDevice on the bus after position {next} ({} SubDevices found)",
+                def.name,
+                subs.len()
+            )));
+        };
+        next = i + 1;
+        let regs = ethercrab::Command::fprd(*station, 0x0800)
+            .receive::<[u8; 16]>(md)
+            .await
+            .map_err(ec_err("SM registers"))?;
+        let sm = |o: usize| {
+            (
+                u16::from_le_bytes([regs[o], regs[o + 1]]),
+                u16::from_le_bytes([regs[o + 2], regs[o + 3]]),
+            )
+        };
+        let (out, inp) = (sm(0), sm(8));
+        let mailbox = if out.1 == 0 || inp.1 == 0 {
+            Mailbox::None
+        } else if def.profile == Profile::Sercos {
+            Mailbox::Soe(SoeClient::new(*station, out, inp))
+        } else {
+            Mailbox::Coe(CoeClient::new(*station, out, inp))
+        };
+        axes.push(AxisDevice {
+            sub: i,
+            def: def.clone(),
+            mailbox,
+            name: format!("{axis}:{name}"),
+        });
+    }
+    Ok(axes)
+}
+
+/// Write the drive definition's RxPDO / TxPDO as 0x1600 / 0x1A00 assigned to SM2 / SM3
+/// (CiA 301 procedure).
+async fn write_pdo_mapping(
+    md: &MainDevice<'static>,
+    c: &mut CoeClient,
+    def: &DriveDefinition,
+    who: &str,
+) -> Result<(), LinkError> {
+    for (assign, pdo, layout) in [
+        (0x1C12u16, 0x1600u16, &def.rxpdo),
+        (0x1C13, 0x1A00, &def.txpdo),
+    ] {
+        let what = |s: &str| format!("device {who}: PDO mapping {s}");
+        c.sdo_download(md, assign, 0, &[0])
+            .await
+            .map_err(mbx_err(what(&format!("{assign:#06x}:00 = 0"))))?;
+        c.sdo_download(md, pdo, 0, &[0])
+            .await
+            .map_err(mbx_err(what(&format!("{pdo:#06x}:00 = 0"))))?;
+        for (k, e) in layout.entries().iter().enumerate() {
+            let v = (u32::from(e.index) << 16) | (u32::from(e.sub) << 8) | (8 * e.ty.size() as u32);
+            c.sdo_download(md, pdo, (k + 1) as u8, &v.to_le_bytes())
+                .await
+                .map_err(mbx_err(what(&format!("{pdo:#06x}:{:02x}", k + 1))))?;
+        }
+        let n = layout.entries().len() as u8;
+        c.sdo_download(md, pdo, 0, &[n])
+            .await
+            .map_err(mbx_err(what(&format!("{pdo:#06x}:00 = {n}"))))?;
+        c.sdo_download(md, assign, 1, &pdo.to_le_bytes())
+            .await
+            .map_err(mbx_err(what(&format!("{assign:#06x}:01"))))?;
+        c.sdo_download(md, assign, 0, &[1])
+            .await
+            .map_err(mbx_err(what(&format!("{assign:#06x}:00 = 1"))))?;
+    }
+    Ok(())
+}
+
+/// (size in bytes, signed) of object `index:sub` for drive `def`: its function / IDN tables,
+/// then the CiA 402 object table; 4 bytes unsigned otherwise.
+fn object_type(def: &DriveDefinition, index: u16, sub: u8) -> (usize, bool) {
+    if let Some(ty) = def.object_type(index, sub) {
+        return (ty.size(), ty.is_signed());
+    }
+    if let Some(o) = crate::drive::pdo::lookup(index, sub) {
+        return (o.ty.size(), o.ty.is_signed());
+    }
+    (4, false)
+}
+
+fn decode_le(bytes: &[u8], signed: bool) -> i64 {
+    let n = bytes.len().min(8);
+    let mut b = [0u8; 8];
+    b[..n].copy_from_slice(&bytes[..n]);
+    let v = u64::from_le_bytes(b);
+    if signed && n > 0 && n < 8 && bytes[n - 1] & 0x80 != 0 {
+        (v | (!0u64 << (8 * n))) as i64
+    } else {
+        v as i64
+    }
+}
+
+impl Link for EthercatLink {
+    fn exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError> {
+        if images.len() != self.axes.len() {
+            return Err(LinkError::Mismatch {
+                devices: self.axes.len(),
+                images: images.len(),
+            });
+        }
+        let n = self.exchanges;
+        self.exchanges += 1;
+        if self.lose.contains(&n) {
+            if let Some(seg) = self.wire.segment.as_mut() {
+                let next = seg.offered_frames();
+                seg.drop_frame_at(next);
+            }
+        }
+        self.copy_outputs(images)?;
+        self.cycle_frame(now)?;
+        if self.emulated {
+            if let Some(seg) = self.wire.segment.as_mut() {
+                seg.sync0(now);
+            }
+            self.cycle_frame(now)?;
+        }
+        self.copy_inputs(images)
+    }
+
+    fn read_object(&mut self, device: usize, index: u16, sub: u8) -> Result<i64, LinkError> {
+        let md = self.md;
+        let ax = self
+            .axes
+            .get_mut(device)
+            .ok_or_else(|| LinkError::Other(format!("device {device}: not on the link")))?;
+        let (_, signed) = object_type(&ax.def, index, sub);
+        let abort = |e: MailboxError| match e {
+            MailboxError::Abort { code, .. } => LinkError::Abort {
+                device,
+                index,
+                sub,
+                code,
+            },
+            other => LinkError::Other(format!("device {device}: {index:#06x}:{sub:02x}: {other}")),
+        };
+        match &mut ax.mailbox {
+            Mailbox::Coe(c) => {
+                let bytes = drive(&mut self.wire, c.sdo_upload(md, index, sub)).map_err(abort)?;
+                Ok(decode_le(&bytes, signed))
+            }
+            Mailbox::Soe(s) => drive(&mut self.wire, s.read_value(md, 0, index)).map_err(abort),
+            Mailbox::None => Err(LinkError::Other(format!(
+                "device {device}: the SubDevice has no mailbox"
+            ))),
+        }
+    }
+
+    fn write_object(
+        &mut self,
+        device: usize,
+        index: u16,
+        sub: u8,
+        value: i64,
+    ) -> Result<(), LinkError> {
+        let md = self.md;
+        let ax = self
+            .axes
+            .get_mut(device)
+            .ok_or_else(|| LinkError::Other(format!("device {device}: not on the link")))?;
+        let (size, _) = object_type(&ax.def, index, sub);
+        let abort = |e: MailboxError| match e {
+            MailboxError::Abort { code, .. } => LinkError::Abort {
+                device,
+                index,
+                sub,
+                code,
+            },
+            other => LinkError::Other(format!("device {device}: {index:#06x}:{sub:02x}: {other}")),
+        };
+        match &mut ax.mailbox {
+            Mailbox::Coe(c) => {
+                let bytes = value.to_le_bytes();
+                drive(
+                    &mut self.wire,
+                    c.sdo_download(md, index, sub, &bytes[..size.min(8)]),
+                )
+                .map_err(abort)
+            }
+            Mailbox::Soe(s) => {
+                drive(&mut self.wire, s.write_value(md, 0, index, value)).map_err(abort)
+            }
+            Mailbox::None => Err(LinkError::Other(format!(
+                "device {device}: the SubDevice has no mailbox"
+            ))),
+        }
+    }
+
+    fn plant(&self) -> Option<&Plant> {
+        self.wire.segment.as_ref()?.world().map(World::plant)
+    }
+
+    fn plant_mut(&mut self) -> Option<&mut Plant> {
+        self.wire
+            .segment
+            .as_mut()?
+            .world_mut()
+            .map(World::plant_mut)
+    }
+
+    fn model(&self, device: usize) -> Option<&dyn DriveModel> {
+        self.wire.segment.as_ref()?.model(device)
+    }
+
+    fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
+        self.wire.segment.as_mut()?.model_mut(device)
+    }
+
+    fn lose_exchange_at(&mut self, n: u64) {
+        EthercatLink::lose_exchange_at(self, n);
+    }
+
+    fn exchanges(&self) -> u64 {
+        self.exchanges
+    }
+}
