@@ -1,22 +1,54 @@
 //! `fieldprobe sim`: emulate EtherCAT devices on a network interface.
 //!
 //! ```text
-//! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--seconds N]
+//! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--drive POS=DRIVE]...
+//!                         [--probe-at POS=MM]... [--seconds N]
 //! ```
 //! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; the
-//! first device of each file is used), with the SII image generated from the ESI and a simple
-//! application (no process data: none; with process data: echo of the inverted outputs), and
-//! answers EtherCAT frames on `IF` until `--seconds` pass (default: forever) or the process
-//! is killed. Needs CAP_NET_RAW (e.g. inside `unshare -rn`). Exit 0; 2 on bad input (the
-//! message names the file or interface).
+//! first device of each file is used; ring positions count from 0 nearest the master), with the
+//! SII image generated from the ESI, and answers EtherCAT frames on `IF` until `--seconds` pass
+//! (default: forever) or the process is killed. Needs CAP_NET_RAW (e.g. inside `unshare -rn`).
+//!
+//! What runs behind each device's process data:
+//! * a device whose ESI `Profile/ProfileNo` is 402 (CiA 402 drive), or any device named by
+//!   `--drive POS=DRIVE`, is a full emulated servo
+//!   ([`emulated_servo`](fieldprobe::sim::esc::device::emulated_servo): CoE server with
+//!   segmented transfers, PDO objects 0x1C12/0x1C13/0x16xx/0x1Axx, a CiA 402 drive model
+//!   behind SM2/SM3). DRIVE is a built-in drive name or a drive file (`drives/*.toml`); without
+//!   `--drive` a 402 device gets the built-in `cia402-generic` (= `drives/cia402-generic.toml`,
+//!   whose layout is the default mapping of `esi/fieldprobe-cia402-servo.xml`). The drive's PDO
+//!   layout must hold the entries of the ESI's default mapping, else the command fails with
+//!   exit 2;
+//! * any other device with process data echoes its inverted outputs into its inputs;
+//! * a device without process data has no application.
+//!
+//! The servos' drive models live in a [`World`] (probe surfaces, see [`fieldprobe::sim::plant`])
+//! stepped once per process-data cycle: after every frame that writes process data (LWR/LRW),
+//! with the model time advancing by the servo cycle (1 ms,
+//! [`DEFAULT_CYCLE`](fieldprobe::sim::esc::device::DEFAULT_CYCLE)) per step, whatever the
+//! master's wall-clock cycle. `--probe-at POS=MM` puts a probe surface at MM (axis units of that
+//! servo's drive scaling, converted to increments with `increments_per_unit` and `offset`) on
+//! the servo at ring position POS, wired to that servo's touch probe input 1: the input pulses
+//! when the actual position crosses the surface (either direction), so a touch probe armed in
+//! 0x60B8 latches the surface position in 0x60BA/0x60BB.
+//!
+//! Exit 0; 2 on bad input (the message names the file, position or interface).
 
 use super::EXIT_OK;
 use anyhow::Context;
-use fieldprobe::esi::{self, sii, to_sii, Device, SmKind};
+use fieldprobe::drive::catalogue;
+use fieldprobe::esi::{self, sii, to_sii, Device, EsiFile, SmKind};
 use fieldprobe::sim::esc::{
-    raw, segment::Segment, EchoApp, Esc, EscApplication, EscConfig, NullApp,
+    device::{emulated_servo, DEFAULT_CYCLE},
+    raw,
+    segment::Segment,
+    EchoApp, Esc, EscApplication, EscConfig, NullApp,
 };
-use std::path::PathBuf;
+use fieldprobe::sim::plant::{Plant, ProbeSurface};
+use fieldprobe::sim::world::World;
+use fieldprobe::units::{Nanos, Scaling};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
@@ -43,8 +75,20 @@ struct EthercatArgs {
     #[arg(long, value_name = "IF")]
     iface: String,
     /// ESI file of the next device(s) in ring order, optionally `:COUNT` for several.
+    /// A device whose ESI profile is 402 (CiA 402) is an emulated servo with the built-in
+    /// drive `cia402-generic` unless `--drive` names another one.
     #[arg(long = "device", value_name = "FILE.xml[:COUNT]", required = true)]
     devices: Vec<String>,
+    /// Emulate the device at ring position POS (0 = nearest the master) as a CiA 402 servo
+    /// with drive definition DRIVE (built-in name or drives/*.toml file). Its PDO layout must
+    /// hold the entries of the ESI default mapping.
+    #[arg(long = "drive", value_name = "POS=DRIVE")]
+    drives: Vec<String>,
+    /// Put a probe surface at MM (axis units of the drive's scaling) on the servo at ring
+    /// position POS, wired to its touch probe input 1 (pulses when the actual position
+    /// crosses it). Repeatable.
+    #[arg(long = "probe-at", value_name = "POS=MM")]
+    probes: Vec<String>,
     /// Stop after this many seconds (default: run until killed).
     #[arg(long, value_name = "N")]
     seconds: Option<f64>,
@@ -90,14 +134,50 @@ fn pd_sizes(device: &Device) -> (u16, u16) {
     )
 }
 
-fn build_device(path: &std::path::Path) -> anyhow::Result<Esc> {
+/// `POS=VALUE` → (ring position, value).
+fn split_position<'a>(option: &str, spec: &'a str) -> anyhow::Result<(usize, &'a str)> {
+    let (pos, value) = spec
+        .split_once('=')
+        .with_context(|| format!("{option} {spec}: expected POS=VALUE"))?;
+    let pos: usize = pos
+        .trim()
+        .parse()
+        .with_context(|| format!("{option} {spec}: ring position {pos:?} is not a number"))?;
+    Ok((pos, value.trim()))
+}
+
+/// Is the ESI device a CiA 402 drive (`Profile/ProfileNo` 402)?
+fn is_cia402(device: &Device) -> bool {
+    device.profile.as_ref().and_then(|p| p.profile_no) == Some(402)
+}
+
+/// The built-in drive a CiA 402 device gets without `--drive`.
+const DEFAULT_DRIVE: &str = "cia402-generic";
+
+fn build_device(
+    path: &Path,
+    file: &EsiFile,
+    position: usize,
+    drive: Option<&str>,
+) -> anyhow::Result<(Esc, Option<Scaling>)> {
     let shown = path.display();
-    let file = esi::load(path).map_err(|e| anyhow::anyhow!("--device {shown}: {e}"))?;
     let device = file
         .devices
         .first()
         .with_context(|| format!("--device {shown}: the ESI file describes no device"))?;
-    let content = to_sii::sii_from_device(&file, device)
+    let drive = drive.or(is_cia402(device).then_some(DEFAULT_DRIVE));
+    if let Some(drive) = drive {
+        let def = catalogue::load(drive)
+            .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
+        let esc = emulated_servo(file, device, &def)
+            .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
+        eprintln!(
+            "fieldprobe sim ethercat: device {position}: {} (CiA 402 servo, drive {})",
+            device.type_name, def.name
+        );
+        return Ok((esc, Some(def.scaling)));
+    }
+    let content = to_sii::sii_from_device(file, device)
         .with_context(|| format!("--device {shown}: cannot build the SII image"))?;
     let image = sii::encode(&content)
         .with_context(|| format!("--device {shown}: cannot encode the SII image"))?;
@@ -109,23 +189,76 @@ fn build_device(path: &std::path::Path) -> anyhow::Result<Esc> {
             Box::new(app)
         }
     };
-    Ok(Esc::new(EscConfig::from_sii(image), app))
+    eprintln!(
+        "fieldprobe sim ethercat: device {position}: {}",
+        device.type_name
+    );
+    Ok((Esc::new(EscConfig::from_sii(image), app), None))
 }
 
 fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
+    let mut drives = BTreeMap::new();
+    for spec in &a.drives {
+        let (pos, drive) = split_position("--drive", spec)?;
+        anyhow::ensure!(
+            drives.insert(pos, drive).is_none(),
+            "--drive {spec}: device {pos} already has a drive"
+        );
+    }
     let mut escs = Vec::new();
+    // Scaling of each servo, in ring order (index = world device).
+    let mut servos: Vec<(usize, Scaling)> = Vec::new();
     for spec in &a.devices {
         let (path, count) = split_count(spec)?;
+        let file = esi::load(&path).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
         for _ in 0..count {
-            escs.push(build_device(&path)?);
+            let pos = escs.len();
+            let (esc, scaling) = build_device(&path, &file, pos, drives.get(&pos).copied())?;
+            if let Some(scaling) = scaling {
+                servos.push((pos, scaling));
+            }
+            escs.push(esc);
         }
+    }
+    if let Some((pos, drive)) = drives.range(escs.len()..).next() {
+        anyhow::bail!(
+            "--drive {pos}={drive}: there is no device {pos} (the segment has {})",
+            escs.len()
+        );
     }
     let deadline = match a.seconds {
         None => None,
         Some(s) if s.is_finite() && s >= 0.0 => Some(Instant::now() + Duration::from_secs_f64(s)),
         Some(s) => anyhow::bail!("--seconds {s}: expected a non-negative number"),
     };
+    let mut plant = Plant::new();
+    for spec in &a.probes {
+        let (pos, mm) = split_position("--probe-at", spec)?;
+        let mm: f64 = mm
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .with_context(|| format!("--probe-at {spec}: {mm:?} is not a position in mm"))?;
+        let (device, scaling) = servos
+            .iter()
+            .enumerate()
+            .find(|(_, (p, _))| *p == pos)
+            .map(|(d, (_, s))| (d, *s))
+            .with_context(|| format!("--probe-at {spec}: device {pos} is not a CiA 402 servo"))?;
+        let inc = scaling
+            .to_increments(mm)
+            .with_context(|| format!("--probe-at {spec}: {mm} mm does not fit INTEGER32"))?;
+        plant.add_probe_surface(ProbeSurface::new(device, f64::from(inc), vec![(device, 1)]));
+        eprintln!(
+            "fieldprobe sim ethercat: probe surface at {mm} mm = {inc} increments of device {pos}, \
+             wired to its touch probe input 1"
+        );
+    }
     let mut segment = Segment::new(escs, HOP_DELAY_NS);
+    if !servos.is_empty() {
+        segment.set_world(World::new(plant), Nanos(DEFAULT_CYCLE.as_nanos() as u64));
+        segment.set_auto_sync(true);
+    }
     eprintln!(
         "fieldprobe sim ethercat: {} device(s) on {}",
         segment.len(),

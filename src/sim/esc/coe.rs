@@ -201,8 +201,23 @@ impl ObjectEntry {
     }
 }
 
+/// Content of object 0x2000:00 "emulator notice" (VISIBLE_STRING, read-only) of
+/// [`ds402_objects`]. It is longer than a 128-byte mailbox can carry in one upload response
+/// (128 − 16 = 112 bytes), so a master has to read it with a segmented upload (CiA 301 §7.2.4.3.4,
+/// ETG.1000.6 §5.6.2.3); the interop test with SOEM checks it byte for byte.
+pub const EMULATOR_NOTICE: &str = "fieldprobe emulated CiA 402 servo drive. Not a vendor \
+device: SII, object dictionary and process data are generated from the ESI file and the drive \
+definition; the drive model runs one step per process-data exchange.";
+
 /// The object table for a CiA 402 drive model: 0x1000 device type, 0x1008 device name, the
-/// CiA 402 objects [`crate::drive::model::ds402::Ds402Model`] implements, 0x60D0 as an array.
+/// CiA 402 objects [`crate::drive::model::ds402::Ds402Model`] implements, 0x60D0 as an array,
+/// 0x1C00 sync manager communication types, and 0x2000 [`EMULATOR_NOTICE`] (a read-only string
+/// long enough for a segmented upload).
+///
+/// 0x1C00 (ETG.1000.6 §5.6.7.4.1, UINT8 array) describes the standard layout of a device with a
+/// mailbox: SM0 mailbox out (1), SM1 mailbox in (2), SM2 outputs (3), SM3 inputs (4). SOEM reads
+/// it before 0x1C12/0x1C13 (`ecx_readPDOmap`) and fails the mapping without it; ethercrab 0.7.1
+/// does not read it (notes `ethercat.md` §2.2).
 pub fn ds402_objects(device_name: &str) -> Vec<ObjectEntry> {
     use Access::*;
     use DataType::*;
@@ -210,6 +225,12 @@ pub fn ds402_objects(device_name: &str) -> Vec<ObjectEntry> {
     vec![
         ObjectEntry::constant(0x1000, 0, U32, 0x0002_0192),
         ObjectEntry::bytes(0x1008, 0, Ro, device_name.as_bytes(), 0),
+        ObjectEntry::constant(0x1C00, 0, U8, 4),
+        ObjectEntry::constant(0x1C00, 1, U8, 1),
+        ObjectEntry::constant(0x1C00, 2, U8, 2),
+        ObjectEntry::constant(0x1C00, 3, U8, 3),
+        ObjectEntry::constant(0x1C00, 4, U8, 4),
+        ObjectEntry::bytes(0x2000, 0, Ro, EMULATOR_NOTICE.as_bytes(), 0),
         m(0x603F, 0, U16, Ro),
         m(0x6040, 0, U16, Rw),
         m(0x6041, 0, U16, Ro),
