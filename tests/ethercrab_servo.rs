@@ -128,6 +128,7 @@ fn bounded<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
 struct Outcome {
     identities: Vec<(u32, u32, u32)>,
     statusword: u16,
+    statusword_op: u16,
     device_type: u32,
     identity_1018: (u32, u32),
     sizes: Vec<(usize, usize)>,
@@ -223,9 +224,16 @@ fn servo_from_esi_reaches_operation_enabled() {
                     break;
                 }
             }
+            // The statusword over CoE in OP, operation enabled: the SDO path reads the live model.
+            let sd = group.subdevice(&md, 1).expect("servo subdevice");
+            let statusword_op = sd
+                .sdo_read::<u16>(0x6041, 0)
+                .await
+                .expect("SDO 0x6041 in OP");
             Outcome {
                 identities,
                 statusword,
+                statusword_op,
                 device_type,
                 identity_1018: (vendor, product),
                 sizes,
@@ -252,7 +260,17 @@ fn servo_from_esi_reaches_operation_enabled() {
     assert_eq!(outcome.identities[1].0, 0x0FB0);
     assert_eq!(outcome.identities[1].1, product);
     assert_eq!(outcome.identities[1].2, device.revision_no);
+    // Before the first process-data cycle the drive is "not ready to switch on" (CiA 402:
+    // statusword xxxx xxxx x0xx 0000); the model agrees.
+    assert_eq!(outcome.statusword & 0x4F, 0x00);
     assert_eq!(outcome.statusword, expected_statusword);
+    // In OP after enabling, the SDO read shows "operation enabled" (x01x 0111).
+    assert_eq!(
+        outcome.statusword_op & 0x6F,
+        0x27,
+        "{:#x}",
+        outcome.statusword_op
+    );
     assert_eq!(outcome.device_type, 0x0002_0192);
     assert_eq!(outcome.identity_1018, (0x0FB0, product));
     assert_eq!(

@@ -112,7 +112,7 @@ fn load_machine(
 pub struct LinkArgs {
     /// Link to the drives: `sim` (drive models in memory), `ethercat-emu` (ethercrab against
     /// emulated EtherCAT drives in-process) or `ethercat:IFACE` (ethercrab on a network
-    /// interface). Default: `ethercat-emu` when every axis has a CiA 402 or SERCOS drive (the
+    /// interface). Default: `ethercat-emu` when every axis has a CiA 402, SERCOS or EL5101 drive (the
     /// families the EtherCAT emulator plays), else `sim`.
     #[arg(long, value_name = "LINK")]
     link: Option<String>,
@@ -142,8 +142,7 @@ impl LinkArgs {
 fn default_link(cfg: &fieldprobe::params::MachineConfig) -> &'static str {
     use fieldprobe::drive::catalogue;
     let emulated = cfg.axes.iter().all(|a| {
-        catalogue::load(&a.drive)
-            .is_ok_and(|d| fieldprobe::link::ethercat::esi_for(d.profile).is_some())
+        catalogue::load(&a.drive).is_ok_and(|d| fieldprobe::link::ethercat::esi_for(&d).is_some())
     });
     if emulated {
         "ethercat-emu"

@@ -69,7 +69,9 @@ pub const MAX_SUBDEVICES: usize = 64;
 /// Process data image bytes a link can hold (inputs and outputs of all devices).
 pub const MAX_PDI: usize = 4096;
 const MAX_FRAMES: usize = 16;
-const PDU_DATA: usize = PduStorage::element_size(1100);
+/// Datagram bytes per frame: a full Ethernet frame (1514 bytes − 14 Ethernet − 2 EtherCAT header).
+const FRAME_DATA: usize = 1498;
+const PDU_DATA: usize = PduStorage::element_size(FRAME_DATA);
 
 type Storage = PduStorage<MAX_FRAMES, PDU_DATA>;
 
@@ -77,6 +79,8 @@ type Storage = PduStorage<MAX_FRAMES, PDU_DATA>;
 pub const SERVO_ESI: &str = include_str!("../../esi/fieldprobe-cia402-servo.xml");
 /// ESI of the emulated SERCOS drive (embedded).
 pub const SERCOS_ESI: &str = include_str!("../../esi/fieldprobe-ax5000-sercos.xml");
+/// ESI of the emulated EL5101-kind encoder terminal (embedded).
+pub const EL5101_ESI: &str = include_str!("../../esi/fieldprobe-el5101.xml");
 /// ESI of the emulated coupler (embedded).
 pub const COUPLER_ESI: &str = include_str!("../../esi/fieldprobe-ek1100.xml");
 /// Forwarding delay between neighbouring emulated devices.
@@ -114,11 +118,16 @@ pub struct EthercatSpec {
     pub pcap: Option<std::path::PathBuf>,
 }
 
-/// The ESI text the emulator uses for a drive family, if it emulates that family on EtherCAT.
-pub fn esi_for(profile: Profile) -> Option<&'static str> {
-    match profile {
+/// The ESI text the emulator uses for a drive, if it emulates that drive on EtherCAT: CiA 402
+/// servo, SERCOS drive, EL5101 encoder terminal (not the K-bus KL5101).
+pub fn esi_for(def: &DriveDefinition) -> Option<&'static str> {
+    match def.profile {
         Profile::Cia402 => Some(SERVO_ESI),
         Profile::Sercos => Some(SERCOS_ESI),
+        Profile::Terminal => crate::drive::terminal::TerminalConfig::from_definition(def)
+            .ok()
+            .filter(|c| c.variant == crate::drive::terminal::Variant::El5101)
+            .map(|_| EL5101_ESI),
         _ => None,
     }
 }
@@ -140,9 +149,9 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
     let mut escs = vec![Esc::new(EscConfig::from_sii(image), Box::new(NullApp))];
     let cycle = Duration::from_nanos(spec.cycle.0.max(1));
     for (axis, def) in spec.drives.iter().enumerate() {
-        let text = esi_for(def.profile).ok_or_else(|| {
+        let text = esi_for(def).ok_or_else(|| {
             other(format!(
-                "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives only",
+                "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives and EL5101 terminals only",
                 def.name,
                 def.profile.name()
             ))
@@ -388,6 +397,16 @@ impl EthercatLink {
         for (o, i, _) in &sizes {
             wkc += u16::from(*i > 0) + 2 * u16::from(*o > 0);
         }
+        // One LRW (10 header + 2 WKC bytes) and the DC FRMW (12 + 8) must share one frame:
+        // ethercrab splits a larger image over several frames, whose working counters it adds
+        // up differently; the link refuses that instead of guessing.
+        let pdi: usize = sizes.iter().map(|(o, i, _)| o + i).sum();
+        let room = FRAME_DATA - 12 - 20;
+        if pdi > room {
+            return Err(LinkError::Other(format!(
+                "the process image of the bus is {pdi} bytes; one EtherCAT frame carries at most {room} (about 36 CiA 402 axes per link)"
+            )));
+        }
         for ax in &self.axes {
             let (o, i, name) = &sizes[ax.sub];
             let (want_o, want_i) = image_lengths(&ax.def);
@@ -625,7 +644,12 @@ impl Session {
                     name: sd.name().to_string(),
                     state,
                     dc: dc.to_string(),
-                    mailbox: (sm(0), sm(8)),
+                    // Mailbox mode = control byte bits 0-1 = 10.
+                    mailbox: if regs[4] & 0x03 == 0x02 && regs[12] & 0x03 == 0x02 {
+                        (sm(0), sm(8))
+                    } else {
+                        ((0, 0), (0, 0))
+                    },
                 });
             }
             Ok::<_, LinkError>(out)
@@ -767,7 +791,7 @@ async fn assign_axes(
     let mut next = 0usize;
     let mut axes = Vec::new();
     for (axis, def) in spec.drives.iter().enumerate() {
-        let want = esi_for(def.profile)
+        let want = esi_for(def)
             .and_then(|t| esi::parse(t, "embedded ESI").ok())
             .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)));
         let found = subs
@@ -793,7 +817,13 @@ async fn assign_axes(
                 u16::from_le_bytes([regs[o + 2], regs[o + 3]]),
             )
         };
-        let (out, inp) = (sm(0), sm(8));
+        // SM0 / SM1 are the mailbox only in mailbox mode (control byte bits 0-1 = 10).
+        let mailbox_mode = regs[4] & 0x03 == 0x02 && regs[12] & 0x03 == 0x02;
+        let (out, inp) = if mailbox_mode {
+            (sm(0), sm(8))
+        } else {
+            ((0, 0), (0, 0))
+        };
         let mailbox = if out.1 == 0 || inp.1 == 0 {
             Mailbox::None
         } else if def.profile == Profile::Sercos {

@@ -87,6 +87,8 @@ pub enum MailboxServer {
     Coe(CoeServer),
     /// SoE (IDN read / write).
     Soe(SoeServer),
+    /// No mailbox (a simple terminal): the model alone.
+    None(Box<dyn DriveModel>),
 }
 
 impl MailboxServer {
@@ -94,6 +96,7 @@ impl MailboxServer {
         match self {
             MailboxServer::Coe(c) => c.model(),
             MailboxServer::Soe(s) => s.model(),
+            MailboxServer::None(m) => m.as_ref(),
         }
     }
 
@@ -101,6 +104,7 @@ impl MailboxServer {
         match self {
             MailboxServer::Coe(c) => c.model_mut(),
             MailboxServer::Soe(s) => s.model_mut(),
+            MailboxServer::None(m) => m.as_mut(),
         }
     }
 }
@@ -140,7 +144,7 @@ impl ServoApp {
     pub fn coe(&self) -> Option<&CoeServer> {
         match &self.server {
             MailboxServer::Coe(c) => Some(c),
-            MailboxServer::Soe(_) => None,
+            _ => None,
         }
     }
 
@@ -148,7 +152,7 @@ impl ServoApp {
     pub fn coe_mut(&mut self) -> Option<&mut CoeServer> {
         match &mut self.server {
             MailboxServer::Coe(c) => Some(c),
-            MailboxServer::Soe(_) => None,
+            _ => None,
         }
     }
 
@@ -242,6 +246,7 @@ impl EscApplication for ServoApp {
         match &mut self.server {
             MailboxServer::Coe(c) => c.handle(data),
             MailboxServer::Soe(s) => s.handle(data),
+            MailboxServer::None(_) => None,
         }
     }
 
@@ -249,6 +254,7 @@ impl EscApplication for ServoApp {
         match &mut self.server {
             MailboxServer::Coe(c) => c.poll(),
             MailboxServer::Soe(s) => s.take_outgoing(),
+            MailboxServer::None(_) => Vec::new(),
         }
     }
 
@@ -441,9 +447,12 @@ pub fn emulated_drive(
     }
     let content = sii_from_device(esi, device)?;
     let cfg = EscConfig::from_sii(sii::encode_padded(&content)?);
-    let mbx = cfg
-        .mailbox
-        .ok_or_else(|| ServoError::NoMailbox(device.type_name.clone()))?;
+    let terminal = def.profile == crate::drive::catalogue::Profile::Terminal;
+    let mbx = match cfg.mailbox {
+        Some(m) => Some(m),
+        None if terminal => None,
+        None => return Err(ServoError::NoMailbox(device.type_name.clone())),
+    };
 
     let rx_pdos = assigned(&device.rx_pdos, cfg.output_sm);
     let tx_pdos = assigned(&device.tx_pdos, cfg.input_sm);
@@ -451,7 +460,9 @@ pub fn emulated_drive(
         crate::drive::model::for_definition(def).map_err(|e| ServoError::Model(e.to_string()))?;
     let (rx_len, tx_len) = (model.rx_len(), model.tx_len());
     let sercos = def.profile == crate::drive::catalogue::Profile::Sercos;
-    if sercos {
+    // SERCOS: IDNs in the ESI; terminal: the terminal's own objects (0x6000 / 0x7000 …) for the
+    // drive file's combined image. Both are checked by size.
+    if sercos || terminal {
         check_sizes("rx", def, rx_len, &rx_pdos)?;
         check_sizes("tx", def, tx_len, &tx_pdos)?;
     } else {
@@ -467,18 +478,23 @@ pub fn emulated_drive(
             ObjectEntry::constant(first, 4, DataType::U32, 0),
         ]
     };
-    let server = if sercos {
-        MailboxServer::Soe(SoeServer::new(
-            model,
-            sercos_idns(),
-            usize::from(mbx.tx_size),
-        ))
-    } else {
-        let mut entries = ds402_objects(device.name());
-        entries.extend(identity(0x1018));
-        entries.extend(pdo_objects(0x1C12, &rx_pdos));
-        entries.extend(pdo_objects(0x1C13, &tx_pdos));
-        MailboxServer::Coe(CoeServer::new(model, entries, usize::from(mbx.tx_size)))
+    let server = match mbx {
+        Some(mbx) if !terminal => {
+            if sercos {
+                MailboxServer::Soe(SoeServer::new(
+                    model,
+                    sercos_idns(),
+                    usize::from(mbx.tx_size),
+                ))
+            } else {
+                let mut entries = ds402_objects(device.name());
+                entries.extend(identity(0x1018));
+                entries.extend(pdo_objects(0x1C12, &rx_pdos));
+                entries.extend(pdo_objects(0x1C13, &tx_pdos));
+                MailboxServer::Coe(CoeServer::new(model, entries, usize::from(mbx.tx_size)))
+            }
+        }
+        _ => MailboxServer::None(model),
     };
     let identity_plan = |len: usize| {
         vec![Span {
