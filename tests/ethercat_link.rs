@@ -257,6 +257,18 @@ fn a_lost_frame_is_reported_and_leaves_the_inputs_alone() {
     // The next cycle works again.
     link.exchange(Nanos::from_micros(3000), &mut images)
         .unwrap();
+    // A working counter one short (a device did not process the LRW) is a lost exchange too.
+    images[0].inputs.fill(0x5A);
+    link.miscount_exchange_at(3);
+    match link.exchange(Nanos::from_micros(4000), &mut images) {
+        Err(fieldprobe::link::LinkError::Lost { reason, .. }) => {
+            assert_eq!(reason, "working counter 2, expected 3")
+        }
+        other => panic!("expected a lost exchange, got {other:?}"),
+    }
+    assert!(images[0].inputs.iter().all(|&b| b == 0x5A));
+    link.exchange(Nanos::from_micros(5000), &mut images)
+        .unwrap();
 }
 
 /// Step a G100 run cycle by cycle; `each(machine, cycle)` after every cycle.

@@ -35,7 +35,7 @@
 //!
 //! # Limits
 //!
-//! Each link leaks one ethercrab `PduStorage` (about 18 kB; ethercrab needs it `'static` and
+//! Each link leaks one ethercrab `PduStorage` (about 24 kB; ethercrab needs it `'static` and
 //! lets it be split once), which is fine for a process that opens a handful of links.
 
 use std::collections::BTreeSet;
@@ -288,6 +288,7 @@ pub struct EthercatLink {
     expected_wkc: u16,
     exchanges: u64,
     lose: BTreeSet<u64>,
+    miscount: BTreeSet<u64>,
     emulated: bool,
 }
 
@@ -368,6 +369,7 @@ impl EthercatLink {
             expected_wkc: 0,
             exchanges: 0,
             lose: BTreeSet::new(),
+            miscount: BTreeSet::new(),
             emulated,
         };
         link.check_images()?;
@@ -425,6 +427,12 @@ impl EthercatLink {
     /// cable would; the exchange returns [`LinkError::Lost`]. Emulated wire only.
     pub fn lose_exchange_at(&mut self, n: u64) {
         self.lose.insert(n);
+    }
+
+    /// Fault knob: the `n`-th exchange (0-based) comes back with a working counter one short
+    /// (emulated wire only); the exchange returns [`LinkError::Lost`].
+    pub fn miscount_exchange_at(&mut self, n: u64) {
+        self.miscount.insert(n);
     }
 
     /// Exchanges attempted so far.
@@ -918,6 +926,12 @@ impl Link for EthercatLink {
             if let Some(seg) = self.wire.segment.as_mut() {
                 let next = seg.offered_frames();
                 seg.drop_frame_at(next);
+            }
+        }
+        if self.miscount.contains(&n) {
+            if let Some(seg) = self.wire.segment.as_mut() {
+                let next = seg.offered_frames();
+                seg.miscount_frame_at(next);
             }
         }
         self.copy_outputs(images)?;

@@ -307,27 +307,34 @@ impl Esc {
             .collect()
     }
 
+    /// `N` raw bytes from `addr` without allocating; out-of-range bytes read as 0.
+    fn peek_array<const N: usize>(&self, addr: u16) -> [u8; N] {
+        let mut b = [0u8; N];
+        let start = usize::from(addr);
+        if let Some(src) = self.mem.get(start..(start + N).min(self.mem.len())) {
+            b[..src.len()].copy_from_slice(src);
+        }
+        b
+    }
+
     /// Raw u8 register.
     pub fn peek_u8(&self, addr: u16) -> u8 {
-        self.peek(addr, 1)[0]
+        self.peek_array::<1>(addr)[0]
     }
 
     /// Raw little-endian u16 register.
     pub fn peek_u16(&self, addr: u16) -> u16 {
-        let b = self.peek(addr, 2);
-        u16::from_le_bytes([b[0], b[1]])
+        u16::from_le_bytes(self.peek_array(addr))
     }
 
     /// Raw little-endian u32 register.
     pub fn peek_u32(&self, addr: u16) -> u32 {
-        let b = self.peek(addr, 4);
-        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        u32::from_le_bytes(self.peek_array(addr))
     }
 
     /// Raw little-endian u64 register.
     pub fn peek_u64(&self, addr: u16) -> u64 {
-        let b = self.peek(addr, 8);
-        u64::from_le_bytes(b.try_into().unwrap_or([0; 8]))
+        u64::from_le_bytes(self.peek_array(addr))
     }
 
     /// Write memory from the PDI side (no ECAT write protection, no side effects).

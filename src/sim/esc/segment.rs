@@ -28,6 +28,7 @@ pub struct Segment {
     sync_time: Nanos,
     syncs: u64,
     drop_frames: std::collections::BTreeSet<u64>,
+    miscount: std::collections::BTreeSet<u64>,
     offered: u64,
 }
 
@@ -49,6 +50,7 @@ impl Segment {
             sync_time: Nanos::ZERO,
             syncs: 0,
             drop_frames: std::collections::BTreeSet::new(),
+            miscount: std::collections::BTreeSet::new(),
             offered: 0,
         }
     }
@@ -80,6 +82,13 @@ impl Segment {
     /// network interface, which bring their own cycle; in-process links call [`Self::sync0`].
     pub fn set_auto_sync(&mut self, on: bool) {
         self.auto_sync = on;
+    }
+
+    /// Return the `n`-th frame (0-based count of offered frames) with the working counter of
+    /// every logical datagram (LRD / LWR / LRW) one short, as if one device had not processed
+    /// it. May be called for several.
+    pub fn miscount_frame_at(&mut self, n: u64) {
+        self.miscount.insert(n);
     }
 
     /// Frames offered to [`Self::process_frame`] so far (including dropped ones).
@@ -186,6 +195,7 @@ impl Segment {
             return Ok(false);
         }
         let chain = &mut self.chain;
+        let miscount = self.miscount.contains(&n);
         let mut logical_write = false;
         let count = wire::for_each_datagram_mut(frame, |mut dg| {
             let cmd = dg.command().code();
@@ -193,6 +203,10 @@ impl Segment {
             let raw_addr = dg.address();
             let mut wkc = dg.wkc();
             let new_addr = chain.process_raw(cmd, raw_addr, dg.data_mut(), &mut wkc, now_ns);
+            if miscount && dg.command().addressing() == wire::Addressing::Logical {
+                // A device that did not take part: one count short.
+                wkc = wkc.saturating_sub(1);
+            }
             dg.set_address(new_addr);
             dg.set_wkc(wkc);
             let irq = dg.irq() | chain.irq();
