@@ -1,3 +1,5 @@
 //! Fieldbus wire formats and masters.
 
+pub mod can;
+pub mod canopen;
 pub mod ethercat;

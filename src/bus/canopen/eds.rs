@@ -1,0 +1,1 @@
+//! EDS / DCF (CiA 306) electronic data sheets.

@@ -1,0 +1,1 @@
+//! SDO client and server (CiA 301 §7.2.4), sans-IO.
