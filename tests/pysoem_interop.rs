@@ -41,12 +41,16 @@ const EMULATOR_SECONDS: &str = "150";
 const MASTER_IF: &str = "v0";
 const EMULATOR_IF: &str = "v1";
 /// Ring order: coupler (no mailbox, no process data), CiA 402 servo (CoE, emulated servo),
-/// encoder terminal (no mailbox, process data on SM0/SM1, echo application).
-const ESI_FILES: [&str; 3] = [
+/// encoder terminal (no mailbox, process data on SM0/SM1, echo application), timestamp
+/// terminal (inputs only; the probe surface is wired to its channel 1 too).
+const ESI_FILES: [&str; 4] = [
     "esi/fieldprobe-ek1100.xml",
     "esi/fieldprobe-cia402-servo.xml",
     "esi/fieldprobe-el5101.xml",
+    "esi/fieldprobe-el1252.xml",
 ];
+/// Ring position of the timestamp terminal in [`ESI_FILES`].
+const TIMESTAMP: usize = 3;
 /// Ring position of the servo in [`ESI_FILES`].
 const SERVO: usize = 1;
 /// Drive definition the emulator gives the servo (its default for a ProfileNo 402 device).
@@ -394,6 +398,7 @@ fn inner(python: &Path) {
             "start_inc": drive_increments(&drive, RAMP_MM.0),
             "end_inc": drive_increments(&drive, RAMP_MM.1),
             "step_inc": 200,
+            "timestamp": TIMESTAMP,
         },
     });
 
@@ -466,20 +471,32 @@ fn inner(python: &Path) {
         })
         .collect();
     assert_eq!(sizes, want);
-    // LRW: every device with process data counts +1 (read) +2 (write); the coupler maps nothing.
-    let with_pd = expected
+    // LRW: every device with inputs counts +1 (read), with outputs +2 (write); the coupler maps
+    // nothing, the timestamp terminal only reads.
+    let wkc: u64 = expected
         .iter()
-        .filter(|e| e.out_bits + e.in_bits > 0)
-        .count() as u64;
-    assert_eq!(map["expected_wkc"], 3 * with_pd);
+        .map(|e| u64::from(e.in_bits > 0) + 2 * u64::from(e.out_bits > 0))
+        .sum();
+    assert_eq!(map["expected_wkc"], wkc);
     let op = result_step(&result, "op");
-    assert_eq!(op["wkcs"], json!([3 * with_pd]), "{op}");
+    assert_eq!(op["wkcs"], json!([wkc]), "{op}");
     assert_eq!(result["wkc_errors"], 0, "{result}");
     // The servo ESI declares DC (AssignActivate 0x300): SOEM must find it.
     assert_eq!(result_step(&result, "config_dc")["dc"], true, "{result}");
     let enable = result_step(&result, "cia402_enable");
     let probe = result_step(&result, "touch_probe");
     let latched = probe["tp1_pos"].as_i64().expect("tp1_pos");
+    // The timestamp terminal stamped the same edge in DC time: after the emulator's DC epoch
+    // (DcClock::default) and within the run (< 150 s of emulated cycles).
+    let epoch = i128::from(
+        fieldprobe::core::measure::timestamp::DcClock::default()
+            .dc_time(fieldprobe::units::Nanos::ZERO),
+    );
+    let stamp = i128::from(probe["ts_rising"].as_u64().expect("ts_rising"));
+    assert!(
+        stamp > epoch && stamp < epoch + 150_000_000_000,
+        "EL1252 rising-edge time {stamp}, DC epoch {epoch}"
+    );
     assert!(
         (latched - probe_inc).abs() <= 1,
         "0x60BA {latched}, surface at {probe_inc} increments"

@@ -19,6 +19,10 @@
 //!   whose layout is the default mapping of `esi/fieldprobe-cia402-servo.xml`). The drive's PDO
 //!   layout must hold the entries of the ESI's default mapping, else the command fails with
 //!   exit 2;
+//! * a device whose ESI type name contains `EL1252` is a timestamp terminal
+//!   ([`emulated_el1252`](fieldprobe::sim::esc::device::emulated_el1252): 2 channels, continuous
+//!   latching, DC clock of the emulator); every `--probe-at` surface is also wired to its
+//!   channel 1, so its inputs carry the DC time of each probe edge;
 //! * any other device with process data echoes its inverted outputs into its inputs;
 //! * a device without process data has no application.
 //!
@@ -154,12 +158,28 @@ fn is_cia402(device: &Device) -> bool {
 /// The built-in drive a CiA 402 device gets without `--drive`.
 const DEFAULT_DRIVE: &str = "cia402-generic";
 
+/// What a device hosts in the world.
+#[derive(Debug, Clone, Copy)]
+enum Hosted {
+    /// Nothing (no process data, or the echo application).
+    Nothing,
+    /// A CiA 402 servo with this drive scaling.
+    Servo(Scaling),
+    /// An EL1252-kind timestamp terminal (2 channels, continuous latching, default DC clock).
+    Timestamp,
+}
+
+/// An EL1252-kind terminal by its ESI type name.
+fn is_el1252(device: &Device) -> bool {
+    device.type_name.to_ascii_uppercase().contains("EL1252")
+}
+
 fn build_device(
     path: &Path,
     file: &EsiFile,
     position: usize,
     drive: Option<&str>,
-) -> anyhow::Result<(Esc, Option<Scaling>)> {
+) -> anyhow::Result<(Esc, Hosted)> {
     let shown = path.display();
     let device = file
         .devices
@@ -175,7 +195,22 @@ fn build_device(
             "fieldprobe sim ethercat: device {position}: {} (CiA 402 servo, drive {})",
             device.type_name, def.name
         );
-        return Ok((esc, Some(def.scaling)));
+        return Ok((esc, Hosted::Servo(def.scaling)));
+    }
+    if is_el1252(device) {
+        let esc = fieldprobe::sim::esc::device::emulated_el1252(
+            file,
+            device,
+            2,
+            fieldprobe::drive::el1252::LatchMode::Continuous,
+            fieldprobe::core::measure::timestamp::DcClock::default(),
+        )
+        .map_err(|e| anyhow::anyhow!("device {position} ({shown}): {e}"))?;
+        eprintln!(
+            "fieldprobe sim ethercat: device {position}: {} (timestamp terminal, 2 channels)",
+            device.type_name
+        );
+        return Ok((esc, Hosted::Timestamp));
     }
     let content = to_sii::sii_from_device(file, device)
         .with_context(|| format!("--device {shown}: cannot build the SII image"))?;
@@ -193,7 +228,7 @@ fn build_device(
         "fieldprobe sim ethercat: device {position}: {}",
         device.type_name
     );
-    Ok((Esc::new(EscConfig::from_sii(image), app), None))
+    Ok((Esc::new(EscConfig::from_sii(image), app), Hosted::Nothing))
 }
 
 fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
@@ -206,16 +241,16 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
         );
     }
     let mut escs = Vec::new();
-    // Scaling of each servo, in ring order (index = world device).
-    let mut servos: Vec<(usize, Scaling)> = Vec::new();
+    // Devices hosting a model, in ring order (index = world device): (position, what).
+    let mut hosted: Vec<(usize, Hosted)> = Vec::new();
     for spec in &a.devices {
         let (path, count) = split_count(spec)?;
         let file = esi::load(&path).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
         for _ in 0..count {
             let pos = escs.len();
-            let (esc, scaling) = build_device(&path, &file, pos, drives.get(&pos).copied())?;
-            if let Some(scaling) = scaling {
-                servos.push((pos, scaling));
+            let (esc, what) = build_device(&path, &file, pos, drives.get(&pos).copied())?;
+            if !matches!(what, Hosted::Nothing) {
+                hosted.push((pos, what));
             }
             escs.push(esc);
         }
@@ -239,23 +274,35 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
             .ok()
             .filter(|v: &f64| v.is_finite())
             .with_context(|| format!("--probe-at {spec}: {mm:?} is not a position in mm"))?;
-        let (device, scaling) = servos
+        let (device, scaling) = hosted
             .iter()
             .enumerate()
-            .find(|(_, (p, _))| *p == pos)
-            .map(|(d, (_, s))| (d, *s))
+            .find_map(|(d, (p, what))| match what {
+                Hosted::Servo(s) if *p == pos => Some((d, *s)),
+                _ => None,
+            })
             .with_context(|| format!("--probe-at {spec}: device {pos} is not a CiA 402 servo"))?;
         let inc = scaling
             .to_increments(mm)
             .with_context(|| format!("--probe-at {spec}: {mm} mm does not fit INTEGER32"))?;
-        plant.add_probe_surface(ProbeSurface::new(device, f64::from(inc), vec![(device, 1)]));
+        // Wired to the servo's touch probe input 1 and to channel 1 of every timestamp terminal.
+        let mut wired = vec![(device, 1)];
+        wired.extend(
+            hosted
+                .iter()
+                .enumerate()
+                .filter(|(_, (_, w))| matches!(w, Hosted::Timestamp))
+                .map(|(d, _)| (d, 1)),
+        );
+        plant.add_probe_surface(ProbeSurface::new(device, f64::from(inc), wired.clone()));
         eprintln!(
             "fieldprobe sim ethercat: probe surface at {mm} mm = {inc} increments of device {pos}, \
-             wired to its touch probe input 1"
+             wired to its touch probe input 1{}",
+            if wired.len() > 1 { " and channel 1 of the timestamp terminal(s)" } else { "" }
         );
     }
     let mut segment = Segment::new(escs, HOP_DELAY_NS);
-    if !servos.is_empty() {
+    if !hosted.is_empty() {
         segment.set_world(World::new(plant), Nanos(DEFAULT_CYCLE.as_nanos() as u64));
         segment.set_auto_sync(true);
     }

@@ -257,6 +257,10 @@ def probe_latch(cyc, p):
         i = cyc.exchange()
     i = cyc.until(lambda i: abs(i["pos"] - start) <= 2, 2000, f"settled at {start}")
     check(not i["tps"] & 0x0002, f"0x60B9 {i['tps']:#06x}: latched before crossing")
+    ts = p.get("timestamp")
+    if ts is not None:
+        before = timestamps(cyc, ts)
+        check(before == (0, 0), f"timestamp terminal: channel 1 latch {before} before crossing")
     latched = None
     for target in ramp(start, end, step_inc):
         cyc.out["target"] = target
@@ -270,8 +274,22 @@ def probe_latch(cyc, p):
                                f"never set crossing {p['position_inc']} from {start} to {end}")
     check(abs(i["tp1_pos"] - p["position_inc"]) <= 1,
           f"0x60BA = {i['tp1_pos']}, surface at {p['position_inc']} increments (± 1)")
+    info = {}
+    if ts is not None:
+        # The same probe edge, stamped by the EL1252-kind terminal in DC time (channel 1 of
+        # 17 bytes: status u8, rising-edge time u64, falling-edge time u64; channel 2 unwired).
+        rising, falling = timestamps(cyc, ts)
+        check(rising > 0, "timestamp terminal: no rising-edge time on channel 1")
+        ch2 = bytes(cyc.master.slaves[ts].input)[17:34]
+        check(ch2 == bytes(17), f"timestamp terminal: channel 2 {ch2.hex()} (not wired)")
+        info = {"ts_rising": rising, "ts_falling": falling}
     step("touch_probe", status=hex(i["tps"]), tp1_pos=i["tp1_pos"],
-         surface_inc=p["position_inc"], cycles=cyc.cycles)
+         surface_inc=p["position_inc"], cycles=cyc.cycles, **info)
+
+
+def timestamps(cyc, pos):
+    b = bytes(cyc.master.slaves[pos].input)
+    return (struct.unpack_from("<Q", b, 1)[0], struct.unpack_from("<Q", b, 9)[0])
 
 
 def ramp(a, b, step_inc):

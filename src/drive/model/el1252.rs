@@ -83,3 +83,93 @@ impl El1252Device {
         Ok(())
     }
 }
+
+/// The terminal as a device of the simulated world (an EtherCAT SubDevice hosting it, a probe
+/// surface wired to its channels): no outputs, the timestamp image as inputs, input edges
+/// stamped; it has no axis, so no trajectory, position, stop or objects.
+impl super::DriveModel for El1252Device {
+    fn rx_len(&self) -> usize {
+        0
+    }
+
+    fn tx_len(&self) -> usize {
+        self.image_len()
+    }
+
+    fn begin_step(&mut self, _now: Nanos, _dt_s: f64, _rx: &[u8]) {}
+
+    fn input_edge(&mut self, input: u8, rising: bool, at: Nanos) {
+        self.edge(input, rising, at);
+    }
+
+    fn finish_step(&mut self, tx: &mut [u8]) {
+        // The image always fits `tx_len` bytes; a shorter buffer keeps its old content.
+        let _ = self.write_image(tx);
+    }
+
+    fn trajectory(&self) -> &[(Nanos, f64)] {
+        &[]
+    }
+
+    fn position_at(&self, _t: Nanos) -> Option<f64> {
+        None
+    }
+
+    fn set_input_level(&mut self, input: u8, level: bool) {
+        if let Some(c) = usize::from(input)
+            .checked_sub(1)
+            .and_then(|i| self.channels.get_mut(i))
+        {
+            if level {
+                c.status |= ST_LEVEL;
+            } else {
+                c.status &= !ST_LEVEL;
+            }
+        }
+    }
+
+    fn input_level(&self, input: u8) -> Option<bool> {
+        let c = self.channels.get(usize::from(input).checked_sub(1)?)?;
+        Some(c.status & ST_LEVEL != 0)
+    }
+
+    fn set_fixed_stop(&mut self, _position: Option<f64>) {}
+
+    fn fixed_stop(&self) -> Option<f64> {
+        None
+    }
+
+    fn state(&self) -> super::PowerState {
+        super::PowerState::OperationEnabled
+    }
+
+    fn last_error_code(&self) -> u16 {
+        0
+    }
+
+    fn actual(&self) -> f64 {
+        0.0
+    }
+
+    fn set_actual(&mut self, _inc: f64) {}
+
+    fn set_disturbance(&mut self, _offset_inc: f64) {}
+
+    fn inject_fault(&mut self, _code: u16) {}
+
+    fn read_object(&self, _index: u16, _sub: u8) -> Result<i64, u32> {
+        Err(super::abort::NO_OBJECT)
+    }
+
+    fn write_object(&mut self, _index: u16, _sub: u8, _value: i64) -> Result<(), u32> {
+        Err(super::abort::NO_OBJECT)
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
+        self
+    }
+}

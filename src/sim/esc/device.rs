@@ -552,3 +552,57 @@ fn check_sizes(
     }
     Ok(())
 }
+
+/// Emulated EL1252-kind timestamp terminal: the ESI device's SII, no mailbox, inputs = the
+/// terminal image of [`El1252Device`](crate::drive::model::el1252::El1252Device) (`channels`
+/// channels stamping with `clock`). Hosted in a segment's world, a probe surface wired to
+/// `(its world index, channel)` stamps its edges.
+pub fn emulated_el1252(
+    esi: &EsiFile,
+    device: &Device,
+    channels: usize,
+    mode: crate::drive::el1252::LatchMode,
+    clock: crate::core::measure::timestamp::DcClock,
+) -> Result<Esc, ServoError> {
+    let content = sii_from_device(esi, device)?;
+    let cfg = EscConfig::from_sii(sii::encode_padded(&content)?);
+    let model = crate::drive::model::el1252::El1252Device::new(channels, mode, clock);
+    let tx_len = model.image_len();
+    // Inputs only: every TxPDO the ESI assigns to a sync manager.
+    let esi_bits: u32 = device
+        .tx_pdos
+        .iter()
+        .filter(|p| p.sm.is_some())
+        .map(|p| p.bit_len())
+        .sum();
+    if esi_bits != 8 * tx_len as u32 {
+        return Err(ServoError::PdoMismatch {
+            direction: "tx",
+            drive: "el1252".into(),
+            drive_entries: Vec::new(),
+            drive_bytes: tx_len,
+            esi_entries: Vec::new(),
+            esi_bits,
+        });
+    }
+    let empty = crate::drive::pdo::PdoLayout::default();
+    let app = ServoApp {
+        server: MailboxServer::None(Box::new(model)),
+        model_rx: empty.clone(),
+        model_tx: empty,
+        outputs: Vec::new(),
+        inputs: vec![0; tx_len],
+        bus_rx_len: 0,
+        bus_tx_len: tx_len,
+        rx_plan: Vec::new(),
+        tx_plan: vec![Span {
+            bus: 0,
+            model: 0,
+            len: tx_len,
+        }],
+        exchanges: 0,
+        cycle_ns: DEFAULT_CYCLE.as_nanos() as u64,
+        synchronized: false,
+    };
+    Ok(Esc::new(cfg, Box::new(app)))
+}

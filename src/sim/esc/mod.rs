@@ -78,9 +78,9 @@ pub struct EscConfig {
     pub mailbox: Option<MailboxConfig>,
     /// BOOT state supported.
     pub bootstrap: bool,
-    /// Sync manager carrying the outputs (checked on PRE-OP → SAFE-OP).
+    /// Sync manager carrying the outputs (checked on PRE-OP → SAFE-OP); `u8::MAX`: none.
     pub output_sm: u8,
-    /// Sync manager carrying the inputs.
+    /// Sync manager carrying the inputs; `u8::MAX`: none.
     pub input_sm: u8,
     /// SII EEPROM image (bytes, word 0 first).
     pub sii: Vec<u8>,
@@ -125,11 +125,39 @@ impl EscConfig {
         };
         let has_mbx = mbx.rx_size != 0 && mbx.tx_size != 0 && mbx.rx_size != 0xFFFF;
         let bootstrap = w(0x15) != 0 && w(0x17) != 0 && w(0x15) != 0xFFFF;
+        // Process-data SMs: from the SII SyncManager category types when it has them, else
+        // the usual layout (2/3 behind a mailbox, 0/1 without). A device with only inputs
+        // (e.g. a timestamp terminal) has no output SM: u8::MAX.
+        let typed = crate::esi::sii::decode_ignoring_checksum(&sii)
+            .ok()
+            .and_then(|c| {
+                c.categories.iter().find_map(|cat| match cat {
+                    crate::esi::sii::Category::SyncManagers(v) => Some(
+                        v.iter().map(|sm| sm.sm_type).collect::<Vec<u8>>(),
+                    ),
+                    _ => None,
+                })
+            })
+            .filter(|t| t.iter().any(|&t| t != 0));
+        let find = |ty: u8| {
+            typed
+                .as_ref()
+                .and_then(|t| t.iter().position(|&x| x == ty))
+                .map(|p| p as u8)
+        };
+        let (output_sm, input_sm) = match &typed {
+            Some(_) => (
+                find(crate::esi::sii::sm_type::OUTPUTS).unwrap_or(u8::MAX),
+                find(crate::esi::sii::sm_type::INPUTS).unwrap_or(u8::MAX),
+            ),
+            None if has_mbx => (2, 3),
+            None => (0, 1),
+        };
         Self {
             mailbox: has_mbx.then_some(mbx),
             bootstrap,
-            output_sm: if has_mbx { 2 } else { 0 },
-            input_sm: if has_mbx { 3 } else { 1 },
+            output_sm,
+            input_sm,
             sii,
             ..Self::default()
         }
