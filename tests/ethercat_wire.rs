@@ -749,7 +749,7 @@ fn big_endian_classic_pcap() {
 fn block(be: bool, btype: u32, body: &[u8]) -> Vec<u8> {
     let w32 = |v: u32| if be { v.to_be_bytes() } else { v.to_le_bytes() };
     let mut body = body.to_vec();
-    while body.len() % 4 != 0 {
+    while !body.len().is_multiple_of(4) {
         body.push(0);
     }
     let total = 12 + body.len() as u32;
@@ -913,11 +913,11 @@ fn random_bytes_never_panic() {
         let n = (rng.next() % 200) as usize;
         let mut b = rng.bytes(n);
         // steer half the inputs past the EtherType / magic checks
-        if n >= 16 && rng.next() % 2 == 0 {
+        if n >= 16 && rng.next().is_multiple_of(2) {
             b[12..14].copy_from_slice(&[0x88, 0xA4]);
             b[15] = (b[15] & 0x0F) | 0x10;
         }
-        if n >= 4 && rng.next() % 4 == 0 {
+        if n >= 4 && rng.next().is_multiple_of(4) {
             b[..4].copy_from_slice(&[0x0A, 0x0D, 0x0D, 0x0A]);
         }
         poke_everything(&b);

@@ -324,11 +324,11 @@ fn back_and_forth(step: i32, top: i32, dwell: usize) -> Vec<i32> {
         }
     };
     ramp(&mut t, 0, top);
-    t.extend(std::iter::repeat(top).take(dwell));
+    t.extend(std::iter::repeat_n(top, dwell));
     ramp(&mut t, top, 0);
-    t.extend(std::iter::repeat(0).take(dwell));
+    t.extend(std::iter::repeat_n(0, dwell));
     ramp(&mut t, 0, top);
-    t.extend(std::iter::repeat(top).take(dwell));
+    t.extend(std::iter::repeat_n(top, dwell));
     t
 }
 

@@ -124,7 +124,7 @@ impl Channel {
             // A path measurement of the same block must leave this axis's latch to this run
             // (seed 004 §2: independent measurement "in parallel to a path motion of a G100").
             let released = match &mut self.mode {
-                Mode::Moving(m) => m.meas.as_mut().map_or(true, |run| run.release_axis(axis)),
+                Mode::Moving(m) => m.meas.as_mut().is_none_or(|run| run.release_axis(axis)),
                 _ => true,
             };
             if !released {

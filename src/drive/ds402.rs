@@ -697,7 +697,7 @@ impl DriveAdapter for Ds402Adapter {
         self.statusword = statusword;
         self.state = state;
         self.probe_inputs(inputs, previous);
-        let csp = mode_display.map_or(true, |m| m == MODE_CSP);
+        let csp = mode_display.is_none_or(|m| m == MODE_CSP);
         Ok(DriveFeedback {
             state,
             statusword,
@@ -796,7 +796,7 @@ impl DriveAdapter for Ds402Adapter {
         let enabled = self
             .latch
             .last_status
-            .map_or(true, |s| (s >> shift) as u8 & probe_status::ENABLED != 0);
+            .is_none_or(|s| (s >> shift) as u8 & probe_status::ENABLED != 0);
         let written = (self.latch.word >> shift) as u8 != 0;
         let phase = if enabled || written || self.latch.config.rearm_requires_zero {
             Phase::Clearing

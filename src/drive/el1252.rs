@@ -169,13 +169,11 @@ impl Decoder {
             };
             match self.mode {
                 LatchMode::SingleEvent => {
-                    if c.status & ST_RISING != 0
-                        && last.map_or(true, |l| l.latch_pos != c.latch_pos)
+                    if c.status & ST_RISING != 0 && last.is_none_or(|l| l.latch_pos != c.latch_pos)
                     {
                         edges.push(mk(true, c.latch_pos));
                     }
-                    if c.status & ST_FALLING != 0
-                        && last.map_or(true, |l| l.latch_neg != c.latch_neg)
+                    if c.status & ST_FALLING != 0 && last.is_none_or(|l| l.latch_neg != c.latch_neg)
                     {
                         edges.push(mk(false, c.latch_neg));
                     }

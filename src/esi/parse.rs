@@ -176,7 +176,7 @@ pub(crate) fn parse_number(t: &str) -> Option<i128> {
 /// ETG.2000 hexBinary (`92010200` → [0x92, 0x01, 0x02, 0x00]); whitespace allowed.
 fn decode_hex_binary(t: &str) -> Option<Vec<u8>> {
     let digits: Vec<u8> = t.bytes().filter(|b| !b.is_ascii_whitespace()).collect();
-    if digits.len() % 2 != 0 {
+    if !digits.len().is_multiple_of(2) {
         return None;
     }
     digits

@@ -1092,7 +1092,7 @@ fn decode_category(ty: u16, d: &[u8], base: usize) -> Result<Category, SiiError>
         }
         category_type::FMMU => Category::Fmmu(d.to_vec()),
         category_type::SYNC_MANAGER => {
-            if d.len() % 8 != 0 {
+            if !d.len().is_multiple_of(8) {
                 return Err(bad(
                     ty,
                     base,
@@ -1121,7 +1121,7 @@ fn decode_category(ty: u16, d: &[u8], base: usize) -> Result<Category, SiiError>
             }
         }
         category_type::DC => {
-            if d.len() % 24 != 0 {
+            if !d.len().is_multiple_of(24) {
                 return Err(bad(
                     ty,
                     base,
@@ -1251,7 +1251,7 @@ fn hex_bytes(s: &str) -> Result<Vec<u8>, String> {
     if !s.is_ascii() {
         return Err("not ASCII hex".into());
     }
-    if s.len() % 2 != 0 {
+    if !s.len().is_multiple_of(2) {
         return Err(format!("odd number of hex digits ({})", s.len()));
     }
     (0..s.len())

@@ -503,7 +503,7 @@ impl ProbeInputs for ScriptedInputs {
             return;
         };
         for e in &self.edges {
-            let after_from = self.from.map_or(true, |from| e.at > from);
+            let after_from = self.from.is_none_or(|from| e.at > from);
             if after_from && e.at <= to {
                 f(*e);
             }

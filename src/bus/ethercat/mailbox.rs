@@ -103,6 +103,9 @@ pub fn abort_text(code: u32) -> &'static str {
         0x0503_0000 => "toggle bit not alternated",
         0x0504_0000 => "SDO protocol timed out",
         0x0504_0001 => "client/server command specifier not valid or unknown",
+        0x0504_0002 => "invalid block size (block mode only)",
+        0x0504_0003 => "invalid sequence number (block mode only)",
+        0x0504_0004 => "CRC error (block mode only)",
         0x0504_0005 => "out of memory",
         0x0601_0000 => "unsupported access to an object",
         0x0601_0001 => "attempt to read a write-only object",
@@ -121,11 +124,13 @@ pub fn abort_text(code: u32) -> &'static str {
         0x0609_0031 => "value of parameter written too high",
         0x0609_0032 => "value of parameter written too low",
         0x0609_0036 => "maximum value is less than minimum value",
+        0x060A_0023 => "resource not available: SDO connection",
         0x0800_0000 => "general error",
         0x0800_0020 => "data cannot be transferred or stored to the application",
         0x0800_0021 => "data cannot be transferred because of local control",
         0x0800_0022 => "data cannot be transferred because of the present device state",
         0x0800_0023 => "object dictionary not present or dynamic generation failed",
+        0x0800_0024 => "no data available",
         _ => "unknown abort code",
     }
 }

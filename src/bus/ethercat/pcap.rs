@@ -329,7 +329,7 @@ impl<'a> CaptureReader<'a> {
             let btype = rd32(endian, self.buf, at, "pcapng block type")?;
             let total = rd32(endian, self.buf, at + 4, "pcapng block length")? as usize;
             let name = block_name(btype);
-            if total < 12 || total % 4 != 0 {
+            if total < 12 || !total.is_multiple_of(4) {
                 return Err(PcapError::Invalid {
                     what: "block total length",
                     block: name,

@@ -362,7 +362,7 @@ fn check_layout(
         v
     };
     if sorted(&drive_entries) != sorted(&esi_entries)
-        || esi_bits % 8 != 0
+        || !esi_bits.is_multiple_of(8)
         || (esi_bits / 8) as usize != drive_bytes
     {
         return Err(ServoError::PdoMismatch {
@@ -536,7 +536,7 @@ fn check_sizes(
     pdos: &[&Pdo],
 ) -> Result<(), ServoError> {
     let esi_bits: u32 = pdos.iter().map(|p| p.bit_len()).sum();
-    if esi_bits % 8 != 0 || (esi_bits / 8) as usize != model_bytes {
+    if !esi_bits.is_multiple_of(8) || (esi_bits / 8) as usize != model_bytes {
         return Err(ServoError::PdoMismatch {
             direction,
             drive: def.name.clone(),
