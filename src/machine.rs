@@ -142,7 +142,7 @@ impl LinkChoice {
 }
 
 /// `--link` values this build knows, for messages.
-pub const LINKS: &str = "sim (drive models in memory), ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
+pub const LINKS: &str = "sim (drive models in memory), canopen-emu (our CiA 301 master against emulated CiA 402 nodes in-process), ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
 
 /// A machine: channel, axes, and the link to their drives.
 pub struct Machine {
@@ -271,6 +271,10 @@ impl Machine {
             .collect();
         let link: Box<dyn Link> = match choice.link.as_str() {
             "sim" => Box::new(SimLink::from_models(models, cycle)),
+            "canopen-emu" => Box::new(
+                crate::link::canopen::CanopenLink::emulated(&defs, cycle)
+                    .map_err(|e| MachineError::Config(format!("--link canopen-emu: {e}")))?,
+            ),
             other => {
                 let wire = Wire::from_link(other).ok_or_else(|| {
                     MachineError::Config(format!(

@@ -9,19 +9,36 @@ use crate::link::{LinkError, ProcessImage};
 use crate::messages::{ids, CncMessage};
 use crate::units::Nanos;
 
+/// Consecutive lost exchanges after which the channel gives up waiting for standstill
+/// feedback and is aborted (100 cycles; 0.1 s at 1 ms).
+pub const LINK_LOST_GIVE_UP_CYCLES: u32 = 100;
+
 impl Channel {
     // ----- the interpolation cycle --------------------------------------------------------
 
     /// The link failed to exchange process data this cycle: the inputs are stale. Stop (the
     /// drives receive braking set-points as soon as the link is back) and report.
+    ///
+    /// 900012 is reported once per run of consecutive lost exchanges (later ones are logged).
+    /// When the link stays lost for [`LINK_LOST_GIVE_UP_CYCLES`], the channel stops waiting for
+    /// the axes to confirm standstill (it cannot see them) and is aborted: the drives' own
+    /// watchdogs (EtherCAT SM watchdog, CANopen heartbeat consumer) stop them.
     pub fn link_lost(&mut self, err: &LinkError) {
         self.cycles += 1;
-        self.push(CncMessage::error(
-            ids::LINK_LOST,
-            format!("{err}; axes stopped"),
-        ));
+        self.lost_streak = self.lost_streak.saturating_add(1);
+        if self.lost_streak == 1 {
+            self.push(CncMessage::error(
+                ids::LINK_LOST,
+                format!("{err}; axes stopped"),
+            ));
+        } else {
+            tracing::debug!(target: "fieldprobe::channel", streak = self.lost_streak, "exchange lost again: {err}");
+        }
         if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
             self.begin_stop(ChannelState::Aborted);
+        }
+        if self.lost_streak >= LINK_LOST_GIVE_UP_CYCLES && !matches!(self.mode, Mode::Aborted) {
+            self.mode = Mode::Aborted;
         }
     }
 
@@ -30,6 +47,7 @@ impl Channel {
     #[allow(clippy::needless_range_loop)] // axes, images and set-points are parallel arrays
     pub fn cycle(&mut self, now: Nanos, images: &mut [ProcessImage]) {
         self.cycles += 1;
+        self.lost_streak = 0;
         self.now = now;
         let dt = self.cfg.cycle.as_secs_f64();
         self.poll_handshakes(now);

@@ -205,6 +205,8 @@ struct AxisBrake {
 /// The CNC channel.
 #[derive(Debug)]
 pub struct Channel {
+    /// Consecutive cycles whose exchange was lost (see [`Channel::link_lost`]).
+    lost_streak: u32,
     cfg: ChannelConfig,
     axes: Vec<Axis>,
     sls: SoftLimits,
@@ -275,6 +277,7 @@ impl Channel {
             next: vec![0.0; n],
             violations: Vec::new(),
             cycles: 0,
+            lost_streak: 0,
             operation_mode: OperationMode::Automatic,
             measurement: None,
             acyclic: Default::default(),

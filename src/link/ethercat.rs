@@ -50,7 +50,7 @@ use ethercrab::{
     DcSync, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceGroup, Timeouts,
 };
 
-use super::{Link, LinkError, ProcessImage};
+use super::{decode_le, object_type, Link, LinkError, ProcessImage};
 use crate::bus::ethercat::mailbox::{CoeClient, MailboxError};
 use crate::bus::ethercat::pcap::{PcapWriter, TimestampResolution};
 use crate::bus::ethercat::soe::SoeClient;
@@ -806,7 +806,7 @@ async fn assign_axes(
             .iter()
             .enumerate()
             .skip(next)
-            .find(|(_, (_, v, p, _))| want.map_or(true, |(wv, wp)| (*v, *p) == (wv, wp)));
+            .find(|(_, (_, v, p, _))| want.is_none_or(|(wv, wp)| (*v, *p) == (wv, wp)));
         let Some((i, (station, _, _, name))) = found else {
             return Err(LinkError::Other(format!(
                 "axis {axis} (drive '{}'): no matching SubDevice on the bus after position {next} ({} SubDevices found)",
@@ -886,30 +886,6 @@ async fn write_pdo_mapping(
             .map_err(mbx_err(what(&format!("{assign:#06x}:00 = 1"))))?;
     }
     Ok(())
-}
-
-/// (size in bytes, signed) of object `index:sub` for drive `def`: its function / IDN tables,
-/// then the CiA 402 object table; 4 bytes unsigned otherwise.
-fn object_type(def: &DriveDefinition, index: u16, sub: u8) -> (usize, bool) {
-    if let Some(ty) = def.object_type(index, sub) {
-        return (ty.size(), ty.is_signed());
-    }
-    if let Some(o) = crate::drive::pdo::lookup(index, sub) {
-        return (o.ty.size(), o.ty.is_signed());
-    }
-    (4, false)
-}
-
-fn decode_le(bytes: &[u8], signed: bool) -> i64 {
-    let n = bytes.len().min(8);
-    let mut b = [0u8; 8];
-    b[..n].copy_from_slice(&bytes[..n]);
-    let v = u64::from_le_bytes(b);
-    if signed && n > 0 && n < 8 && bytes[n - 1] & 0x80 != 0 {
-        (v | (!0u64 << (8 * n))) as i64
-    } else {
-        v as i64
-    }
 }
 
 impl Link for EthercatLink {

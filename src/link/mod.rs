@@ -6,6 +6,7 @@
 //! | `sim` | [`sim::SimLink`]: drive models in memory, images laid out as the PDO mapping |
 //! | `ethercat-emu`, `ethercat:IFACE` | [`ethercat::EthercatLink`]: ethercrab MainDevice, emulated segment in-process or a raw socket |
 
+pub mod canopen;
 pub mod ethercat;
 pub mod sim;
 
@@ -135,5 +136,44 @@ impl<'a> dyn Link + 'a {
     /// The model of device `device` as its concrete type `T`, if it is one.
     pub fn model_as<T: 'static>(&mut self, device: usize) -> Option<&mut T> {
         self.model_mut(device)?.as_any_mut().downcast_mut::<T>()
+    }
+}
+
+/// (size in bytes, signed) of object `index:sub` for drive `def`: its function / IDN tables,
+/// then the CiA 402 object table, then the CiA 301 communication objects (0x1001, 0x100C,
+/// 0x1017, PDO parameters); 4 bytes unsigned otherwise.
+pub(crate) fn object_type(
+    def: &crate::drive::catalogue::DriveDefinition,
+    index: u16,
+    sub: u8,
+) -> (usize, bool) {
+    if let Some(ty) = def.object_type(index, sub) {
+        return (ty.size(), ty.is_signed());
+    }
+    if let Some(o) = crate::drive::pdo::lookup(index, sub) {
+        return (o.ty.size(), o.ty.is_signed());
+    }
+    // CiA 301 communication objects.
+    let size = match (index, sub) {
+        (0x1001, 0) => 1,
+        (0x100C, 0) | (0x1017, 0) => 2,
+        (0x1400..=0x1BFF, 0) => 1,
+        (0x1400..=0x15FF | 0x1800..=0x19FF, 2) => 1,
+        (0x1400..=0x15FF | 0x1800..=0x19FF, 3 | 5) => 2,
+        _ => 4,
+    };
+    (size, false)
+}
+
+/// Little-endian bytes as a number (sign-extended when `signed`).
+pub(crate) fn decode_le(bytes: &[u8], signed: bool) -> i64 {
+    let n = bytes.len().min(8);
+    let mut b = [0u8; 8];
+    b[..n].copy_from_slice(&bytes[..n]);
+    let v = u64::from_le_bytes(b);
+    if signed && n > 0 && n < 8 && bytes[n - 1] & 0x80 != 0 {
+        (v | (!0u64 << (8 * n))) as i64
+    } else {
+        v as i64
     }
 }

@@ -509,6 +509,20 @@ impl CoeServer {
         }
     }
 
+    /// Read object `index:sub` as bytes (the object dictionary without the CoE framing, e.g.
+    /// for a CANopen SDO server); `Err` is the CiA 301 abort code.
+    pub fn read(&self, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
+        let i = self.find(index, sub)?;
+        self.read_entry(i)
+    }
+
+    /// Write object `index:sub` from bytes (data type and access checked); `Err` is the CiA 301
+    /// abort code.
+    pub fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), u32> {
+        let i = self.find(index, sub)?;
+        self.write_entry(i, data)
+    }
+
     fn find(&self, index: u16, sub: u8) -> Result<usize, u32> {
         if let Some(i) = self
             .entries

@@ -132,9 +132,9 @@ impl EscConfig {
             .ok()
             .and_then(|c| {
                 c.categories.iter().find_map(|cat| match cat {
-                    crate::esi::sii::Category::SyncManagers(v) => Some(
-                        v.iter().map(|sm| sm.sm_type).collect::<Vec<u8>>(),
-                    ),
+                    crate::esi::sii::Category::SyncManagers(v) => {
+                        Some(v.iter().map(|sm| sm.sm_type).collect::<Vec<u8>>())
+                    }
                     _ => None,
                 })
             })
