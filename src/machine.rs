@@ -129,6 +129,8 @@ pub struct LinkChoice {
     pub link: String,
     /// Capture every EtherCAT frame into this pcap file.
     pub pcap: Option<std::path::PathBuf>,
+    /// Log every CAN frame into this file (candump -L format).
+    pub candump: Option<std::path::PathBuf>,
 }
 
 impl LinkChoice {
@@ -137,12 +139,13 @@ impl LinkChoice {
         LinkChoice {
             link: link.to_string(),
             pcap: None,
+            candump: None,
         }
     }
 }
 
 /// `--link` values this build knows, for messages.
-pub const LINKS: &str = "sim (drive models in memory), canopen-emu (our CiA 301 master against emulated CiA 402 nodes in-process), ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
+pub const LINKS: &str = "sim (drive models in memory), canopen-emu (our CiA 301 master against emulated CiA 402 nodes on an in-process virtual CAN bus), canopen-udp[:GROUP:PORT] (python-can udp_multicast bus), socketcan:IF, ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
 
 /// A machine: channel, axes, and the link to their drives.
 pub struct Machine {
@@ -271,10 +274,21 @@ impl Machine {
             .collect();
         let link: Box<dyn Link> = match choice.link.as_str() {
             "sim" => Box::new(SimLink::from_models(models, cycle)),
-            "canopen-emu" => Box::new(
-                crate::link::canopen::CanopenLink::emulated(&defs, cycle)
-                    .map_err(|e| MachineError::Config(format!("--link canopen-emu: {e}")))?,
-            ),
+            other
+                if other == "canopen-emu"
+                    || other.starts_with("canopen-udp")
+                    || other.starts_with("socketcan:") =>
+            {
+                Box::new(
+                    crate::link::canopen::CanopenLink::on_link(
+                        other,
+                        &defs,
+                        cycle,
+                        choice.candump.as_deref(),
+                    )
+                    .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?,
+                )
+            }
             other => {
                 let wire = Wire::from_link(other).ok_or_else(|| {
                     MachineError::Config(format!(
@@ -291,6 +305,12 @@ impl Machine {
                 Box::new(link)
             }
         };
+        let can = choice.link.starts_with("canopen") || choice.link.starts_with("socketcan:");
+        if choice.candump.is_some() && !can {
+            return Err(MachineError::Config(
+                "--candump needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT] or socketcan:IF)".into(),
+            ));
+        }
         if choice.link == "sim" && choice.pcap.is_some() {
             return Err(MachineError::Config(
                 "--pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE)".into(),

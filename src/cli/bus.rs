@@ -15,6 +15,7 @@
 use super::{load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::drive::pdo::DataType;
+use fieldprobe::link::canopen::CanSession;
 use fieldprobe::link::ethercat::{EthercatSpec, Session, Wire};
 use fieldprobe::link::LinkError;
 use std::path::PathBuf;
@@ -22,9 +23,14 @@ use std::path::PathBuf;
 /// Where the bus is.
 #[derive(Debug, Clone, clap::Args)]
 pub struct BusArgs {
-    /// `ethercat-emu` (emulated segment of the machine file) or `ethercat:IFACE`.
+    /// `ethercat-emu` (emulated segment of the machine file), `ethercat:IFACE`, `canopen-emu`
+    /// (emulated CANopen nodes of the machine file, ids 1 …), `canopen-udp[:GROUP:PORT]` or
+    /// `socketcan:IF`.
     #[arg(long, value_name = "LINK", default_value = "ethercat-emu")]
     link: String,
+    /// Log every CAN frame in candump -L format (CAN links).
+    #[arg(long, value_name = "FILE.log")]
+    candump: Option<PathBuf>,
     /// Machine file whose axes the emulated segment carries (ethercat-emu).
     #[arg(long)]
     machine: Option<PathBuf>,
@@ -37,6 +43,34 @@ pub struct BusArgs {
 }
 
 impl BusArgs {
+    fn is_can(&self) -> bool {
+        self.link.starts_with("canopen") || self.link.starts_with("socketcan:")
+    }
+
+    fn drives(
+        &self,
+    ) -> anyhow::Result<Vec<std::sync::Arc<fieldprobe::drive::catalogue::DriveDefinition>>> {
+        let cfg = load_machine(self.machine.as_deref(), &self.sets)?;
+        cfg.axes
+            .iter()
+            .map(|a| {
+                fieldprobe::drive::catalogue::load(&a.drive)
+                    .map(std::sync::Arc::new)
+                    .with_context(|| format!("axis {}: drive '{}'", a.name, a.drive))
+            })
+            .collect()
+    }
+
+    fn open_can(&self) -> anyhow::Result<CanSession> {
+        let drives = if self.link == "canopen-emu" {
+            self.drives()?
+        } else {
+            Vec::new()
+        };
+        CanSession::open(&self.link, &drives, self.candump.as_deref())
+            .map_err(|e| anyhow::anyhow!("--link {}: {e}", self.link))
+    }
+
     fn open(&self) -> anyhow::Result<Session> {
         let wire = Wire::from_link(&self.link).with_context(|| {
             format!(
@@ -105,9 +139,12 @@ enum SdoOp {
 struct SdoRead {
     #[command(flatten)]
     bus: BusArgs,
-    /// Ring position of the SubDevice (as `scan` prints it).
+    /// Ring position of the SubDevice (as `scan` prints it; EtherCAT links).
+    #[arg(long, required_unless_present = "node", conflicts_with = "node")]
+    device: Option<usize>,
+    /// CANopen node id 1 … 127 (CAN links).
     #[arg(long)]
-    device: usize,
+    node: Option<u8>,
     /// Object, e.g. `0x6041:00` or `0x1008` (sub-index 0).
     object: String,
     /// Data type (`u8` `i8` `u16` `i16` `u32` `i32`, or `string`, `bytes`); default: the CiA 402
@@ -120,9 +157,12 @@ struct SdoRead {
 struct SdoWrite {
     #[command(flatten)]
     bus: BusArgs,
-    /// Ring position of the SubDevice.
+    /// Ring position of the SubDevice (EtherCAT links).
+    #[arg(long, required_unless_present = "node", conflicts_with = "node")]
+    device: Option<usize>,
+    /// CANopen node id 1 … 127 (CAN links).
     #[arg(long)]
-    device: usize,
+    node: Option<u8>,
     /// Object, e.g. `0x6065:00`.
     object: String,
     /// Value (decimal or 0x hex; a string for `--type string`).
@@ -164,12 +204,34 @@ fn parse_int(s: &str) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
+/// Whom an SDO goes to.
+enum Target {
+    Device(usize),
+    Node(u8),
+}
+
+fn target(bus: &BusArgs, device: Option<usize>, node: Option<u8>) -> anyhow::Result<Target> {
+    match (bus.is_can(), device, node) {
+        (false, Some(d), None) => Ok(Target::Device(d)),
+        (true, None, Some(n)) if (1..=127).contains(&n) => Ok(Target::Node(n)),
+        (true, None, Some(n)) => anyhow::bail!("--node {n}: allowed 1 … 127"),
+        (true, _, _) => anyhow::bail!(
+            "--link {}: a CAN link addresses nodes: give --node N (1 … 127), not --device",
+            bus.link
+        ),
+        (false, _, _) => anyhow::bail!(
+            "--link {}: an EtherCAT link addresses SubDevices: give --device N (ring position)",
+            bus.link
+        ),
+    }
+}
+
 /// Exit code and message for a refused access.
 fn refused(e: LinkError) -> anyhow::Result<i32> {
     eprintln!("fieldprobe: {e}");
     Ok(match e {
         LinkError::Abort { .. } => EXIT_CNC_ERROR,
-        LinkError::Other(m) if m.contains("SoE") => EXIT_CNC_ERROR,
+        LinkError::Other(m) if m.contains("SoE") || m.contains("aborted") => EXIT_CNC_ERROR,
         _ => EXIT_BAD_INPUT,
     })
 }
@@ -180,8 +242,11 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
         SdoOp::Read(r) => {
             let (index, sub) = parse_object(&r.object)?;
             let ty = r.ty.as_deref().map(str::to_ascii_lowercase);
-            let mut s = r.bus.open()?;
-            let bytes = match s.sdo_read(r.device, index, sub) {
+            let result = match target(&r.bus, r.device, r.node)? {
+                Target::Device(d) => r.bus.open()?.sdo_read(d, index, sub),
+                Target::Node(n) => r.bus.open_can()?.sdo_upload(n, index, sub),
+            };
+            let bytes = match result {
                 Ok(b) => b,
                 Err(e) => return refused(e),
             };
@@ -213,8 +278,11 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                 }
                 Some(t) => {
                     eprintln!(
-                        "fieldprobe: device {} {index:#06x}:{sub:02x}: {} bytes do not fit type {}",
-                        r.device,
+                        "fieldprobe: {} {index:#06x}:{sub:02x}: {} bytes do not fit type {}",
+                        r.node.map_or_else(
+                            || format!("device {}", r.device.unwrap_or(0)),
+                            |n| format!("node {n}")
+                        ),
                         bytes.len(),
                         t.name()
                     );
@@ -272,8 +340,11 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                     v.to_le_bytes()[..ty.size()].to_vec()
                 }
             };
-            let mut s = w.bus.open()?;
-            match s.sdo_write(w.device, index, sub, &data) {
+            let result = match target(&w.bus, w.device, w.node)? {
+                Target::Device(d) => w.bus.open()?.sdo_write(d, index, sub, &data),
+                Target::Node(n) => w.bus.open_can()?.sdo_download(n, index, sub, &data),
+            };
+            match result {
                 Ok(()) => {
                     println!("{index:#06x}:{sub:02x} written ({} bytes)", data.len());
                     Ok(EXIT_OK)
@@ -360,6 +431,91 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
                 }
                 Err(e) => refused(e),
             }
+        }
+    }
+}
+
+/// Arguments of `fieldprobe can`.
+#[derive(Debug, clap::Args)]
+pub struct CanArgs {
+    #[command(subcommand)]
+    op: CanOp,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum CanOp {
+    /// Find the CANopen nodes (SDO 0x1000 to every id): id, state, device type, identity, name.
+    Scan(CanScan),
+    /// Print the frames on the bus, candump style, with their CANopen meaning.
+    Dump(CanDump),
+}
+
+#[derive(Debug, clap::Args)]
+struct CanScan {
+    #[command(flatten)]
+    bus: BusArgs,
+}
+
+#[derive(Debug, clap::Args)]
+struct CanDump {
+    #[command(flatten)]
+    bus: BusArgs,
+    /// How long to listen, s.
+    #[arg(long, default_value = "1")]
+    seconds: f64,
+}
+
+/// `fieldprobe can`.
+pub fn can(a: CanArgs) -> anyhow::Result<i32> {
+    match a.op {
+        CanOp::Scan(s) => {
+            anyhow::ensure!(s.bus.is_can(), "--link {}: `can scan` needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)", s.bus.link);
+            let mut session = s.bus.open_can()?;
+            let nodes = session.scan().map_err(|e| anyhow::anyhow!("{e}"))?;
+            println!(
+                "node  state            device type  vendor      product     revision    name"
+            );
+            let hex = |v: Option<u32>| v.map_or_else(|| "-".to_string(), |v| format!("{v:#010x}"));
+            for n in nodes {
+                println!(
+                    "{:<5} {:<16} {:#010x}   {:<11} {:<11} {:<11} {}",
+                    n.id,
+                    n.state.map_or("unknown", |s| s.name()),
+                    n.device_type,
+                    hex(n.identity[0]),
+                    hex(n.identity[1]),
+                    hex(n.identity[2]),
+                    n.name.unwrap_or_default()
+                );
+            }
+            Ok(EXIT_OK)
+        }
+        CanOp::Dump(d) => {
+            anyhow::ensure!(
+                d.bus.is_can(),
+                "--link {}: `can dump` needs a CAN link",
+                d.bus.link
+            );
+            anyhow::ensure!(
+                d.seconds.is_finite() && (0.0..=86_400.0).contains(&d.seconds),
+                "--seconds {}: allowed 0 … 86400",
+                d.seconds
+            );
+            let iface = d.bus.link.clone();
+            let mut session = d.bus.open_can()?;
+            session
+                .listen(std::time::Duration::from_secs_f64(d.seconds), &mut |f| {
+                    let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
+                    let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
+                    let meaning = fieldprobe::bus::canopen::describe(f);
+                    if meaning.is_empty() {
+                        println!("{line}");
+                    } else {
+                        println!("{line}  ; {meaning}");
+                    }
+                })
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            Ok(EXIT_OK)
         }
     }
 }

@@ -52,8 +52,11 @@ enum Command {
     Sim(sim::SimArgs),
     /// List the EtherCAT SubDevices: position, address, identity, AL state, DC, name.
     Scan(bus::ScanArgs),
-    /// Read or write a CoE object (SDO) of an EtherCAT SubDevice.
+    /// Read or write an object by SDO: CoE on an EtherCAT SubDevice (`--device`) or a CANopen
+    /// node (`--node`).
     Sdo(bus::SdoArgs),
+    /// CANopen bus: find nodes, dump frames.
+    Can(bus::CanArgs),
     /// Read or write a SERCOS IDN (SoE) of an EtherCAT SubDevice.
     Idn(bus::IdnArgs),
 }
@@ -81,6 +84,7 @@ pub fn main() -> i32 {
         Command::Sim(a) => sim::run(a),
         Command::Scan(a) => bus::scan(a),
         Command::Sdo(a) => bus::sdo(a),
+        Command::Can(a) => bus::can(a),
         Command::Idn(a) => bus::idn(a),
     };
     match result {
@@ -111,14 +115,19 @@ fn load_machine(
 #[derive(Debug, Clone, clap::Args)]
 pub struct LinkArgs {
     /// Link to the drives: `sim` (drive models in memory), `ethercat-emu` (ethercrab against
-    /// emulated EtherCAT drives in-process) or `ethercat:IFACE` (ethercrab on a network
-    /// interface). Default: `ethercat-emu` when every axis has a CiA 402, SERCOS or EL5101 drive (the
+    /// emulated EtherCAT drives in-process), `ethercat:IFACE` (ethercrab on a network
+    /// interface), `canopen-emu` (our CANopen master against emulated CiA 402 nodes on an
+    /// in-process virtual bus), `canopen-udp[:GROUP:PORT]` (python-can udp_multicast bus) or
+    /// `socketcan:IF`. Default: `ethercat-emu` when every axis has a CiA 402, SERCOS or EL5101 drive (the
     /// families the EtherCAT emulator plays), else `sim`.
     #[arg(long, value_name = "LINK")]
     link: Option<String>,
     /// Write every EtherCAT frame (both directions) into this pcap file (EtherCAT links).
     #[arg(long, value_name = "FILE.pcap")]
     pcap: Option<std::path::PathBuf>,
+    /// Log every CAN frame (both directions) in candump -L format into this file (CAN links).
+    #[arg(long, value_name = "FILE.log")]
+    candump: Option<std::path::PathBuf>,
 }
 
 impl LinkArgs {
@@ -134,6 +143,7 @@ impl LinkArgs {
         fieldprobe::machine::LinkChoice {
             link,
             pcap: self.pcap.clone(),
+            candump: self.candump.clone(),
         }
     }
 }

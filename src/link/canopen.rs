@@ -2,7 +2,7 @@
 //!
 //! | `--link` | bus | nodes |
 //! |---|---|---|
-//! | `canopen-emu` | in-process: the master's frames go straight to a [`CanopenSegment`] | one emulated CiA 402 node per axis (node id = axis number + 1) |
+//! | `canopen-emu` | in-process [`VirtualCan`]: the master on one endpoint, the [`CanopenSegment`] on another | one emulated CiA 402 node per axis (node id = axis number + 1) |
 //! | `canopen-udp[:GROUP:PORT]`, `socketcan:IF` | a [`CanBus`] given to [`CanopenLink::open`] | whatever answers |
 //!
 //! # Start-up
@@ -29,7 +29,10 @@ use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use super::{decode_le, object_type, Link, LinkError, ProcessImage};
-use crate::bus::can::{CanBus, CanFrame};
+use crate::bus::can::{
+    CanBus, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus, VirtualCan,
+    VirtualEndpoint,
+};
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{pack_layout, Direction, Pdo, MAX_PDOS};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
@@ -80,25 +83,183 @@ impl std::fmt::Debug for CanopenLink {
     }
 }
 
-/// Where the master's frames go.
-enum Transport {
-    /// In-process nodes: sending queues for them, receiving returns what they answered.
-    Emulated {
-        segment: CanopenSegment,
-        sent: Vec<CanFrame>,
-        received: std::collections::VecDeque<CanFrame>,
-    },
-    /// A CAN bus.
-    Bus(Box<dyn CanBus>),
+/// Where the master's frames go: a CAN bus, and for `canopen-emu` the emulated nodes on the
+/// other endpoint of the same in-process virtual bus.
+struct Transport {
+    bus: Box<dyn CanBus>,
+    emulated: Option<(CanopenSegment, VirtualEndpoint)>,
+    candump: Option<CandumpWriter<std::io::BufWriter<std::fs::File>>>,
 }
 
 impl Transport {
     fn describe(&self) -> String {
-        match self {
-            Transport::Emulated { .. } => "in-process emulated nodes".into(),
-            Transport::Bus(b) => b.describe(),
+        match &self.emulated {
+            Some(_) => format!("{} with emulated nodes", self.bus.describe()),
+            None => self.bus.describe(),
         }
     }
+
+    fn send(&mut self, f: &CanFrame) -> Result<(), LinkError> {
+        self.log(f);
+        self.bus
+            .send(f)
+            .map_err(|e| other(format!("CAN send on {}: {e}", self.bus.describe())))
+    }
+
+    /// Emulated: the nodes take what reached their endpoint and answer on it.
+    fn run_nodes(&mut self, now: Nanos) {
+        let Some((segment, endpoint)) = self.emulated.as_mut() else {
+            return;
+        };
+        let mut frames = Vec::new();
+        while let Ok(Some(f)) = endpoint.recv(Duration::ZERO) {
+            frames.push(f);
+        }
+        for f in segment.run(&frames, now) {
+            if endpoint.send(&f).is_err() {
+                tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
+            }
+        }
+    }
+
+    /// Take every frame that arrived; `wait` bounds the wait for the first one (not waited
+    /// for with emulated nodes: they have answered already).
+    fn receive_all(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
+        let mut v = Vec::new();
+        let mut timeout = if self.emulated.is_some() {
+            Duration::ZERO
+        } else {
+            wait
+        };
+        while let Some(f) = self
+            .bus
+            .recv(timeout)
+            .map_err(|e| other(format!("CAN receive on {}: {e}", self.bus.describe())))?
+        {
+            self.log(&f);
+            v.push(f);
+            timeout = Duration::ZERO;
+        }
+        Ok(v)
+    }
+
+    /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives`, ids 1 …;
+    /// `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
+    fn open(
+        link: &str,
+        drives: &[Arc<DriveDefinition>],
+        cycle: Nanos,
+        candump: Option<&std::path::Path>,
+    ) -> Result<Transport, LinkError> {
+        if link == "canopen-emu" {
+            let nodes = drives
+                .iter()
+                .enumerate()
+                .map(|(i, d)| {
+                    if d.profile != crate::drive::catalogue::Profile::Cia402 {
+                        return Err(other(format!(
+                            "axis {i}: drive '{}' is a {} drive; the CANopen emulator plays CiA 402 drives only",
+                            d.name,
+                            d.profile.name()
+                        )));
+                    }
+                    EmulatedNode::new((i + 1) as u8, d)
+                        .map_err(|e| other(format!("axis {i}: {e}")))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let hub = VirtualCan::new();
+            let master = hub.endpoint();
+            let node_side = hub.endpoint();
+            return Ok(Transport {
+                bus: Box::new(master),
+                emulated: Some((CanopenSegment::new(nodes, cycle), node_side)),
+                candump: candump.map(|p| open_candump(p, "vcan-emu")).transpose()?,
+            });
+        }
+        let bus: Box<dyn CanBus> = if let Some(ifname) = link.strip_prefix("socketcan:") {
+            Box::new(SocketCanBus::open(ifname).map_err(|e| other(e.to_string()))?)
+        } else if let Some(rest) = link.strip_prefix("canopen-udp") {
+            let cfg = UdpConfig::parse(&format!("udp{rest}"))
+                .map_err(|e| other(format!("{e} (as canopen-udp or canopen-udp:GROUP:PORT)")))?;
+            Box::new(UdpMulticastBus::open(cfg).map_err(|e| other(e.to_string()))?)
+        } else {
+            return Err(other(format!(
+                "unknown CAN link '{link}' (allowed: canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)"
+            )));
+        };
+        let iface = bus.describe().replace(' ', "_");
+        Ok(Transport {
+            bus,
+            emulated: None,
+            candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+        })
+    }
+
+    /// One SDO transfer with `client`, starting with `first`; frames that are not for the
+    /// client go to `other_frames`. Bounded by four client timeouts of wall-clock time.
+    fn sdo(
+        &mut self,
+        client: &mut SdoClient,
+        first: Vec<CanFrame>,
+        t0: Instant,
+        now: Nanos,
+        other_frames: &mut dyn FnMut(Vec<CanFrame>) -> Result<(), LinkError>,
+    ) -> Result<Vec<u8>, (Option<SdoError>, String)> {
+        let wall = || Nanos(t0.elapsed().as_nanos() as u64);
+        for f in &first {
+            self.send(f).map_err(|e| (None, e.to_string()))?;
+        }
+        let deadline = Instant::now() + Duration::from_secs(4);
+        loop {
+            if let Some(r) = client.take_result() {
+                return r.map_err(|e| {
+                    let text = e.to_string();
+                    (Some(e), text)
+                });
+            }
+            if Instant::now() > deadline {
+                return Err((None, "no answer".into()));
+            }
+            self.run_nodes(now);
+            let frames = self
+                .receive_all(Duration::from_millis(5))
+                .map_err(|e| (None, e.to_string()))?;
+            let mut replies = Vec::new();
+            let mut rest = Vec::new();
+            let response =
+                u32::from(crate::bus::canopen::sdo::SDO_TX_BASE) + u32::from(client.node());
+            for f in frames {
+                if !f.extended && f.id == response {
+                    replies.extend(client.handle(&f, wall()));
+                } else {
+                    rest.push(f);
+                }
+            }
+            other_frames(rest).map_err(|e| (None, e.to_string()))?;
+            replies.extend(client.poll(wall()));
+            for f in &replies {
+                self.send(f).map_err(|e| (None, e.to_string()))?;
+            }
+        }
+    }
+
+    fn log(&mut self, f: &CanFrame) {
+        if let Some(w) = self.candump.as_mut() {
+            if let Err(e) = w.write_frame_now(f) {
+                tracing::warn!(target: "fieldprobe::link::canopen", "--candump write failed: {e}");
+                self.candump = None;
+            }
+        }
+    }
+}
+
+fn open_candump(
+    path: &std::path::Path,
+    iface: &str,
+) -> Result<CandumpWriter<std::io::BufWriter<std::fs::File>>, LinkError> {
+    let f = std::fs::File::create(path)
+        .map_err(|e| other(format!("--candump {}: {e}", path.display())))?;
+    Ok(CandumpWriter::new(std::io::BufWriter::new(f), iface))
 }
 
 fn other(m: String) -> LinkError {
@@ -109,25 +270,29 @@ impl CanopenLink {
     /// `canopen-emu`: one emulated CiA 402 node per drive (node id = position + 1) and the
     /// master, in process; brought to operational.
     pub fn emulated(drives: &[Arc<DriveDefinition>], cycle: Nanos) -> Result<Self, LinkError> {
-        let nodes = drives
-            .iter()
-            .enumerate()
-            .map(|(i, d)| {
-                if d.profile != crate::drive::catalogue::Profile::Cia402 {
-                    return Err(other(format!(
-                        "axis {i}: drive '{}' is a {} drive; the CANopen emulator plays CiA 402 drives only",
-                        d.name,
-                        d.profile.name()
-                    )));
-                }
-                EmulatedNode::new((i + 1) as u8, d).map_err(|e| other(format!("axis {i}: {e}")))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let bus = Transport::Emulated {
-            segment: CanopenSegment::new(nodes, cycle),
-            sent: Vec::new(),
-            received: Default::default(),
-        };
+        CanopenLink::emulated_with(drives, cycle, None)
+    }
+
+    /// [`emulated`](Self::emulated), logging every frame in candump -L format into `candump`.
+    pub fn emulated_with(
+        drives: &[Arc<DriveDefinition>],
+        cycle: Nanos,
+        candump: Option<&std::path::Path>,
+    ) -> Result<Self, LinkError> {
+        let bus = Transport::open("canopen-emu", drives, cycle, candump)?;
+        let ids: Vec<u8> = (1..=drives.len() as u8).collect();
+        CanopenLink::start(bus, drives, &ids)
+    }
+
+    /// A master for `drives` (node ids 1 …) on the CAN link named `link` (`canopen-emu`,
+    /// `canopen-udp[:GROUP:PORT]`, `socketcan:IF`), brought to operational.
+    pub fn on_link(
+        link: &str,
+        drives: &[Arc<DriveDefinition>],
+        cycle: Nanos,
+        candump: Option<&std::path::Path>,
+    ) -> Result<Self, LinkError> {
+        let bus = Transport::open(link, drives, cycle, candump)?;
         let ids: Vec<u8> = (1..=drives.len() as u8).collect();
         CanopenLink::start(bus, drives, &ids)
     }
@@ -137,8 +302,18 @@ impl CanopenLink {
         bus: Box<dyn CanBus>,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
+        candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
-        CanopenLink::start(Transport::Bus(bus), drives, ids)
+        let iface = bus.describe().replace(' ', "_");
+        CanopenLink::start(
+            Transport {
+                bus,
+                emulated: None,
+                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+            },
+            drives,
+            ids,
+        )
     }
 
     fn start(
@@ -192,47 +367,15 @@ impl CanopenLink {
     }
 
     fn send(&mut self, f: &CanFrame) -> Result<(), LinkError> {
-        match &mut self.bus {
-            Transport::Emulated { sent, .. } => {
-                sent.push(*f);
-                Ok(())
-            }
-            Transport::Bus(b) => b
-                .send(f)
-                .map_err(|e| other(format!("CAN send on {}: {e}", b.describe()))),
-        }
+        self.bus.send(f)
     }
 
-    /// Emulated: run the nodes on what the master sent since the last run.
     fn run_nodes(&mut self, now: Nanos) {
-        if let Transport::Emulated {
-            segment,
-            sent,
-            received,
-        } = &mut self.bus
-        {
-            let frames = std::mem::take(sent);
-            received.extend(segment.run(&frames, now));
-        }
+        self.bus.run_nodes(now);
     }
 
-    /// Take every frame that arrived; `wait` bounds the wait for the first one (bus only).
     fn receive_all(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
-        match &mut self.bus {
-            Transport::Emulated { received, .. } => Ok(received.drain(..).collect()),
-            Transport::Bus(b) => {
-                let mut v = Vec::new();
-                let mut timeout = wait;
-                while let Some(f) = b
-                    .recv(timeout)
-                    .map_err(|e| other(format!("CAN receive on {}: {e}", b.describe())))?
-                {
-                    v.push(f);
-                    timeout = Duration::ZERO;
-                }
-                Ok(v)
-            }
-        }
+        self.bus.receive_all(wait)
     }
 
     /// Common handling of heartbeats and EMCY; returns the frames not consumed.
@@ -335,46 +478,29 @@ impl CanopenLink {
     ) -> Result<Vec<u8>, LinkError> {
         let node = self.axes[i].node;
         let wall = self.wall();
+        let mut client = std::mem::replace(&mut self.axes[i].sdo, SdoClient::new(node));
         let first = match data {
-            None => self.axes[i].sdo.upload(index, sub, wall),
-            Some(d) => self.axes[i].sdo.download(index, sub, d, wall),
+            None => client.upload(index, sub, wall),
+            Some(d) => client.download(index, sub, d, wall),
         };
-        for f in &first {
-            self.send(f)?;
-        }
-        let deadline = Instant::now() + self.response_timeout * 4;
-        loop {
-            if let Some(r) = self.axes[i].sdo.take_result() {
-                return r.map_err(|e| match e {
-                    SdoError::Abort { code, .. } => LinkError::Abort {
-                        device: i,
-                        index,
-                        sub,
-                        code,
-                    },
-                    other_err => other(format!(
-                        "node {node}: SDO {index:#06x}:{sub:02x}: {other_err}"
-                    )),
-                });
-            }
-            if Instant::now() > deadline {
-                return Err(other(format!(
-                    "node {node}: SDO {index:#06x}:{sub:02x}: no answer"
-                )));
-            }
-            self.run_nodes(self.now);
-            let frames = self.receive_all(Duration::from_millis(5))?;
-            let frames = self.note(frames, self.now)?;
-            let wall = self.wall();
-            let mut replies = Vec::new();
-            for f in &frames {
-                replies.extend(self.axes[i].sdo.handle(f, wall));
-            }
-            replies.extend(self.axes[i].sdo.poll(wall));
-            for f in &replies {
-                self.send(f)?;
-            }
-        }
+        let now = self.now;
+        let t0 = self.t0;
+        let mut seen = Vec::new();
+        let r = self.bus.sdo(&mut client, first, t0, now, &mut |frames| {
+            seen.extend(frames);
+            Ok(())
+        });
+        self.axes[i].sdo = client;
+        self.note(seen, now)?;
+        r.map_err(|(e, text)| match e {
+            Some(SdoError::Abort { code, .. }) => LinkError::Abort {
+                device: i,
+                index,
+                sub,
+                code,
+            },
+            _ => other(format!("node {node}: SDO {index:#06x}:{sub:02x}: {text}")),
+        })
     }
 
     /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus.
@@ -389,18 +515,12 @@ impl CanopenLink {
 
     /// The emulated nodes (`canopen-emu`).
     pub fn segment(&self) -> Option<&CanopenSegment> {
-        match &self.bus {
-            Transport::Emulated { segment, .. } => Some(segment),
-            Transport::Bus(_) => None,
-        }
+        self.bus.emulated.as_ref().map(|(s, _)| s)
     }
 
     /// The emulated nodes, mutable (fault knobs: a node's 0x1017, model faults).
     pub fn segment_mut(&mut self) -> Option<&mut CanopenSegment> {
-        match &mut self.bus {
-            Transport::Emulated { segment, .. } => Some(segment),
-            Transport::Bus(_) => None,
-        }
+        self.bus.emulated.as_mut().map(|(s, _)| s)
     }
 }
 
@@ -415,18 +535,17 @@ impl Link for CanopenLink {
         self.now = now;
         let n = self.exchanges;
         self.exchanges += 1;
+        let mut rpdos = Vec::new();
         for (ax, img) in self.axes.iter().zip(images.iter()) {
             for p in &ax.rx {
                 let data = p.pack(&img.outputs);
                 let f = CanFrame::new(p.cob, &data)
                     .map_err(|e| other(format!("node {}: RPDO {}: {e}", ax.node, p.number + 1)))?;
-                match &mut self.bus {
-                    Transport::Emulated { sent, .. } => sent.push(f),
-                    Transport::Bus(b) => b
-                        .send(&f)
-                        .map_err(|e| other(format!("CAN send on {}: {e}", b.describe())))?,
-                }
+                rpdos.push(f);
             }
+        }
+        for f in &rpdos {
+            self.send(f)?;
         }
         self.send(&nmt::sync())?;
         self.run_nodes(now);
@@ -446,7 +565,7 @@ impl Link for CanopenLink {
                         .any(|a| a.tx.iter().any(|p| u32::from(p.cob) == f.id))
                 })
                 .count();
-            if tpdos >= expected || matches!(self.bus, Transport::Emulated { .. }) {
+            if tpdos >= expected || self.bus.emulated.is_some() {
                 break;
             }
             if Instant::now() > deadline {
@@ -567,5 +686,200 @@ impl Link for CanopenLink {
 
     fn exchanges(&self) -> u64 {
         self.exchanges
+    }
+}
+
+/// One node as [`CanSession::scan`] finds it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeInfo {
+    /// Node id.
+    pub id: u8,
+    /// State from its last heartbeat / boot-up, if one was seen.
+    pub state: Option<NmtState>,
+    /// 0x1000 device type.
+    pub device_type: u32,
+    /// 0x1018:1 … 3 vendor, product code, revision (None where the node refused).
+    pub identity: [Option<u32>; 3],
+    /// 0x1008 device name, if the node has one.
+    pub name: Option<String>,
+}
+
+/// A CAN bus for commissioning commands (`can scan`, `can dump`, `sdo … --node`): no NMT
+/// commands, no PDO configuration; SDO by node id.
+pub struct CanSession {
+    bus: Transport,
+    t0: Instant,
+    states: std::collections::BTreeMap<u8, NmtState>,
+}
+
+impl std::fmt::Debug for CanSession {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CanSession")
+            .field("bus", &self.bus.describe())
+            .finish_non_exhaustive()
+    }
+}
+
+impl CanSession {
+    /// Open `link` (`canopen-emu`: the emulated nodes of `drives`, ids 1 …;
+    /// `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
+    pub fn open(
+        link: &str,
+        drives: &[Arc<DriveDefinition>],
+        candump: Option<&std::path::Path>,
+    ) -> Result<Self, LinkError> {
+        let bus = Transport::open(link, drives, Nanos::from_micros(1000), candump)?;
+        let mut s = CanSession {
+            bus,
+            t0: Instant::now(),
+            states: Default::default(),
+        };
+        // Emulated nodes boot at once (boot-up message, pre-operational).
+        s.bus.run_nodes(Nanos::ZERO);
+        let frames = s.bus.receive_all(Duration::ZERO)?;
+        s.note(&frames);
+        Ok(s)
+    }
+
+    fn wall(&self) -> Nanos {
+        Nanos(self.t0.elapsed().as_nanos() as u64)
+    }
+
+    fn note(&mut self, frames: &[CanFrame]) {
+        for f in frames {
+            if let Some((n, s)) = nmt::parse_heartbeat(f) {
+                self.states.insert(n, s);
+            }
+        }
+    }
+
+    /// Every frame on the bus for `duration` (emulated nodes run meanwhile), in order.
+    pub fn listen(
+        &mut self,
+        duration: Duration,
+        each: &mut dyn FnMut(&CanFrame),
+    ) -> Result<(), LinkError> {
+        let end = Instant::now() + duration;
+        while Instant::now() < end {
+            let now = self.wall();
+            self.bus.run_nodes(now);
+            let frames = self.bus.receive_all(Duration::from_millis(10))?;
+            self.note(&frames);
+            for f in &frames {
+                each(f);
+            }
+            if self.bus.emulated.is_some() {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+        Ok(())
+    }
+
+    /// SDO upload from `node`.
+    pub fn sdo_upload(&mut self, node: u8, index: u16, sub: u8) -> Result<Vec<u8>, LinkError> {
+        self.transfer(node, index, sub, None)
+    }
+
+    /// SDO download to `node`.
+    pub fn sdo_download(
+        &mut self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), LinkError> {
+        self.transfer(node, index, sub, Some(data)).map(|_| ())
+    }
+
+    fn transfer(
+        &mut self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        data: Option<&[u8]>,
+    ) -> Result<Vec<u8>, LinkError> {
+        if !(1..=127).contains(&node) {
+            return Err(other(format!("node {node}: allowed 1 … 127")));
+        }
+        let mut client = SdoClient::new(node);
+        let wall = self.wall();
+        let first = match data {
+            None => client.upload(index, sub, wall),
+            Some(d) => client.download(index, sub, d, wall),
+        };
+        let t0 = self.t0;
+        let mut seen = Vec::new();
+        let r = self.bus.sdo(&mut client, first, t0, wall, &mut |f| {
+            seen.extend(f);
+            Ok(())
+        });
+        self.note(&seen);
+        r.map_err(|(_, text)| other(format!("node {node}: {text}")))
+    }
+
+    /// Find the nodes: an SDO upload of 0x1000 to every node id 1 … 127 at once (nodes in
+    /// pre-operational or operational answer), then 0x1018:1 … 3 and 0x1008 from each.
+    pub fn scan(&mut self) -> Result<Vec<NodeInfo>, LinkError> {
+        let wall = self.wall();
+        let mut clients: Vec<SdoClient> = (1..=127u8).map(SdoClient::new).collect();
+        for c in &mut clients {
+            c.set_timeout(Nanos::from_micros(300_000));
+            for f in c.upload(0x1000, 0, wall) {
+                self.bus.send(&f)?;
+            }
+        }
+        let end = Instant::now() + Duration::from_millis(400);
+        while Instant::now() < end && clients.iter().any(|c| c.busy()) {
+            let now = self.wall();
+            self.bus.run_nodes(now);
+            let frames = self.bus.receive_all(Duration::from_millis(10))?;
+            self.note(&frames);
+            for f in &frames {
+                if let Some(c) =
+                    f.id.checked_sub(u32::from(crate::bus::canopen::sdo::SDO_TX_BASE))
+                        .filter(|n| (1..=127).contains(n))
+                        .and_then(|n| clients.get_mut(n as usize - 1))
+                {
+                    for r in c.handle(f, now) {
+                        self.bus.send(&r)?;
+                    }
+                }
+            }
+            for c in &mut clients {
+                for r in c.poll(now) {
+                    self.bus.send(&r)?;
+                }
+            }
+        }
+        let found: Vec<(u8, u32)> = clients
+            .iter_mut()
+            .filter_map(|c| match c.take_result() {
+                Some(Ok(b)) => Some((c.node(), decode_le(&b, false) as u32)),
+                _ => None,
+            })
+            .collect();
+        let mut out = Vec::new();
+        for (id, device_type) in found {
+            let mut identity = [None; 3];
+            for (k, slot) in identity.iter_mut().enumerate() {
+                *slot = self
+                    .sdo_upload(id, 0x1018, (k + 1) as u8)
+                    .ok()
+                    .map(|b| decode_le(&b, false) as u32);
+            }
+            let name = self.sdo_upload(id, 0x1008, 0).ok().map(|b| {
+                String::from_utf8_lossy(&b)
+                    .trim_end_matches('\0')
+                    .to_string()
+            });
+            out.push(NodeInfo {
+                id,
+                state: self.states.get(&id).copied(),
+                device_type,
+                identity,
+                name,
+            });
+        }
+        Ok(out)
     }
 }

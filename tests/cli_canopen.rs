@@ -1,0 +1,216 @@
+//! The CANopen command line on the emulated bus of the machine file (`--link canopen-emu`, one
+//! CiA 402 node per axis, ids 1 …): `can scan`, `can dump`, `sdo read|write --node`, and `run`
+//! with `--candump`. Expected values: CiA 402 device type 0x0192 (profile number 402) in the
+//! low word of 0x1000, the seed's meas1 values, candump -L syntax.
+
+use std::process::{Command, Output};
+
+fn fieldprobe(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("run fieldprobe")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn can_scan_finds_one_cia402_node_per_axis() {
+    let o = fieldprobe(&["can", "scan", "--link", "canopen-emu"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    let rows: Vec<Vec<&str>> = out
+        .lines()
+        .skip(1)
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    assert_eq!(rows.len(), 3, "{out}");
+    for (k, r) in rows.iter().enumerate() {
+        assert_eq!(r[0], (k + 1).to_string());
+        assert_eq!(r[1], "pre-operational");
+        let dt = u32::from_str_radix(r[2].trim_start_matches("0x"), 16).unwrap();
+        assert_eq!(dt & 0xFFFF, 402, "{out}");
+    }
+    // A machine of two axes has two nodes.
+    let dir = tempfile::tempdir().unwrap();
+    let machine = dir.path().join("xy.toml");
+    std::fs::write(&machine, "[[axis]]\nname = \"X\"\n[[axis]]\nname = \"Y\"\n").unwrap();
+    let o = fieldprobe(&[
+        "can",
+        "scan",
+        "--link",
+        "canopen-emu",
+        "--machine",
+        machine.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        stdout(&o).lines().count(),
+        1 + 2,
+        "{}{}",
+        stdout(&o),
+        stderr(&o)
+    );
+}
+
+#[test]
+fn sdo_by_node_id_with_aborts_in_words() {
+    let o = fieldprobe(&[
+        "sdo",
+        "read",
+        "--link",
+        "canopen-emu",
+        "--node",
+        "2",
+        "0x1008",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stdout(&o).starts_with("0x1008:00 = \"fieldprobe CiA 402 node"),
+        "{}",
+        stdout(&o)
+    );
+    let o = fieldprobe(&[
+        "sdo",
+        "read",
+        "--link",
+        "canopen-emu",
+        "--node",
+        "1",
+        "0x6065",
+    ]);
+    // drives/cia402-generic.toml: following_error_window = 300000.
+    assert_eq!(stdout(&o).trim(), "0x6065:00 = 300000 (0x493e0)");
+    let o = fieldprobe(&[
+        "sdo",
+        "write",
+        "--link",
+        "canopen-emu",
+        "--node",
+        "3",
+        "0x6072",
+        "500",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(stdout(&o).trim(), "0x6072:00 written (2 bytes)");
+    let o = fieldprobe(&[
+        "sdo",
+        "read",
+        "--link",
+        "canopen-emu",
+        "--node",
+        "2",
+        "0x5000",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("node 2")
+            && stderr(&o).contains("0x5000:00")
+            && stderr(&o).contains("0x06020000 object does not exist"),
+        "{}",
+        stderr(&o)
+    );
+    let o = fieldprobe(&[
+        "sdo",
+        "read",
+        "--link",
+        "canopen-emu",
+        "--device",
+        "1",
+        "0x1000",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("give --node N"), "{}", stderr(&o));
+    let o = fieldprobe(&[
+        "sdo",
+        "read",
+        "--link",
+        "canopen-emu",
+        "--node",
+        "0",
+        "0x1000",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("--node 0: allowed 1 … 127"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn can_dump_prints_heartbeats_with_their_meaning() {
+    let o = fieldprobe(&["can", "dump", "--link", "canopen-emu", "--seconds", "0.35"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    // Heartbeat every 100 ms (0x1017 default) from nodes 1 … 3, in pre-operational (0x7F).
+    for node in 1..=3 {
+        let n = out
+            .lines()
+            .filter(|l| {
+                l.contains(&format!(
+                    " 70{node}#7F  ; heartbeat node {node}: pre-operational"
+                ))
+            })
+            .count();
+        assert!(
+            (2..=5).contains(&n),
+            "node {node}: {n} heartbeats in 0.35 s\n{out}"
+        );
+    }
+}
+
+#[test]
+fn run_over_canopen_with_a_candump_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("meas1.log");
+    let o = fieldprobe(&[
+        "run",
+        "examples/nc/seed004/meas1.nc",
+        "--probe-at",
+        "Z=100",
+        "--link",
+        "canopen-emu",
+        "--candump",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("V.A.MEAS.ACS.VALUE.Z=100.000000"));
+    let text = std::fs::read_to_string(&log).unwrap();
+    let frames: Vec<_> = text
+        .lines()
+        .map(|l| {
+            fieldprobe::bus::can::candump::parse_line(l).unwrap_or_else(|e| panic!("{l}: {e:?}"))
+        })
+        .collect();
+    let id = |r: &fieldprobe::bus::can::CandumpRecord| r.frame.id;
+    // NMT reset communication of all nodes first, boot-ups, then NMT start (0x01, all nodes).
+    assert_eq!(frames[0].frame.payload(), &[0x82, 0x00]);
+    assert!(frames
+        .iter()
+        .any(|r| id(r) == 0 && r.frame.payload() == [0x01, 0x00]));
+    // One SYNC per cycle and every one answered by 4 TPDOs of each of the 3 nodes.
+    let syncs = frames.iter().filter(|r| id(r) == 0x080).count();
+    let tpdos = frames
+        .iter()
+        .filter(|r| (0x181..=0x4FF).contains(&id(r)) && id(r) & 0x80 != 0)
+        .count();
+    assert!(syncs > 1000, "{syncs} SYNCs");
+    assert_eq!(tpdos, 12 * syncs);
+    // --candump needs a CAN link.
+    let o = fieldprobe(&[
+        "run",
+        "examples/nc/hello.nc",
+        "--link",
+        "sim",
+        "--candump",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+}
