@@ -1,4 +1,5 @@
-//! `fieldprobe sim`: emulate EtherCAT devices on a network interface.
+//! `fieldprobe sim`: emulate EtherCAT devices on a network interface, or CANopen CiA 402 nodes
+//! on a CAN bus (`sim canopen`, see [`CanopenArgs`]).
 //!
 //! ```text
 //! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--drive POS=DRIVE]...
@@ -40,8 +41,11 @@
 
 use super::EXIT_OK;
 use anyhow::Context;
+use fieldprobe::bus::can::{CanBus, CanError};
+use fieldprobe::bus::canopen::eds;
 use fieldprobe::drive::catalogue;
 use fieldprobe::esi::{self, sii, to_sii, Device, EsiFile, SmKind};
+use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
     device::{emulated_servo, DEFAULT_CYCLE},
     raw,
@@ -70,6 +74,8 @@ pub struct SimArgs {
 enum SimCommand {
     /// Serve emulated EtherCAT SubDevices on a network interface (raw socket, EtherType 0x88A4).
     Ethercat(EthercatArgs),
+    /// Serve emulated CANopen CiA 402 nodes on a CAN bus (python-can udp_multicast or SocketCAN).
+    Canopen(CanopenArgs),
 }
 
 /// Arguments of `fieldprobe sim ethercat`.
@@ -102,6 +108,7 @@ struct EthercatArgs {
 pub fn run(a: SimArgs) -> anyhow::Result<i32> {
     match a.command {
         SimCommand::Ethercat(e) => ethercat(e),
+        SimCommand::Canopen(c) => canopen(c),
     }
 }
 
@@ -316,5 +323,231 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
     let stop = AtomicBool::new(false);
     let stats = port.serve(&mut segment, &stop, deadline)?;
     eprintln!("fieldprobe sim ethercat: done, {stats:?}");
+    Ok(EXIT_OK)
+}
+
+/// Arguments of `fieldprobe sim canopen`.
+///
+/// ```text
+/// fieldprobe sim canopen --bus udp[:GROUP:PORT]|socketcan:IF --node ID [--node ID]...
+///                        [--eds FILE] [--drive DRIVE] [--probe-at ID=MM]...
+///                        [--heartbeat-ms MS] [--seconds N]
+/// ```
+/// Serves one emulated CiA 402 node per `--node` ([`EmulatedNode`]: NMT slave, boot-up and
+/// heartbeat producer, SDO server with segmented and block transfers, SYNC-driven PDOs, EMCY)
+/// until `--seconds` pass (default: forever) or the process is killed. With `--eds` the object
+/// dictionary comes from the EDS / DCF ([`EmulatedNode::from_eds`] lists the rules; note that
+/// many EDS files have 0x1017 = 0, i.e. no heartbeat until the master writes 0x1017 or
+/// `--heartbeat-ms` is given), else it is the built-in CiA 402 table ([`EmulatedNode::new`]).
+///
+/// Loop: receive with a short timeout, hand the frames with `now` = wall-clock time since the
+/// start to [`CanopenSegment::run`], send what it returns; `run` is also called without frames
+/// at least every millisecond, so boot-up and heartbeats go out on time on a quiet bus. Every
+/// SYNC steps the drive models once by [`SYNC_MODEL_CYCLE`] of model time, whatever the
+/// master's SYNC period (as `sim ethercat` steps once per process-data frame).
+///
+/// `--probe-at ID=MM` puts a probe surface at MM (axis units of the drive's scaling, converted
+/// with `increments_per_unit` and `offset`) wired to touch probe input 1 of node ID.
+///
+/// Prints `listening` on stderr when the bus is open. Exit 0; 2 on bad input (the message
+/// names the option and the allowed values) or when the bus cannot be opened.
+#[derive(Debug, clap::Args)]
+pub struct CanopenArgs {
+    /// CAN bus: `udp` (python-can udp_multicast on 239.74.163.2:43113), `udp:GROUP:PORT`, or
+    /// `socketcan:IF`.
+    #[arg(long, value_name = "udp[:GROUP:PORT]|socketcan:IF")]
+    bus: String,
+    /// Node id of an emulated node (1 … 127). Repeatable; world device i = i-th `--node`.
+    #[arg(long = "node", value_name = "ID", required = true)]
+    nodes: Vec<String>,
+    /// EDS / DCF file giving the object dictionary of every node.
+    #[arg(long, value_name = "FILE")]
+    eds: Option<PathBuf>,
+    /// Drive definition (built-in name or drives/*.toml file) of every node.
+    #[arg(long, value_name = "DRIVE", default_value = DEFAULT_DRIVE)]
+    drive: String,
+    /// Probe surface at MM (axis units) on node ID, wired to its touch probe input 1.
+    /// Repeatable.
+    #[arg(long = "probe-at", value_name = "ID=MM")]
+    probes: Vec<String>,
+    /// Producer heartbeat time 0x1017 of every node in ms (default: the EDS value, or 100
+    /// without `--eds`).
+    #[arg(long = "heartbeat-ms", value_name = "MS")]
+    heartbeat_ms: Option<String>,
+    /// Stop after this many seconds (default: run until killed).
+    #[arg(long, value_name = "N")]
+    seconds: Option<f64>,
+}
+
+/// Model time one SYNC advances the drive models by (the EtherCAT emulator's servo cycle).
+pub const SYNC_MODEL_CYCLE: Duration = DEFAULT_CYCLE;
+
+/// Longest wait in one receive, so `run` is called at least this often.
+const CAN_POLL: Duration = Duration::from_millis(1);
+
+/// Frames handed to one `run` call at most (the rest wait for the next call).
+const CAN_BATCH: usize = 64;
+
+/// A parsed `--bus`.
+enum CanBusSpec {
+    Udp(fieldprobe::bus::can::UdpConfig),
+    SocketCan(String),
+}
+
+/// Check `--bus` (before anything is built, so bad input fails fast).
+fn parse_can_bus(spec: &str) -> anyhow::Result<CanBusSpec> {
+    const ALLOWED: &str =
+        "allowed: `udp`, `udp:GROUP:PORT` (IPv4 multicast group, port 1 … 65535) \
+                           or `socketcan:IF`";
+    let s = spec.trim();
+    if s.starts_with("udp") {
+        let cfg = fieldprobe::bus::can::UdpConfig::parse(s)
+            .map_err(|e| anyhow::anyhow!("--bus {spec}: {e}"))?;
+        return Ok(CanBusSpec::Udp(cfg));
+    }
+    if let Some(ifname) = s.strip_prefix("socketcan:") {
+        anyhow::ensure!(
+            !ifname.is_empty(),
+            "--bus {spec}: no interface name ({ALLOWED})"
+        );
+        return Ok(CanBusSpec::SocketCan(ifname.to_string()));
+    }
+    anyhow::bail!("--bus {spec}: unknown bus ({ALLOWED})")
+}
+
+/// Open the bus `--bus` named.
+fn open_can_bus(spec: &str, bus: CanBusSpec) -> anyhow::Result<Box<dyn CanBus>> {
+    use fieldprobe::bus::can::{SocketCanBus, UdpMulticastBus};
+    Ok(match bus {
+        CanBusSpec::Udp(cfg) => Box::new(
+            UdpMulticastBus::open(cfg)
+                .map_err(|e| anyhow::anyhow!("--bus {spec}: cannot open {cfg}: {e}"))?,
+        ),
+        CanBusSpec::SocketCan(ifname) => {
+            Box::new(SocketCanBus::open(&ifname).map_err(|e| {
+                anyhow::anyhow!("--bus {spec}: cannot open SocketCAN {ifname}: {e}")
+            })?)
+        }
+    })
+}
+
+/// `--node ID` → node id 1 … 127.
+fn parse_node_id(option: &str, spec: &str, id: &str) -> anyhow::Result<u8> {
+    id.trim()
+        .parse::<u8>()
+        .ok()
+        .filter(|n| (1..=127).contains(n))
+        .with_context(|| format!("{option} {spec}: node id {id:?} (allowed: 1 … 127)"))
+}
+
+fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
+    let bus_spec = parse_can_bus(&a.bus)?;
+    let deadline = match a.seconds {
+        None => None,
+        Some(s) if s.is_finite() && s >= 0.0 => Some(Instant::now() + Duration::from_secs_f64(s)),
+        Some(s) => anyhow::bail!("--seconds {s}: expected a non-negative number"),
+    };
+    let heartbeat = a
+        .heartbeat_ms
+        .as_deref()
+        .map(|ms| {
+            ms.trim().parse::<u16>().map_err(|_| {
+                anyhow::anyhow!("--heartbeat-ms {ms}: expected 0 … 65535 (ms, 0 = no heartbeat)")
+            })
+        })
+        .transpose()?;
+    let mut ids = Vec::new();
+    for spec in &a.nodes {
+        let id = parse_node_id("--node", spec, spec)?;
+        anyhow::ensure!(!ids.contains(&id), "--node {spec}: node {id} given twice");
+        ids.push(id);
+    }
+    let def = catalogue::load(&a.drive).map_err(|e| {
+        anyhow::anyhow!(
+            "--drive {}: {e} (allowed: a built-in drive name such as {DEFAULT_DRIVE}, or a \
+             drive file drives/*.toml)",
+            a.drive
+        )
+    })?;
+    let eds = match &a.eds {
+        None => None,
+        Some(p) => Some(eds::load(p).map_err(|e| anyhow::anyhow!("--eds {}: {e}", p.display()))?),
+    };
+    let mut nodes = Vec::new();
+    for &id in &ids {
+        let mut node = match &eds {
+            None => EmulatedNode::new(id, &def),
+            Some(e) => EmulatedNode::from_eds(id, &def, e),
+        }
+        .map_err(|e| anyhow::anyhow!("--node {id}: {e}"))?;
+        if let Some(ms) = heartbeat {
+            node.set_heartbeat_ms(ms);
+        }
+        eprintln!(
+            "fieldprobe sim canopen: node {id}: CiA 402 drive {}, object dictionary {}",
+            def.name,
+            a.eds
+                .as_ref()
+                .map_or("built in".to_string(), |p| p.display().to_string())
+        );
+        nodes.push(node);
+    }
+    let mut segment = CanopenSegment::new(nodes, Nanos(SYNC_MODEL_CYCLE.as_nanos() as u64));
+    for spec in &a.probes {
+        let (id, mm) = spec
+            .split_once('=')
+            .with_context(|| format!("--probe-at {spec}: expected ID=MM"))?;
+        let id = parse_node_id("--probe-at", spec, id)?;
+        let device = ids.iter().position(|&n| n == id).with_context(|| {
+            format!("--probe-at {spec}: node {id} is not emulated (nodes: {ids:?})")
+        })?;
+        let mm: f64 = mm
+            .trim()
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite())
+            .with_context(|| format!("--probe-at {spec}: {mm:?} is not a position in mm"))?;
+        let inc = def
+            .scaling
+            .to_increments(mm)
+            .with_context(|| format!("--probe-at {spec}: {mm} mm does not fit INTEGER32"))?;
+        segment
+            .world_mut()
+            .plant_mut()
+            .add_probe_surface(ProbeSurface::new(device, f64::from(inc), vec![(device, 1)]));
+        eprintln!(
+            "fieldprobe sim canopen: probe surface at {mm} mm = {inc} increments of node {id}, \
+             wired to its touch probe input 1"
+        );
+    }
+    let mut bus = open_can_bus(&a.bus, bus_spec)?;
+    eprintln!("fieldprobe sim canopen: listening on {}", bus.describe());
+    let t0 = Instant::now();
+    let (mut received, mut sent) = (0u64, 0u64);
+    let mut frames = Vec::with_capacity(CAN_BATCH);
+    while deadline.is_none_or(|d| Instant::now() < d) {
+        frames.clear();
+        let mut wait = CAN_POLL;
+        while frames.len() < CAN_BATCH {
+            match bus.recv(wait) {
+                Ok(Some(f)) => frames.push(f),
+                Ok(None) => break,
+                // A datagram another program got wrong: say so and go on.
+                Err(CanError::Malformed(why)) => {
+                    tracing::warn!(target: "fieldprobe::sim::canopen", "dropped frame: {why}");
+                }
+                Err(e) => anyhow::bail!("bus {}: {e}", bus.describe()),
+            }
+            wait = Duration::ZERO;
+        }
+        received += frames.len() as u64;
+        let now = Nanos(t0.elapsed().as_nanos() as u64);
+        for f in segment.run(&frames, now) {
+            bus.send(&f)
+                .map_err(|e| anyhow::anyhow!("bus {}: send {f:?}: {e}", bus.describe()))?;
+            sent += 1;
+        }
+    }
+    eprintln!("fieldprobe sim canopen: done, {received} frames received, {sent} sent");
     Ok(EXIT_OK)
 }

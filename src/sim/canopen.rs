@@ -9,6 +9,9 @@
 //! CiA 301 procedure. On NMT start the node reads its PDO parameters and refuses (stays
 //! pre-operational, EMCY 0x8200) a mapping its drive model cannot serve.
 //!
+//! [`EmulatedNode::from_eds`] builds the object dictionary from an EDS / DCF instead; its doc
+//! lists the rules.
+//!
 //! Cycle: RPDOs received while operational are stored; at SYNC the segment steps every
 //! operational node's model once with those outputs (one [`World::step`], the same step
 //! [`SimLink`](crate::link::sim::SimLink) makes) and then every node sends its TPDOs. So a master
@@ -16,6 +19,9 @@
 //! cycle, as over `--link sim`.
 
 use crate::bus::can::CanFrame;
+use std::collections::BTreeMap;
+
+use crate::bus::canopen::eds::{self, AccessType, Eds};
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{pack_layout, Direction, Mapped, Pdo, MAX_PDOS};
 use crate::bus::canopen::sdo::{ObjectAccess, SdoServer, SDO_RX_BASE};
@@ -31,12 +37,18 @@ pub const VENDOR_ID: u32 = 0x0000_0FB0;
 pub const PRODUCT_CODE: u32 = 0x0002_0402;
 /// Default producer heartbeat time (0x1017), ms.
 pub const DEFAULT_HEARTBEAT_MS: u16 = 100;
+/// Capacity (bytes) of a VISIBLE_STRING / OCTET_STRING / UNICODE_STRING / DOMAIN object built
+/// from an EDS entry whose default is shorter ([`EmulatedNode::from_eds`]).
+pub const EDS_STRING_CAPACITY: usize = 256;
 
 /// The object dictionary as the SDO server sees it: the CoE object table, PDO parameters only
 /// writable in pre-operational.
 struct Od<'a> {
     od: &'a mut CoeServer,
     state: NmtState,
+    /// Objects stored as byte strings that have one fixed length (EDS types the CoE table has
+    /// no numeric type for: INTEGER24, REAL32, TIME_OF_DAY …).
+    fixed_len: &'a BTreeMap<(u16, u8), usize>,
 }
 
 impl ObjectAccess for Od<'_> {
@@ -48,6 +60,12 @@ impl ObjectAccess for Od<'_> {
         if (0x1400..0x1C00).contains(&index) && self.state == NmtState::Operational {
             // CiA 301: data cannot be transferred because of the present device state.
             return Err(0x0800_0022);
+        }
+        if let Some(&n) = self.fixed_len.get(&(index, sub)) {
+            if data.len() != n {
+                // CiA 301: data type does not match, length of service parameter does not match.
+                return Err(0x0607_0010);
+            }
         }
         self.od.write(index, sub, data)
     }
@@ -72,6 +90,7 @@ pub struct EmulatedNode {
     outgoing: Vec<CanFrame>,
     syncs: u64,
     sdo_muted: bool,
+    fixed_len: BTreeMap<(u16, u8), usize>,
 }
 
 fn u32_entry(index: u16, sub: u8, v: u32) -> ObjectEntry {
@@ -111,16 +130,82 @@ fn pdo_entries(direction: Direction, node: u8, pdos: &[Pdo]) -> Vec<ObjectEntry>
     v
 }
 
+fn check_node_id(id: u8) -> Result<(), String> {
+    if (1..=127).contains(&id) {
+        Ok(())
+    } else {
+        Err(format!("node id {id}: allowed 1 … 127"))
+    }
+}
+
+/// One EDS entry as an object table entry, and its fixed length if it is stored as raw bytes
+/// of one size (see [`EmulatedNode::from_eds`]).
+fn eds_object(e: &eds::Entry, node: u8) -> Result<(ObjectEntry, Option<usize>), String> {
+    use eds::DataType as T;
+    let access = match e.access {
+        AccessType::ReadOnly | AccessType::Const => Access::Ro,
+        AccessType::WriteOnly => Access::Wo,
+        AccessType::ReadWrite | AccessType::ReadWriteInput | AccessType::ReadWriteOutput => {
+            Access::Rw
+        }
+    };
+    let given = e.parameter_value.as_ref().or(e.default.as_ref());
+    let value = match given {
+        None => None,
+        Some(text) => Some(
+            e.value_bytes(node)
+                .ok_or_else(|| format!("value {:?} is not a valid {:?}", text.raw, e.data_type))?,
+        ),
+    };
+    let numeric = match e.data_type {
+        T::Boolean => Some(DataType::Bool),
+        T::Integer8 => Some(DataType::I8),
+        T::Integer16 => Some(DataType::I16),
+        T::Integer32 => Some(DataType::I32),
+        T::Integer64 => Some(DataType::I64),
+        T::Unsigned8 => Some(DataType::U8),
+        T::Unsigned16 => Some(DataType::U16),
+        T::Unsigned32 => Some(DataType::U32),
+        T::Unsigned64 => Some(DataType::U64),
+        _ => None,
+    };
+    let (ty, data, fixed) = match (numeric, e.data_type.size()) {
+        (Some(ty), _) => {
+            let n = ty.size().unwrap_or(1);
+            (ty, value.unwrap_or_else(|| vec![0; n]), None)
+        }
+        (None, Some(n)) => (
+            DataType::Bytes(n),
+            value.unwrap_or_else(|| vec![0; n]),
+            Some(n),
+        ),
+        (None, None) => {
+            let v = value.unwrap_or_default();
+            (DataType::Bytes(v.len().max(EDS_STRING_CAPACITY)), v, None)
+        }
+    };
+    if let Some(n) = ty.size().or(fixed) {
+        if data.len() != n {
+            return Err(format!("value has {} bytes, the type {n}", data.len()));
+        }
+    }
+    Ok((
+        ObjectEntry {
+            index: e.index,
+            sub: e.sub,
+            ty,
+            access,
+            data: Some(data),
+        },
+        fixed,
+    ))
+}
+
 impl EmulatedNode {
     /// Node `id` (1 … 127) with the drive model of `def` (CiA 402), in boot-up: it sends its
     /// boot-up message and enters pre-operational at the first [`Self::poll`].
     pub fn new(id: u8, def: &DriveDefinition) -> Result<Self, String> {
-        if !(1..=127).contains(&id) {
-            return Err(format!("node id {id}: allowed 1 … 127"));
-        }
-        let model = crate::drive::model::for_definition(def).map_err(|e| e.to_string())?;
-        let rx = pack_layout(&def.rxpdo, Direction::Rx, id)?;
-        let tx = pack_layout(&def.txpdo, Direction::Tx, id)?;
+        check_node_id(id)?;
         let mut entries = ds402_objects(&format!("fieldprobe CiA 402 node ({})", def.name));
         entries.extend([
             ObjectEntry::constant(0x1018, 0, DataType::U8, 4),
@@ -133,6 +218,126 @@ impl EmulatedNode {
                 ..ObjectEntry::constant(0x1017, 0, DataType::U16, i64::from(DEFAULT_HEARTBEAT_MS))
             },
         ]);
+        Self::build(id, def, entries, BTreeMap::new())
+    }
+
+    /// Node `id` with the drive model of `def` and the object dictionary of an EDS / DCF
+    /// (CiA 306), in boot-up like [`Self::new`].
+    ///
+    /// Rules:
+    /// * Every EDS entry (every sub-index, compact storage expanded) becomes an object with the
+    ///   EDS access (`ro`/`const` → read-only, `wo` → write-only, `rw`/`rwr`/`rww` →
+    ///   read-write) and the EDS value evaluated for `id` (`$NODEID`): `ParameterValue` (DCF)
+    ///   if present, else `DefaultValue`, else zero / empty. A value that does not parse for
+    ///   its data type is an error naming the object.
+    /// * Data types: BOOLEAN, INTEGER8/16/32/64 and UNSIGNED8/16/32/64 are numeric objects
+    ///   (a download must have exactly the type's size, else abort 0x0607_0010). Other
+    ///   fixed-size types (INTEGER24/40/48/56, UNSIGNED24/40/48/56, REAL32/64, TIME_OF_DAY,
+    ///   TIME_DIFFERENCE) are stored as raw bytes of that size, with the same length check.
+    ///   VISIBLE_STRING, OCTET_STRING, UNICODE_STRING, DOMAIN and the complex / manufacturer
+    ///   types are byte strings holding up to max(default length, [`EDS_STRING_CAPACITY`])
+    ///   bytes.
+    /// * Objects the drive model implements (the model-backed entries of [`ds402_objects`]:
+    ///   0x6040, 0x6041, 0x6060/61, 0x6064, 0x6065/66/67, 0x606C, 0x6072, 0x6077, 0x607A,
+    ///   0x60B8..=0x60BD, 0x60D0, 0x60E0/E1, 0x60F4, 0x6502, 0x603F) stay backed by the model
+    ///   when the EDS has them, with the model's data type and access (the EDS default is not
+    ///   written to the model); model objects the EDS lacks are not in the dictionary (SDO
+    ///   abort 0x0602_0000), although the drive file's process data still carries them.
+    /// * 0x1018 identity from the EDS: subs 1 … 3 from [`Eds::identity`] (the sub's value,
+    ///   else `[DeviceInfo]` VendorNumber / ProductNumber / RevisionNumber, else 0), sub 4
+    ///   from the EDS, else the node id. Always read-only, sub 0 = 4.
+    /// * 0x1000 device type: the EDS value; if the EDS lacks 0x1000 (CiA 301 mandatory), the
+    ///   built-in one (0x00020192).
+    /// * 0x1017 producer heartbeat time: the EDS value (often 0 = no heartbeat until the master
+    ///   writes it); if the EDS lacks 0x1017, [`DEFAULT_HEARTBEAT_MS`].
+    /// * PDO parameters 0x1400..=0x1BFF: not taken from the EDS; the node has them as
+    ///   [`Self::new`] does (the drive file's process data packed by [`pack_layout`]).
+    pub fn from_eds(id: u8, def: &DriveDefinition, eds: &Eds) -> Result<Self, String> {
+        check_node_id(id)?;
+        let builtin = ds402_objects(&format!("fieldprobe CiA 402 node ({})", def.name));
+        let model_backed: BTreeMap<(u16, u8), &ObjectEntry> = builtin
+            .iter()
+            .filter(|e| e.data.is_none())
+            .map(|e| ((e.index, e.sub), e))
+            .collect();
+        let mut entries = Vec::new();
+        let mut fixed_len = BTreeMap::new();
+        for (&(index, sub), e) in &eds.objects {
+            if (0x1400..0x1C00).contains(&index) || index == 0x1018 {
+                continue;
+            }
+            if let Some(m) = model_backed.get(&(index, sub)) {
+                entries.push((*m).clone());
+                continue;
+            }
+            let (entry, fixed) = eds_object(e, id).map_err(|why| {
+                format!(
+                    "EDS {}: object {index:#06x}:{sub:02x} ({}): {why}",
+                    eds.file, e.parameter_name
+                )
+            })?;
+            if let Some(n) = fixed {
+                fixed_len.insert((index, sub), n);
+            }
+            entries.push(entry);
+        }
+        let has = |index: u16| {
+            eds.objects
+                .range((index, 0)..=(index, u8::MAX))
+                .next()
+                .is_some()
+        };
+        if !has(0x1000) {
+            entries.extend(builtin.iter().filter(|e| e.index == 0x1000).cloned());
+        }
+        if !has(0x1017) {
+            entries.push(ObjectEntry {
+                access: Access::Rw,
+                ..ObjectEntry::constant(0x1017, 0, DataType::U16, i64::from(DEFAULT_HEARTBEAT_MS))
+            });
+        }
+        let ident = eds.identity();
+        let serial = eds
+            .get(0x1018, 4)
+            .and_then(|e| e.value(id))
+            .and_then(|v| v.as_u64())
+            .and_then(|v| u32::try_from(v).ok())
+            .unwrap_or(u32::from(id));
+        entries.extend([
+            ObjectEntry::constant(0x1018, 0, DataType::U8, 4),
+            ObjectEntry::constant(
+                0x1018,
+                1,
+                DataType::U32,
+                i64::from(ident.vendor_id.unwrap_or(0)),
+            ),
+            ObjectEntry::constant(
+                0x1018,
+                2,
+                DataType::U32,
+                i64::from(ident.product_code.unwrap_or(0)),
+            ),
+            ObjectEntry::constant(
+                0x1018,
+                3,
+                DataType::U32,
+                i64::from(ident.revision_number.unwrap_or(0)),
+            ),
+            ObjectEntry::constant(0x1018, 4, DataType::U32, i64::from(serial)),
+        ]);
+        Self::build(id, def, entries, fixed_len)
+    }
+
+    /// The node around an object table (without the PDO parameters, which this adds).
+    fn build(
+        id: u8,
+        def: &DriveDefinition,
+        mut entries: Vec<ObjectEntry>,
+        fixed_len: BTreeMap<(u16, u8), usize>,
+    ) -> Result<Self, String> {
+        let model = crate::drive::model::for_definition(def).map_err(|e| e.to_string())?;
+        let rx = pack_layout(&def.rxpdo, Direction::Rx, id)?;
+        let tx = pack_layout(&def.txpdo, Direction::Tx, id)?;
         entries.extend(pdo_entries(Direction::Rx, id, &rx));
         entries.extend(pdo_entries(Direction::Tx, id, &tx));
         let (rx_len, tx_len) = (model.rx_len(), model.tx_len());
@@ -153,7 +358,14 @@ impl EmulatedNode {
             outgoing: Vec::new(),
             syncs: 0,
             sdo_muted: false,
+            fixed_len,
         })
+    }
+
+    /// Read `index:sub` from the object dictionary as an SDO upload would (bytes, or the
+    /// CiA 301 abort code); for tests and diagnostics.
+    pub fn read_object(&self, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
+        self.od.read(index, sub)
     }
 
     /// Node id.
@@ -314,6 +526,7 @@ impl EmulatedNode {
             let mut od = Od {
                 od: &mut self.od,
                 state: self.state,
+                fixed_len: &self.fixed_len,
             };
             let replies = self.sdo.handle(f, &mut od, now);
             self.outgoing.extend(replies);
@@ -459,6 +672,137 @@ impl CanopenSegment {
         drop(ports);
         for n in &mut self.nodes {
             n.send_tpdos();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus::canopen::eds;
+    use crate::drive::catalogue;
+
+    const TECHNOSOFT: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/test-data/eds/technosoft-ipos-cia402.eds"
+    );
+
+    /// One SDO request (8 bytes on 0x600 + 5) and the node's single reply on 0x585.
+    #[track_caller]
+    fn sdo(node: &mut EmulatedNode, req: [u8; 8]) -> [u8; 8] {
+        let f = CanFrame::new(0x605, &req).unwrap();
+        node.handle(&f, Nanos(1_000_000));
+        let out = node.take_outgoing();
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert_eq!(out[0].id, 0x585);
+        out[0].data
+    }
+
+    /// Expedited upload of `index:sub`: `Ok(4 data bytes)` or `Err(abort code)`.
+    #[track_caller]
+    fn upload(node: &mut EmulatedNode, index: u16, sub: u8) -> Result<[u8; 4], u32> {
+        let [lo, hi] = index.to_le_bytes();
+        let r = sdo(node, [0x40, lo, hi, sub, 0, 0, 0, 0]);
+        match r[0] {
+            0x80 => Err(u32::from_le_bytes([r[4], r[5], r[6], r[7]])),
+            c if c & 0xE3 == 0x43 => Ok([r[4], r[5], r[6], r[7]]),
+            c => panic!("unexpected reply {c:#04x}: {r:02x?}"),
+        }
+    }
+
+    /// Expedited download of 2 bytes: `Ok(())` or `Err(abort code)`.
+    #[track_caller]
+    fn download_u16(node: &mut EmulatedNode, index: u16, sub: u8, v: u16) -> Result<(), u32> {
+        let [lo, hi] = index.to_le_bytes();
+        let [a, b] = v.to_le_bytes();
+        // 0x2B: expedited, size indicated, 2 bytes
+        let r = sdo(node, [0x2B, lo, hi, sub, a, b, 0, 0]);
+        match r[0] {
+            0x60 => Ok(()),
+            0x80 => Err(u32::from_le_bytes([r[4], r[5], r[6], r[7]])),
+            c => panic!("unexpected reply {c:#04x}"),
+        }
+    }
+
+    fn technosoft_node() -> EmulatedNode {
+        let def = catalogue::load("cia402-generic").unwrap();
+        let eds = eds::load(TECHNOSOFT).unwrap();
+        let mut n = EmulatedNode::from_eds(5, &def, &eds).unwrap();
+        n.poll(Nanos(0)); // boot-up -> pre-operational
+        let boot = n.take_outgoing();
+        // 705 [1] 00: boot-up; no heartbeat follows because the EDS has 0x1017 = 0
+        assert_eq!(boot, vec![CanFrame::new(0x705, &[0]).unwrap()]);
+        n
+    }
+
+    #[test]
+    fn from_eds_takes_values_access_and_identity_from_the_file() {
+        let mut n = technosoft_node();
+        // Values as written in the file: [1000] DefaultValue=0x60192, [1018sub1] 0x000001A3.
+        assert_eq!(upload(&mut n, 0x1000, 0), Ok(0x0006_0192u32.to_le_bytes()));
+        assert_eq!(upload(&mut n, 0x1018, 0).map(|b| b[0]), Ok(4));
+        assert_eq!(upload(&mut n, 0x1018, 1), Ok(0x1A3u32.to_le_bytes()));
+        // No product code in the file ([1018sub2] without default, no ProductNumber): 0.
+        assert_eq!(upload(&mut n, 0x1018, 2), Ok([0; 4]));
+        // Serial number: none in the file -> the node id.
+        assert_eq!(upload(&mut n, 0x1018, 4), Ok(5u32.to_le_bytes()));
+        // [1008] const "iPOS" (4 bytes: expedited).
+        assert_eq!(upload(&mut n, 0x1008, 0), Ok(*b"iPOS"));
+        assert_eq!(download_u16(&mut n, 0x1008, 0, 0x4141), Err(0x0601_0002));
+        // [1017] rw DefaultValue=0.
+        assert_eq!(
+            upload(&mut n, 0x1017, 0).map(|b| b[..2].to_vec()),
+            Ok(vec![0, 0])
+        );
+        // Manufacturer objects: [2000] ro u16 0, [2010] rww u16 0.
+        assert_eq!(
+            upload(&mut n, 0x2000, 0).map(|b| b[..2].to_vec()),
+            Ok(vec![0, 0])
+        );
+        assert_eq!(download_u16(&mut n, 0x2000, 0, 1), Err(0x0601_0002));
+        assert_eq!(download_u16(&mut n, 0x2010, 0, 0xBEEF), Ok(()));
+        assert_eq!(
+            upload(&mut n, 0x2010, 0).map(|b| b[..2].to_vec()),
+            Ok(vec![0xEF, 0xBE])
+        );
+        // A 4-byte write to a u16 object is refused (length does not match).
+        let r = sdo(&mut n, [0x23, 0x10, 0x20, 0, 1, 2, 3, 4]);
+        assert_eq!(r, [0x80, 0x10, 0x20, 0, 0x10, 0, 0x07, 0x06]);
+        // Not in the file: built-in emulator notice 0x2000 is replaced, 0x1C00 gone.
+        assert_eq!(upload(&mut n, 0x1C00, 0), Err(0x0602_0000));
+        // PDO parameters as the node has them: TPDO1 COB-ID 0x185, first entry 0x6041:00 16 bit
+        // (drives/cia402-generic.toml txpdo starts with the statusword).
+        assert_eq!(upload(&mut n, 0x1800, 1), Ok(0x185u32.to_le_bytes()));
+        assert_eq!(upload(&mut n, 0x1A00, 1), Ok(0x6041_0010u32.to_le_bytes()));
+    }
+
+    #[test]
+    fn from_eds_keeps_the_drive_model_behind_its_objects() {
+        let mut n = technosoft_node();
+        // 0x60B8 touch probe function is in the file; a write reaches the model.
+        assert_eq!(download_u16(&mut n, 0x60B8, 0, 0x0011), Ok(()));
+        assert_eq!(n.model().read_object(0x60B8, 0), Ok(0x0011));
+        // 0x6041 statusword comes from the model, not from the file (which has no default).
+        let sw = upload(&mut n, 0x6041, 0).map(|b| i64::from(u16::from_le_bytes([b[0], b[1]])));
+        assert_eq!(sw, n.model().read_object(0x6041, 0));
+        // Read-only model object stays read-only.
+        assert_eq!(download_u16(&mut n, 0x6041, 0, 0), Err(0x0601_0002));
+    }
+
+    #[test]
+    fn from_eds_rejects_bad_node_ids_and_values() {
+        let def = catalogue::load("cia402-generic").unwrap();
+        let eds = eds::load(TECHNOSOFT).unwrap();
+        assert!(EmulatedNode::from_eds(0, &def, &eds).is_err());
+        assert!(EmulatedNode::from_eds(128, &def, &eds).is_err());
+        let bad = eds::parse(
+            "[MandatoryObjects]\nSupportedObjects=1\n1=0x1000\n\n[1000]\nParameterName=Device type\n\
+             ObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0x1FFFFFFFF\nPDOMapping=0\n",
+            "bad.eds",
+        );
+        if let Ok(bad) = bad {
+            let e = EmulatedNode::from_eds(5, &def, &bad).unwrap_err();
+            assert!(e.contains("0x1000"), "{e}");
         }
     }
 }
