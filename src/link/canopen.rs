@@ -379,7 +379,18 @@ impl CanopenLink {
     }
 
     /// Common handling of heartbeats and EMCY; returns the frames not consumed.
+    /// Time of the heartbeat consumer: the cycle time `now` with emulated nodes (they produce on
+    /// it), the wall clock on a real bus (the nodes produce on theirs).
+    fn heartbeat_clock(&self, now: Nanos) -> Nanos {
+        if self.bus.emulated.is_some() {
+            now
+        } else {
+            self.wall()
+        }
+    }
+
     fn note(&mut self, frames: Vec<CanFrame>, now: Nanos) -> Result<Vec<CanFrame>, LinkError> {
+        let hb_now = self.heartbeat_clock(now);
         let mut rest = Vec::new();
         for f in frames {
             if let Some((node, state)) = nmt::parse_heartbeat(&f) {
@@ -391,7 +402,7 @@ impl CanopenLink {
                         });
                     }
                     ax.state = Some(state);
-                    ax.last_heartbeat = Some(now);
+                    ax.last_heartbeat = Some(hb_now);
                 }
                 continue;
             }
@@ -461,9 +472,10 @@ impl CanopenLink {
         self.run_nodes(self.now);
         let frames = self.receive_all(Duration::from_millis(20))?;
         self.note(frames, self.now)?;
+        let hb_start = self.heartbeat_clock(self.now);
         for a in &mut self.axes {
             a.state = Some(NmtState::Operational);
-            a.last_heartbeat = Some(self.now);
+            a.last_heartbeat = Some(hb_start);
         }
         Ok(())
     }
@@ -503,7 +515,8 @@ impl CanopenLink {
         })
     }
 
-    /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus.
+    /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus (dropped before
+    /// the master sees them; the exchange then reports the missing TPDO).
     pub fn lose_exchange_at(&mut self, n: u64) {
         self.lose.insert(n);
     }
@@ -573,22 +586,26 @@ impl Link for CanopenLink {
             }
         }
         if self.lose.contains(&n) {
-            return Err(LinkError::Lost {
-                at: now,
-                reason: format!("TPDOs lost on the bus (injected at exchange {n})"),
+            // Fault knob: this cycle's TPDOs never arrive.
+            got.retain(|f| {
+                !self
+                    .axes
+                    .iter()
+                    .any(|a| a.tx.iter().any(|p| u32::from(p.cob) == f.id))
             });
         }
         // Heartbeat consumer.
+        let hb_now = self.heartbeat_clock(now);
         for ax in &self.axes {
             let limit = u64::from(HEARTBEAT_MS) * 1_000_000 * HEARTBEAT_TIMEOUT_FACTOR;
             if let Some(t) = ax.last_heartbeat {
-                if now.0.saturating_sub(t.0) > limit {
+                if hb_now.0.saturating_sub(t.0) > limit {
                     return Err(LinkError::Lost {
                         at: now,
                         reason: format!(
                             "node {} heartbeat lost (none for {} ms, period {HEARTBEAT_MS} ms)",
                             ax.node,
-                            now.0.saturating_sub(t.0) / 1_000_000
+                            hb_now.0.saturating_sub(t.0) / 1_000_000
                         ),
                     });
                 }
