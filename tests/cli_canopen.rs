@@ -3,23 +3,9 @@
 //! with `--candump`. Expected values: CiA 402 device type 0x0192 (profile number 402) in the
 //! low word of 0x1000, the seed's meas1 values, candump -L syntax.
 
-use std::process::{Command, Output};
-
-fn fieldprobe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run fieldprobe")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{fieldprobe, stderr, stdout};
 
 #[test]
 fn can_scan_finds_one_cia402_node_per_axis() {

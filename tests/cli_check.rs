@@ -5,19 +5,9 @@
 //! positive latched), Lightbus §6.2 (IN2MODE = 26), PROFIdrive §6.5 (P0660 = 80), CiA 402 §6.4
 //! (0x60B9 and the selected 0x60BA … 0x60BD in the TxPDO, 0x60B8 in the RxPDO).
 
-use std::process::{Command, Output};
-
-fn fieldprobe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run fieldprobe")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{fieldprobe, stdout};
 
 /// A built-in drive file with `from` replaced by `to`, written to `dir`.
 fn variant(dir: &tempfile::TempDir, builtin: &str, from: &str, to: &str) -> String {

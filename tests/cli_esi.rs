@@ -2,23 +2,9 @@
 //! facts on stdout; a broken file → exit 2 with the parser's `file:line:column: path: problem`
 //! on stderr. Expected lines by hand from esi/fieldprobe-cia402-servo.xml.
 
-use std::process::{Command, Output};
-
-fn fieldprobe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run fieldprobe")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{fieldprobe, stderr, stdout};
 
 const SERVO: &str = "esi/fieldprobe-cia402-servo.xml";
 

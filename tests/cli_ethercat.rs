@@ -2,23 +2,9 @@
 //! of the machine file, `run` over EtherCAT by default with `--pcap`. Expected identities come
 //! from the ESI XML text (read here without the ESI parser); the SERCOS value from the drive file.
 
-use std::process::{Command, Output};
-
-fn fieldprobe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run fieldprobe")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{fieldprobe, stderr, stdout};
 
 /// `ProductCode="#x…"` and `<Type …>NAME</Type>` of the first device, from the XML text.
 fn identity(esi: &str) -> (u32, String) {

@@ -6,23 +6,9 @@
 //! ∓100000000 × 0.1 µm = ∓10000 mm; relative G98 / G99 (G91) add to those.
 
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn fieldprobe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run fieldprobe")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{fieldprobe, stderr, stdout};
 
 #[test]
 fn seed_3_1_example_1_absolute_negative_sls() {

@@ -13,26 +13,12 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
-use std::process::{Command, Output};
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{fieldprobe, stderr, stdout};
 
 /// 0.1 µm in mm: one drive increment (the latch resolution).
 const LATCH_TOL: f64 = 1e-4;
-
-fn fieldprobe(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run fieldprobe")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// `fieldprobe run <example> <args> --json`; asserts exit code `code` and returns the report.
 #[track_caller]

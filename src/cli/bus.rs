@@ -135,8 +135,9 @@ enum SdoOp {
     Write(SdoWrite),
 }
 
+/// The bus and the device (EtherCAT) or node (CANopen) an SDO goes to.
 #[derive(Debug, clap::Args)]
-struct SdoRead {
+struct SdoTo {
     #[command(flatten)]
     bus: BusArgs,
     /// Ring position of the SubDevice (as `scan` prints it; EtherCAT links).
@@ -145,6 +146,12 @@ struct SdoRead {
     /// CANopen node id 1 … 127 (CAN links).
     #[arg(long)]
     node: Option<u8>,
+}
+
+#[derive(Debug, clap::Args)]
+struct SdoRead {
+    #[command(flatten)]
+    to: SdoTo,
     /// Object, e.g. `0x6041:00` or `0x1008` (sub-index 0).
     object: String,
     /// Data type (`u8` `i8` `u16` `i16` `u32` `i32`, or `string`, `bytes`); default: the CiA 402
@@ -156,13 +163,7 @@ struct SdoRead {
 #[derive(Debug, clap::Args)]
 struct SdoWrite {
     #[command(flatten)]
-    bus: BusArgs,
-    /// Ring position of the SubDevice (EtherCAT links).
-    #[arg(long, required_unless_present = "node", conflicts_with = "node")]
-    device: Option<usize>,
-    /// CANopen node id 1 … 127 (CAN links).
-    #[arg(long)]
-    node: Option<u8>,
+    to: SdoTo,
     /// Object, e.g. `0x6065:00`.
     object: String,
     /// Value (decimal or 0x hex; a string for `--type string`).
@@ -210,8 +211,9 @@ enum Target {
     Node(u8),
 }
 
-fn target(bus: &BusArgs, device: Option<usize>, node: Option<u8>) -> anyhow::Result<Target> {
-    match (bus.is_can(), device, node) {
+fn target(to: &SdoTo) -> anyhow::Result<Target> {
+    let bus = &to.bus;
+    match (bus.is_can(), to.device, to.node) {
         (false, Some(d), None) => Ok(Target::Device(d)),
         (true, None, Some(n)) if (1..=127).contains(&n) => Ok(Target::Node(n)),
         (true, None, Some(n)) => anyhow::bail!("--node {n}: allowed 1 … 127"),
@@ -242,9 +244,9 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
         SdoOp::Read(r) => {
             let (index, sub) = parse_object(&r.object)?;
             let ty = r.ty.as_deref().map(str::to_ascii_lowercase);
-            let result = match target(&r.bus, r.device, r.node)? {
-                Target::Device(d) => r.bus.open()?.sdo_read(d, index, sub),
-                Target::Node(n) => r.bus.open_can()?.sdo_upload(n, index, sub),
+            let result = match target(&r.to)? {
+                Target::Device(d) => r.to.bus.open()?.sdo_read(d, index, sub),
+                Target::Node(n) => r.to.bus.open_can()?.sdo_upload(n, index, sub),
             };
             let bytes = match result {
                 Ok(b) => b,
@@ -279,8 +281,8 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                 Some(t) => {
                     eprintln!(
                         "fieldprobe: {} {index:#06x}:{sub:02x}: {} bytes do not fit type {}",
-                        r.node.map_or_else(
-                            || format!("device {}", r.device.unwrap_or(0)),
+                        r.to.node.map_or_else(
+                            || format!("device {}", r.to.device.unwrap_or(0)),
                             |n| format!("node {n}")
                         ),
                         bytes.len(),
@@ -340,9 +342,9 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                     v.to_le_bytes()[..ty.size()].to_vec()
                 }
             };
-            let result = match target(&w.bus, w.device, w.node)? {
-                Target::Device(d) => w.bus.open()?.sdo_write(d, index, sub, &data),
-                Target::Node(n) => w.bus.open_can()?.sdo_download(n, index, sub, &data),
+            let result = match target(&w.to)? {
+                Target::Device(d) => w.to.bus.open()?.sdo_write(d, index, sub, &data),
+                Target::Node(n) => w.to.bus.open_can()?.sdo_download(n, index, sub, &data),
             };
             match result {
                 Ok(()) => {

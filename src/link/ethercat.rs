@@ -888,6 +888,19 @@ async fn write_pdo_mapping(
     Ok(())
 }
 
+/// A mailbox failure of an acyclic access as a link error (aborts keep their CiA 301 code).
+fn mailbox_error(device: usize, index: u16, sub: u8) -> impl Fn(MailboxError) -> LinkError {
+    move |e| match e {
+        MailboxError::Abort { code, .. } => LinkError::Abort {
+            device,
+            index,
+            sub,
+            code,
+        },
+        other => LinkError::Other(format!("device {device}: {index:#06x}:{sub:02x}: {other}")),
+    }
+}
+
 impl Link for EthercatLink {
     fn exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError> {
         if images.len() != self.axes.len() {
@@ -928,15 +941,7 @@ impl Link for EthercatLink {
             .get_mut(device)
             .ok_or_else(|| LinkError::Other(format!("device {device}: not on the link")))?;
         let (_, signed) = object_type(&ax.def, index, sub);
-        let abort = |e: MailboxError| match e {
-            MailboxError::Abort { code, .. } => LinkError::Abort {
-                device,
-                index,
-                sub,
-                code,
-            },
-            other => LinkError::Other(format!("device {device}: {index:#06x}:{sub:02x}: {other}")),
-        };
+        let abort = mailbox_error(device, index, sub);
         match &mut ax.mailbox {
             Mailbox::Coe(c) => {
                 let bytes = drive(&mut self.wire, c.sdo_upload(md, index, sub)).map_err(abort)?;
@@ -962,15 +967,7 @@ impl Link for EthercatLink {
             .get_mut(device)
             .ok_or_else(|| LinkError::Other(format!("device {device}: not on the link")))?;
         let (size, _) = object_type(&ax.def, index, sub);
-        let abort = |e: MailboxError| match e {
-            MailboxError::Abort { code, .. } => LinkError::Abort {
-                device,
-                index,
-                sub,
-                code,
-            },
-            other => LinkError::Other(format!("device {device}: {index:#06x}:{sub:02x}: {other}")),
-        };
+        let abort = mailbox_error(device, index, sub);
         match &mut ax.mailbox {
             Mailbox::Coe(c) => {
                 let bytes = value.to_le_bytes();
