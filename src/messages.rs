@@ -192,4 +192,48 @@ pub mod ids {
     pub const NC_ARC_GEOMETRY: u32 = 900022;
     /// Project: the run exceeded its cycle budget (a block that never ends).
     pub const RUN_TIMEOUT: u32 = 900030;
+
+    /// Seed 000 §3.4 notice: CLEAR of an active workspace / protection area (warning; the area
+    /// stays active).
+    pub const AREA_CLEAR_ACTIVE: u32 = 120499;
+    /// Seed 000 §5 case 2 (P-CHAN-00442 = 0): manual mode selected with the TCP outside the
+    /// active workspace.
+    pub const MANUAL_OUTSIDE_WORKSPACE: u32 = 50961;
+    /// Seed 000 §5 case 2 (P-CHAN-00442 = 0): manual mode selected with the TCP inside an active
+    /// protection area.
+    pub const MANUAL_IN_PROTECTION: u32 = 50962;
+    /// Project (seed 000 §3, no ID given): `#CONTROL AREA` command text does not parse.
+    pub const AREA_SYNTAX: u32 = 900300;
+    /// Project (seed 000 §3.1 attention): area definition block not in G90.
+    pub const AREA_NOT_ABSOLUTE: u32 = 900301;
+    /// Project (seed 000 §3.1): area definition block without a valid F.
+    pub const AREA_NO_FEED: u32 = 900302;
+    /// Project (seed 000 §3.1.1 / §3.1.2): POLY takes G01 only, CIRC a G01 start and G02/G03.
+    pub const AREA_WRONG_MOTION: u32 = 900303;
+    /// Project (seed 000 §2.3): more than 20 motion blocks in a polygon.
+    pub const AREA_TOO_MANY_BLOCKS: u32 = 900304;
+    /// Project (seed 000 §3.1.1 notice): polygon first point ≠ last point.
+    pub const AREA_NOT_CLOSED: u32 = 900305;
+    /// Project (seed 000 §3.1.1): polygon with fewer than 3 distinct points.
+    pub const AREA_TOO_FEW_POINTS: u32 = 900306;
+    /// Project (seed 000 §2.3 / §3.1.1): polygon edges cross or touch.
+    pub const AREA_SELF_INTERSECTION: u32 = 900307;
+    /// Project (seed 000 §3.1.2): CIRC geometry (no centre, not a full circle, radius 0, extra
+    /// or missing block).
+    pub const AREA_CIRCLE: u32 = 900308;
+    /// Project (seed 000 §3.1): MIN_EXCUR not below MAX_EXCUR.
+    pub const AREA_EXCURSION: u32 = 900309;
+    /// Project (seed 000 §2.3): a 21st control area.
+    pub const AREA_TABLE_FULL: u32 = 900310;
+    /// Project (seed 000 §3.1 "Overwrite control areas"): redefinition of an active area.
+    pub const AREA_OVERWRITE_ACTIVE: u32 = 900311;
+    /// Project (seed 000 §3.1): BEGIN / END out of sequence, command inside a definition.
+    pub const AREA_SEQUENCE: u32 = 900312;
+    /// Project (seed 000 §3.2): ON of an undefined area, bare OFF with nothing selected.
+    pub const AREA_UNDEFINED: u32 = 900313;
+    /// Project (seed 000 §3.2): TCP not in a valid position when areas are activated.
+    pub const AREA_TCP_INVALID: u32 = 900314;
+    /// Project (seed 000 §4): starting point incomplete, main and additional axes mixed, CIRC on
+    /// additional axes.
+    pub const AREA_AXES: u32 = 900315;
 }

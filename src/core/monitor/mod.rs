@@ -5,6 +5,8 @@
 //!
 //! Workspace and protection areas (seeds 000 / 002) join here later.
 
+pub mod area_geom;
+pub mod areas;
 pub mod sls;
 
 pub use sls::{AxisLimitConfig, PcsLimits, Side, SlsBehaviour, SoftLimits, Violation};
