@@ -19,9 +19,9 @@
 use std::{
     io::{BufRead, BufReader, Read},
     net::Ipv4Addr,
-    path::{Path, PathBuf},
+    path::PathBuf,
     process::{Child, Command, Stdio},
-    sync::{mpsc, Mutex},
+    sync::mpsc,
     thread,
     time::{Duration, Instant},
 };
@@ -31,162 +31,26 @@ use fieldprobe::bus::canopen::nmt::{self, NmtCommand, NmtState};
 use fieldprobe::bus::canopen::sdo::{SdoClient, SdoError, TransferMode};
 use fieldprobe::units::Nanos;
 
+#[path = "common/netns.rs"]
+mod netns;
+use netns::{manifest_path, netns_setup, run_bounded};
+
 /// Set in the re-executed test process (inside the namespace); value = venv python.
 const INNER_ENV: &str = "FIELDPROBE_CANOPEN_INTEROP_INNER";
 const OUTER_TIMEOUT: Duration = Duration::from_secs(120);
-const VENV_TIMEOUT: Duration = Duration::from_secs(300);
 const PEER_TIMEOUT: Duration = Duration::from_secs(60);
-
-fn manifest_path(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
 
 fn test_data(name: &str) -> PathBuf {
     manifest_path(&format!("../shared/test-data/eds/{name}"))
 }
 
-/// Wait for `child` at most `timeout`; kill it if it is still running.
-fn wait_bounded(child: &mut Child, timeout: Duration) -> Option<std::process::ExitStatus> {
-    let t0 = Instant::now();
-    loop {
-        if let Some(s) = child.try_wait().expect("try_wait") {
-            return Some(s);
-        }
-        if t0.elapsed() >= timeout {
-            let _ = child.kill();
-            let _ = child.wait();
-            return None;
-        }
-        thread::sleep(Duration::from_millis(20));
-    }
-}
-
-/// Exit status (`None`: killed at `timeout`), stdout, stderr.
-type Outcome = (Option<std::process::ExitStatus>, String, String);
-
-fn try_run_bounded(cmd: &mut Command, timeout: Duration) -> Result<Outcome, String> {
-    let mut child = cmd
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("cannot run {cmd:?}: {e}"))?;
-    let (o, e) = collect(&mut child);
-    let status = wait_bounded(&mut child, timeout);
-    Ok((
-        status,
-        o.join().unwrap_or_default(),
-        e.join().unwrap_or_default(),
-    ))
-}
-
-/// Threads reading a child's stdout and stderr to strings.
-fn collect(child: &mut Child) -> (thread::JoinHandle<String>, thread::JoinHandle<String>) {
-    let mut out = child.stdout.take().expect("stdout");
-    let mut err = child.stderr.take().expect("stderr");
-    let o = thread::spawn(move || {
-        let mut s = String::new();
-        let _ = out.read_to_string(&mut s);
-        s
-    });
-    let e = thread::spawn(move || {
-        let mut s = String::new();
-        let _ = err.read_to_string(&mut s);
-        s
-    });
-    (o, e)
-}
-
-fn run_bounded(cmd: &mut Command, timeout: Duration) -> Outcome {
-    try_run_bounded(cmd, timeout).unwrap_or_else(|e| panic!("{e}"))
-}
-
-const NETNS_SETUP: &str =
-    "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo";
-
-fn namespace_probe() -> Result<(), String> {
-    let mut cmd = Command::new("unshare");
-    cmd.args(["-rn", "sh", "-c", NETNS_SETUP]);
-    match try_run_bounded(&mut cmd, Duration::from_secs(10))? {
-        (Some(s), _, _) if s.success() => Ok(()),
-        (Some(s), _, err) => Err(format!(
-            "`unshare -rn` + multicast on lo failed ({s}): {}",
-            err.trim()
-        )),
-        (None, _, _) => Err("`unshare -rn` did not finish within 10 s".into()),
-    }
-}
-
-fn ensure_venv() -> PathBuf {
-    static ONCE: Mutex<Option<PathBuf>> = Mutex::new(None);
-    let mut done = ONCE.lock().unwrap_or_else(|p| p.into_inner());
-    if let Some(p) = done.as_ref() {
-        return p.clone();
-    }
-    let venv = match std::env::var_os("PYTHON_CAN_VENV") {
-        Some(v) => PathBuf::from(v),
-        None => manifest_path("target/can-venv"),
-    };
-    let (status, out, err) = run_bounded(
-        Command::new("bash")
-            .arg(manifest_path("scripts/python-can-venv.sh"))
-            .arg(&venv),
-        VENV_TIMEOUT,
-    );
-    match status {
-        Some(s) if s.success() => {}
-        Some(s) => panic!(
-            "scripts/python-can-venv.sh failed ({s}); python-canopen could not be installed \
-             (PyPI unreachable?):\n{out}\n{err}"
-        ),
-        None => panic!("scripts/python-can-venv.sh did not finish within {VENV_TIMEOUT:?}"),
-    }
-    let python = venv.join("bin/python");
-    *done = Some(python.clone());
-    python
-}
-
-/// Outer half of every test: re-run `test_name` inside a new namespace.
+/// Outer half: see [`netns::run_in_namespace`].
 fn run_in_namespace(test_name: &str) {
-    if let Err(why) = namespace_probe() {
-        eprintln!("SKIP {test_name}: {why}");
-        return;
-    }
-    let python = ensure_venv();
-    let exe = std::env::current_exe().expect("current_exe");
-    let t0 = Instant::now();
-    let (status, out, err) = run_bounded(
-        Command::new("unshare")
-            .arg("-rn")
-            .arg("--")
-            .arg(&exe)
-            .args([test_name, "--exact", "--nocapture", "--test-threads=1"])
-            .env(INNER_ENV, &python),
-        OUTER_TIMEOUT,
-    );
-    eprintln!(
-        "--- {test_name} in namespace ({:?}) stdout:\n{out}\n--- stderr:\n{err}",
-        t0.elapsed()
-    );
-    match status {
-        Some(s) => assert!(s.success(), "namespace child failed: {s}"),
-        None => panic!("namespace child did not finish within {OUTER_TIMEOUT:?}"),
-    }
-    assert!(
-        out.contains("INNER OK"),
-        "inner test did not report success"
-    );
+    netns::run_in_namespace(test_name, INNER_ENV, OUTER_TIMEOUT, true);
 }
 
 fn inner_python() -> Option<PathBuf> {
-    std::env::var_os(INNER_ENV).map(PathBuf::from)
-}
-
-fn netns_setup() {
-    let s = Command::new("sh")
-        .args(["-c", NETNS_SETUP])
-        .status()
-        .expect("run sh");
-    assert!(s.success(), "{NETNS_SETUP}: {s}");
+    netns::inner_python(INNER_ENV)
 }
 
 /// Kills the child when dropped (also on panic).
