@@ -132,17 +132,32 @@ pub fn esi_for(def: &DriveDefinition) -> Option<&'static str> {
     }
 }
 
+/// An embedded ESI text, parsed once per process (the link needs it at start-up for the
+/// emulator and again to match axes to SubDevices; there are four such texts).
+fn embedded(text: &'static str, name: &str) -> Result<&'static esi::EsiFile, LinkError> {
+    static CACHE: std::sync::Mutex<Vec<(usize, &'static esi::EsiFile)>> =
+        std::sync::Mutex::new(Vec::new());
+    let mut cache = CACHE.lock().unwrap_or_else(|p| p.into_inner());
+    let key = text.as_ptr() as usize;
+    if let Some((_, f)) = cache.iter().find(|(k, _)| *k == key) {
+        return Ok(f);
+    }
+    let file = esi::parse(text, name).map_err(|e| LinkError::Other(e.to_string()))?;
+    let file: &'static esi::EsiFile = Box::leak(Box::new(file));
+    cache.push((key, file));
+    Ok(file)
+}
+
 /// The emulated segment for `spec`: a coupler, then one drive per axis (the ESI of its family,
 /// the model of its drive definition), with an empty plant, synchronised at SYNC0.
 pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
     let other = |m: String| LinkError::Other(m);
-    let coupler_esi =
-        esi::parse(COUPLER_ESI, "esi/fieldprobe-ek1100.xml").map_err(|e| other(e.to_string()))?;
+    let coupler_esi = embedded(COUPLER_ESI, "esi/fieldprobe-ek1100.xml")?;
     let coupler_dev = coupler_esi
         .devices
         .first()
         .ok_or_else(|| other("coupler ESI has no device".into()))?;
-    let content = esi::to_sii::sii_from_device(&coupler_esi, coupler_dev)
+    let content = esi::to_sii::sii_from_device(coupler_esi, coupler_dev)
         .map_err(|e| other(format!("coupler SII: {e}")))?;
     let image =
         esi::sii::encode_padded(&content).map_err(|e| other(format!("coupler SII: {e}")))?;
@@ -156,12 +171,12 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
                 def.profile.name()
             ))
         })?;
-        let file = esi::parse(text, "embedded ESI").map_err(|e| other(e.to_string()))?;
+        let file = embedded(text, "embedded ESI")?;
         let device = file
             .devices
             .first()
             .ok_or_else(|| other("ESI has no device".into()))?;
-        let esc = emulated_drive(&file, device, def, cycle)
+        let esc = emulated_drive(file, device, def, cycle)
             .map_err(|e| other(format!("axis {axis}, drive '{}': {e}", def.name)))?;
         escs.push(esc);
     }
@@ -800,7 +815,7 @@ async fn assign_axes(
     let mut axes = Vec::new();
     for (axis, def) in spec.drives.iter().enumerate() {
         let want = esi_for(def)
-            .and_then(|t| esi::parse(t, "embedded ESI").ok())
+            .and_then(|t| embedded(t, "embedded ESI").ok())
             .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)));
         let found = subs
             .iter()
