@@ -7,16 +7,12 @@
 use std::{
     sync::{
         atomic::{AtomicBool, Ordering},
-        mpsc, Arc, Mutex,
+        Arc, Mutex,
     },
-    task::{Wake, Waker},
-    thread,
-    time::{Duration, Instant},
+    time::Duration,
 };
 
-use ethercrab::{
-    std::ethercat_now, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, Timeouts,
-};
+use ethercrab::{std::ethercat_now, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
 use fieldprobe::bus::ethercat::mailbox::{CoeClient, MailboxError};
 use fieldprobe::drive::catalogue;
 use fieldprobe::drive::model::ds402::Ds402Model;
@@ -24,6 +20,10 @@ use fieldprobe::esi::{self, sii, to_sii::sii_from_device, Pdo};
 use fieldprobe::sim::esc::coe::{ds402_objects, Access, CoeServer, ObjectEntry};
 use fieldprobe::sim::esc::device::pdo_objects;
 use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig, NullApp};
+
+#[path = "common/wire.rs"]
+mod wire;
+use wire::spawn_wire;
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_FRAMES: usize = 16;
@@ -90,62 +90,6 @@ fn servo() -> (Esc, Arc<Mutex<CoeServer>>, (u16, u16), (u16, u16)) {
     )
 }
 
-struct ThreadWaker(thread::Thread);
-
-impl Wake for ThreadWaker {
-    fn wake(self: Arc<Self>) {
-        self.0.unpark();
-    }
-}
-
-fn spawn_wire(
-    mut tx: PduTx<'static>,
-    mut rx: PduRx<'static>,
-    seg: Arc<Mutex<Segment>>,
-    coe: Arc<Mutex<CoeServer>>,
-    stop: Arc<AtomicBool>,
-) -> thread::JoinHandle<()> {
-    thread::spawn(move || {
-        let waker = Waker::from(Arc::new(ThreadWaker(thread::current())));
-        let t0 = Instant::now();
-        while !stop.load(Ordering::Relaxed) {
-            tx.replace_waker(&waker);
-            while let Some(frame) = tx.next_sendable_frame() {
-                let mut buf = Vec::with_capacity(1514);
-                frame
-                    .send_blocking(|b| {
-                        buf.extend_from_slice(b);
-                        Ok(b.len())
-                    })
-                    .expect("send_blocking");
-                let now = t0.elapsed().as_nanos() as u64;
-                let mut s = seg.lock().unwrap();
-                if s.process_frame(&mut buf, now).is_err() {
-                    continue;
-                }
-                // Device-initiated / queued messages go to the read mailbox between frames.
-                let out = coe.lock().unwrap().take_outgoing();
-                for m in out {
-                    s.esc_mut(1).expect("servo").push_mailbox(m);
-                }
-                drop(s);
-                let _ = rx.receive_frame(&buf);
-            }
-            thread::park_timeout(Duration::from_millis(1));
-        }
-    })
-}
-
-fn bounded<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (done_tx, done_rx) = mpsc::channel();
-    thread::spawn(move || {
-        let _ = done_tx.send(f());
-    });
-    done_rx
-        .recv_timeout(TEST_TIMEOUT)
-        .unwrap_or_else(|e| panic!("MainDevice side did not finish within {TEST_TIMEOUT:?}: {e}"))
-}
-
 #[derive(Debug)]
 struct Outcome {
     device_type: Vec<u8>,
@@ -171,13 +115,20 @@ fn own_coe_client_fixes_ethercrab_defects() {
     let seg = Arc::new(Mutex::new(Segment::new(vec![coupler(), servo], 500)));
     let (tx, rx, pdu_loop) = STORAGE.try_split().expect("split once");
     let stop = Arc::new(AtomicBool::new(false));
-    let wire = spawn_wire(tx, rx, seg.clone(), coe.clone(), stop.clone());
+    let queued = coe.clone();
+    // Device-initiated / queued messages go to the read mailbox between frames.
+    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone(), move |s| {
+        let out = queued.lock().unwrap().take_outgoing();
+        for m in out {
+            s.esc_mut(1).expect("servo").push_mailbox(m);
+        }
+    });
     let coe2 = coe.clone();
     let long2 = long.clone();
     let big: Vec<u8> = (0..250u32).map(|i| (i ^ 0x5A) as u8).collect();
     let big2 = big.clone();
 
-    let outcome = bounded(move || {
+    let outcome = wire::bounded(TEST_TIMEOUT, move || {
         futures_lite::future::block_on(async move {
             let md = MainDevice::new(
                 pdu_loop,

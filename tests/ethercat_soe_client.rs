@@ -9,16 +9,12 @@
 use std::{
     sync::{
         atomic::{AtomicBool, Ordering},
-        mpsc, Arc, Mutex,
+        Arc, Mutex,
     },
-    task::{Wake, Waker},
-    thread,
-    time::{Duration, Instant},
+    time::Duration,
 };
 
-use ethercrab::{
-    std::ethercat_now, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, Timeouts,
-};
+use ethercrab::{std::ethercat_now, MainDevice, MainDeviceConfig, PduStorage, Timeouts};
 use fieldprobe::bus::ethercat::mailbox::MailboxError;
 use fieldprobe::bus::ethercat::soe::{error_text, format_idn, parse_idn, Element, SoeClient};
 use fieldprobe::bus::ethercat::wire::{CoeHeader, CoeService, MailboxHeader, MailboxType};
@@ -28,6 +24,10 @@ use fieldprobe::drive::sercos;
 use fieldprobe::esi::{self, sii, to_sii::sii_from_device, SmKind};
 use fieldprobe::sim::esc::soe::{sercos_idns, SoeServer};
 use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig, NullApp};
+
+#[path = "common/wire.rs"]
+mod wire;
+use wire::spawn_wire;
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_FRAMES: usize = 16;
@@ -156,65 +156,6 @@ fn coe_emergency(code: u16) -> Vec<u8> {
     m
 }
 
-struct ThreadWaker(thread::Thread);
-
-impl Wake for ThreadWaker {
-    fn wake(self: Arc<Self>) {
-        self.0.unpark();
-    }
-}
-
-/// Wire thread: frames through the segment; queued drive messages (ring position, drive) go
-/// to the read mailbox between frames.
-fn spawn_wire(
-    mut tx: PduTx<'static>,
-    mut rx: PduRx<'static>,
-    seg: Arc<Mutex<Segment>>,
-    drives: Vec<(usize, Arc<Mutex<Drive>>)>,
-    stop: Arc<AtomicBool>,
-) -> thread::JoinHandle<()> {
-    thread::spawn(move || {
-        let waker = Waker::from(Arc::new(ThreadWaker(thread::current())));
-        let t0 = Instant::now();
-        while !stop.load(Ordering::Relaxed) {
-            tx.replace_waker(&waker);
-            while let Some(frame) = tx.next_sendable_frame() {
-                let mut buf = Vec::with_capacity(1514);
-                frame
-                    .send_blocking(|b| {
-                        buf.extend_from_slice(b);
-                        Ok(b.len())
-                    })
-                    .expect("send_blocking");
-                let now = t0.elapsed().as_nanos() as u64;
-                let mut s = seg.lock().unwrap();
-                if s.process_frame(&mut buf, now).is_err() {
-                    continue;
-                }
-                for (pos, d) in &drives {
-                    let out = std::mem::take(&mut d.lock().unwrap().queued);
-                    for m in out {
-                        s.esc_mut(*pos).expect("drive ESC").push_mailbox(m);
-                    }
-                }
-                drop(s);
-                let _ = rx.receive_frame(&buf);
-            }
-            thread::park_timeout(Duration::from_millis(1));
-        }
-    })
-}
-
-fn bounded<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (done_tx, done_rx) = mpsc::channel();
-    thread::spawn(move || {
-        let _ = done_tx.send(f());
-    });
-    done_rx
-        .recv_timeout(TEST_TIMEOUT)
-        .unwrap_or_else(|e| panic!("MainDevice side did not finish within {TEST_TIMEOUT:?}: {e}"))
-}
-
 type R<T> = Result<T, String>;
 
 #[derive(Debug)]
@@ -246,16 +187,19 @@ fn own_soe_client_reads_and_writes_idns() {
     )));
     let (tx, rx, pdu_loop) = STORAGE.try_split().expect("split once");
     let stop = Arc::new(AtomicBool::new(false));
-    let wire = spawn_wire(
-        tx,
-        rx,
-        seg.clone(),
-        vec![(1, d1.clone()), (2, d2.clone())],
-        stop.clone(),
-    );
+    // Queued drive messages (ring position, drive) go to the read mailbox between frames.
+    let drives = vec![(1, d1.clone()), (2, d2.clone())];
+    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone(), move |s| {
+        for (pos, d) in &drives {
+            let out = std::mem::take(&mut d.lock().unwrap().queued);
+            for m in out {
+                s.esc_mut(*pos).expect("drive ESC").push_mailbox(m);
+            }
+        }
+    });
     let d1c = d1.clone();
 
-    let outcome = bounded(move || {
+    let outcome = wire::bounded(TEST_TIMEOUT, move || {
         futures_lite::future::block_on(async move {
             let md = MainDevice::new(pdu_loop, Timeouts::default(), MainDeviceConfig::default());
             let group = md

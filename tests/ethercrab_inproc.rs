@@ -10,22 +10,23 @@
 use std::{
     sync::{
         atomic::{AtomicBool, Ordering},
-        mpsc, Arc, Mutex,
+        Arc, Mutex,
     },
-    task::{Wake, Waker},
-    thread,
-    time::{Duration, Instant},
+    time::Duration,
 };
 
 use ethercrab::{
-    std::ethercat_now, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceState,
-    Timeouts,
+    std::ethercat_now, MainDevice, MainDeviceConfig, PduStorage, SubDeviceState, Timeouts,
 };
 use fieldprobe::esi::sii::{
     self, data_type, fmmu_usage, general_flags, sm_enable, sm_type, Category, General, Pdo,
     PdoEntry, SiiContent, SiiHeader, SyncManager,
 };
 use fieldprobe::sim::esc::{segment::Segment, EchoApp, Esc, EscApplication, EscConfig, NullApp};
+
+#[path = "common/wire.rs"]
+mod wire;
+use wire::spawn_wire;
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_SUBDEVICES: usize = 8;
@@ -233,74 +234,6 @@ fn segment(specs: &[DeviceSpec]) -> Arc<Mutex<Segment>> {
     )))
 }
 
-struct ThreadWaker(thread::Thread);
-
-impl Wake for ThreadWaker {
-    fn wake(self: Arc<Self>) {
-        self.0.unpark();
-    }
-}
-
-/// What the emulator thread saw.
-#[derive(Debug, Default)]
-struct EmuStats {
-    frames: u64,
-    bad_frames: u64,
-    ignored_replies: u64,
-}
-
-/// The "wire": takes frames from ethercrab's PDU loop, runs them through the segment and hands
-/// them back, until `stop` is set.
-fn spawn_wire(
-    mut tx: PduTx<'static>,
-    mut rx: PduRx<'static>,
-    seg: Arc<Mutex<Segment>>,
-    stop: Arc<AtomicBool>,
-) -> thread::JoinHandle<EmuStats> {
-    thread::spawn(move || {
-        let waker = Waker::from(Arc::new(ThreadWaker(thread::current())));
-        let t0 = Instant::now();
-        let mut stats = EmuStats::default();
-        while !stop.load(Ordering::Relaxed) {
-            tx.replace_waker(&waker);
-            while let Some(frame) = tx.next_sendable_frame() {
-                let mut buf = Vec::with_capacity(1514);
-                frame
-                    .send_blocking(|b| {
-                        buf.extend_from_slice(b);
-                        Ok(b.len())
-                    })
-                    .expect("send_blocking");
-                stats.frames += 1;
-                let now = t0.elapsed().as_nanos() as u64;
-                if seg.lock().unwrap().process_frame(&mut buf, now).is_err() {
-                    // A real segment drops an invalid frame; ethercrab times out on it.
-                    stats.bad_frames += 1;
-                    continue;
-                }
-                match rx.receive_frame(&buf) {
-                    Ok(ethercrab::ReceiveAction::Processed) => {}
-                    _ => stats.ignored_replies += 1,
-                }
-            }
-            thread::park_timeout(Duration::from_millis(1));
-        }
-        stats
-    })
-}
-
-/// Run `f` on its own thread; fail the test if it does not finish within [`TEST_TIMEOUT`].
-fn bounded<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (done_tx, done_rx) = mpsc::channel();
-    thread::spawn(move || {
-        let _ = done_tx.send(f());
-    });
-    match done_rx.recv_timeout(TEST_TIMEOUT) {
-        Ok(v) => v,
-        Err(e) => panic!("MainDevice side did not finish within {TEST_TIMEOUT:?}: {e}"),
-    }
-}
-
 fn main_device(pdu_loop: ethercrab::PduLoop<'static>) -> MainDevice<'static> {
     MainDevice::new(
         pdu_loop,
@@ -321,9 +254,9 @@ fn init_single_group_discovers_emulated_subdevices() {
     let (tx, rx, pdu_loop) = STORAGE_DISCOVER.try_split().expect("split once");
     let seg = segment(&specs);
     let stop = Arc::new(AtomicBool::new(false));
-    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone());
+    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone(), |_| {});
 
-    let found = bounded(move || {
+    let found = wire::bounded(TEST_TIMEOUT, move || {
         futures_lite::future::block_on(async move {
             let md = main_device(pdu_loop);
             let group = md
@@ -388,9 +321,9 @@ fn run_to_op(storage: &'static PduStorage<MAX_FRAMES, MAX_PDU_DATA>, specs: &[De
     let (tx, rx, pdu_loop) = storage.try_split().expect("split once");
     let seg = segment(specs);
     let stop = Arc::new(AtomicBool::new(false));
-    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone());
+    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone(), |_| {});
 
-    let result = bounded(move || {
+    let result = wire::bounded(TEST_TIMEOUT, move || {
         futures_lite::future::block_on(async move {
             let md = main_device(pdu_loop);
             let group = md

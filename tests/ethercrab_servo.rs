@@ -8,21 +8,22 @@
 use std::{
     sync::{
         atomic::{AtomicBool, Ordering},
-        mpsc, Arc, Mutex,
+        Arc, Mutex,
     },
-    task::{Wake, Waker},
-    thread,
-    time::{Duration, Instant},
+    time::Duration,
 };
 
 use ethercrab::{
-    std::ethercat_now, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceState,
-    Timeouts,
+    std::ethercat_now, MainDevice, MainDeviceConfig, PduStorage, SubDeviceState, Timeouts,
 };
 use fieldprobe::drive::catalogue;
 use fieldprobe::drive::model::ds402::Ds402Model;
 use fieldprobe::esi::{self, sii, to_sii::sii_from_device};
 use fieldprobe::sim::esc::{device::emulated_servo, segment::Segment, Esc, EscConfig, NullApp};
+
+#[path = "common/wire.rs"]
+mod wire;
+use wire::spawn_wire;
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_SUBDEVICES: usize = 8;
@@ -61,69 +62,6 @@ fn coupler() -> Esc {
     Esc::new(cfg, Box::new(NullApp))
 }
 
-struct ThreadWaker(thread::Thread);
-
-impl Wake for ThreadWaker {
-    fn wake(self: Arc<Self>) {
-        self.0.unpark();
-    }
-}
-
-#[derive(Debug, Default)]
-struct EmuStats {
-    frames: u64,
-    bad_frames: u64,
-    ignored_replies: u64,
-}
-
-fn spawn_wire(
-    mut tx: PduTx<'static>,
-    mut rx: PduRx<'static>,
-    seg: Arc<Mutex<Segment>>,
-    stop: Arc<AtomicBool>,
-) -> thread::JoinHandle<EmuStats> {
-    thread::spawn(move || {
-        let waker = Waker::from(Arc::new(ThreadWaker(thread::current())));
-        let t0 = Instant::now();
-        let mut stats = EmuStats::default();
-        while !stop.load(Ordering::Relaxed) {
-            tx.replace_waker(&waker);
-            while let Some(frame) = tx.next_sendable_frame() {
-                let mut buf = Vec::with_capacity(1514);
-                frame
-                    .send_blocking(|b| {
-                        buf.extend_from_slice(b);
-                        Ok(b.len())
-                    })
-                    .expect("send_blocking");
-                stats.frames += 1;
-                let now = t0.elapsed().as_nanos() as u64;
-                if seg.lock().unwrap().process_frame(&mut buf, now).is_err() {
-                    stats.bad_frames += 1;
-                    continue;
-                }
-                match rx.receive_frame(&buf) {
-                    Ok(ethercrab::ReceiveAction::Processed) => {}
-                    _ => stats.ignored_replies += 1,
-                }
-            }
-            thread::park_timeout(Duration::from_millis(1));
-        }
-        stats
-    })
-}
-
-fn bounded<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (done_tx, done_rx) = mpsc::channel();
-    thread::spawn(move || {
-        let _ = done_tx.send(f());
-    });
-    match done_rx.recv_timeout(TEST_TIMEOUT) {
-        Ok(v) => v,
-        Err(e) => panic!("MainDevice side did not finish within {TEST_TIMEOUT:?}: {e}"),
-    }
-}
-
 #[derive(Debug)]
 struct Outcome {
     identities: Vec<(u32, u32, u32)>,
@@ -153,9 +91,9 @@ fn servo_from_esi_reaches_operation_enabled() {
     let seg = Arc::new(Mutex::new(Segment::new(vec![coupler(), servo], 500)));
     let (tx, rx, pdu_loop) = STORAGE_SERVO.try_split().expect("split once");
     let stop = Arc::new(AtomicBool::new(false));
-    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone());
+    let wire = spawn_wire(tx, rx, seg.clone(), stop.clone(), |_| {});
 
-    let outcome = bounded(move || {
+    let outcome = wire::bounded(TEST_TIMEOUT, move || {
         futures_lite::future::block_on(async move {
             let md = MainDevice::new(
                 pdu_loop,
