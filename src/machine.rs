@@ -248,6 +248,7 @@ impl Machine {
             range_check_programmed_limits: cfg.channel.int("P-CHAN-00498") != 0,
             display_pcs_limits: cfg.channel.int("P-CHAN-00489") != 0,
             move_limit_warning: cfg.manual.int("P-MANU-00014") != 0,
+            workspace_manual_mode: u16::try_from(cfg.channel.int("P-CHAN-00442")).unwrap_or(0),
             enable_timeout_cycles: 1000,
             meas: channel_meas_config(&cfg.channel),
         };
@@ -560,7 +561,7 @@ impl Machine {
         }
         // Program start: configured SLS again (seed 001 §3.3), drives enabled.
         if self.channel.state() != ChannelState::Enabling {
-            self.channel.reset();
+            self.channel.program_start();
         }
         self.settle(u64::from(self.channel.config().enable_timeout_cycles) + 2);
         let names = self
@@ -595,9 +596,19 @@ impl Machine {
                 break RunStatus::Aborted;
             }
             match self.channel.state() {
-                ChannelState::Aborted => break RunStatus::Aborted,
+                ChannelState::Aborted => {
+                    self.channel.area_program_end();
+                    for m in self.channel.take_messages() {
+                        emit(RunEvent::Message(m), &mut events);
+                    }
+                    break RunStatus::Aborted;
+                }
                 ChannelState::Idle if ended => {
                     self.channel.program_end();
+                    self.channel.area_program_end();
+                    for m in self.channel.take_messages() {
+                        emit(RunEvent::Message(m), &mut events);
+                    }
                     break RunStatus::Completed;
                 }
                 ChannelState::Idle => {

@@ -236,4 +236,13 @@ pub mod ids {
     /// Project (seed 000 §4): starting point incomplete, main and additional axes mixed, CIRC on
     /// additional axes.
     pub const AREA_AXES: u32 = 900315;
+    /// Project (seed 000 §2.3 path check, no ID given): the programmed path of a block touches
+    /// or enters an active protection area; the block is not executed, the program aborts.
+    pub const AREA_PATH_PROTECTION: u32 = 900316;
+    /// Project (seed 000 §2.3 path check, no ID given): the programmed path of a block leaves
+    /// the active workspaces; the block is not executed, the program aborts.
+    pub const AREA_PATH_WORKSPACE: u32 = 900317;
+    /// Project (seed 000 §5, with P-MANU-00014): a jog stopped ahead of a workspace / protection
+    /// area boundary (warning).
+    pub const AREA_JOG_STOPPED: u32 = 900318;
 }

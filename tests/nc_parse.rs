@@ -110,6 +110,7 @@ fn show_command(c: &Command) -> String {
                 .collect();
             format!("#SET AX LINK[{}, {}]", show_expr(group), l.join(", "))
         }
+        Command::ControlArea { command } => format!("#CONTROL AREA {command:?}"),
         Command::EnableAxLink { enable, group } => format!(
             "#{} AX LINK{}",
             if *enable { "ENABLE" } else { "DISABLE" },

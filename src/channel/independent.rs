@@ -120,6 +120,11 @@ impl Channel {
             self.begin_stop(ChannelState::Aborted);
             return Prepared::Rejected;
         }
+        // Workspace / protection areas (seed 000 §2.3): the axis's own line.
+        if let Some(m) = self.check_area_path(&segment) {
+            self.report(m);
+            return Prepared::Rejected;
+        }
         if measure.is_some() {
             // A path measurement of the same block must leave this axis's latch to this run
             // (seed 004 §2: independent measurement "in parallel to a path motion of a G100").

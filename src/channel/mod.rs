@@ -17,6 +17,7 @@
 //! velocity profiles; look-ahead blending is not part of this build.
 
 pub mod acyclic;
+pub mod areas;
 pub mod coupling;
 mod cycle;
 mod independent;
@@ -69,6 +70,10 @@ pub struct ChannelConfig {
     pub display_pcs_limits: bool,
     /// P-MANU-00014 `move_limit_warning`.
     pub move_limit_warning: bool,
+    /// P-CHAN-00442 `suppress_workspace_monitoring_manual_mode` (seed 000 §5, §6.2): 0 areas
+    /// monitored in manual mode, selection outside the permitted range is an error (50961 /
+    /// 50962); 1 not monitored in manual mode; 2 monitored, selection outside allowed.
+    pub workspace_manual_mode: u16,
     /// Cycles the drives may take to reach *operation enabled*.
     pub enable_timeout_cycles: u32,
     /// Channel measurement settings (seed 004 §8.2.1).
@@ -242,6 +247,8 @@ pub struct Channel {
     now: Nanos,
     /// Latches recorded for a trace (`None`: not recording).
     latch_log: Option<Vec<(Nanos, usize, f64)>>,
+    /// Workspace and protection areas (seed 000).
+    areas: areas::ChannelAreas,
 }
 
 impl Channel {
@@ -265,7 +272,9 @@ impl Channel {
             sls.set_referenced(i, a.is_referenced());
         }
         let n = axes.len();
+        let names = axes.iter().map(|a| a.name().to_string()).collect();
         Ok(Channel {
+            areas: areas::ChannelAreas::new(names),
             cfg,
             axes,
             sls,
@@ -428,9 +437,18 @@ impl Channel {
         true
     }
 
-    /// Controller reset: restores the configured SLS (seed 001 §3.3), clears the error state and
-    /// re-enables the drives (with fault reset).
+    /// Controller reset: restores the configured SLS (seed 001 §3.3), clears the error state,
+    /// re-enables the drives (with fault reset) and deactivates every workspace / protection
+    /// area (kept for reactivation, seed 000 §3 notice "Controller reset").
     pub fn reset(&mut self) {
+        self.reset_areas();
+        self.program_start();
+    }
+
+    /// Program start: like a controller reset ([`Channel::reset`]) except that workspace and
+    /// protection areas stay active (seed 000 §3 notice "Program end": they "continue to be
+    /// monitored at the next program start").
+    pub fn program_start(&mut self) {
         self.sls.reset();
         self.pcs_offset.iter_mut().for_each(|o| *o = 0.0);
         self.velocity.iter_mut().for_each(|v| *v = 0.0);

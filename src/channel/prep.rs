@@ -129,6 +129,13 @@ impl Channel {
             self.mode = Mode::Aborted;
             return Prepared::Rejected;
         }
+        // Workspace and protection areas: the whole path, exactly (seed 000 §2.3 "Path check").
+        // A violating block is not executed; the program aborts at it.
+        if let Some(m) = self.check_area_path(&segment) {
+            self.push(m);
+            self.mode = Mode::Aborted;
+            return Prepared::Rejected;
+        }
         // Every point of the path must be representable in the drive's INTEGER32 positions.
         for (i, a) in self.axes.iter().enumerate() {
             let (lo, hi) = segment.extent(i);
@@ -172,6 +179,7 @@ impl Channel {
             }
             return Prepared::Empty;
         }
+        self.log_path(&segment);
         self.mode = Mode::Moving(Box::new(Motion {
             segment,
             profile,

@@ -197,6 +197,11 @@ pub enum Command {
         /// Couplings.
         links: Vec<AxLink>,
     },
+    /// `#CONTROL AREA BEGIN|START [..]`, `END`, `ON`, `OFF`, `CLEAR` (seed 000 §3).
+    ControlArea {
+        /// The parsed area command.
+        command: crate::core::monitor::areas::AreaCommand,
+    },
     /// `#ENABLE AX LINK [group]` / `#DISABLE AX LINK [group]`.
     EnableAxLink {
         /// Enable (true) or disable.

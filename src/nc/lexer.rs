@@ -322,6 +322,19 @@ impl<'a> Cursor<'a> {
         self.chars.get(self.pos).map_or(self.end, |c| c.span)
     }
 
+    /// The rest of the block as text; the cursor moves to its end.
+    pub fn rest(&mut self) -> String {
+        let s: String = self
+            .chars
+            .get(self.pos..)
+            .unwrap_or_default()
+            .iter()
+            .map(|c| c.ch)
+            .collect();
+        self.pos = self.chars.len();
+        s
+    }
+
     /// Skip blanks (comments were already turned into blanks).
     pub fn skip_ws(&mut self) {
         while self.peek() == Some(' ') {

@@ -58,6 +58,11 @@
 //!   over further lines as long as it is open (see [`super::lexer`]). Since no block can start
 //!   with `[`, this never changes the meaning of an otherwise valid program.
 //! * `KEY=TORQUE LIMIT` in `#DRIVE` (underscore lost) — see the `commands` submodule.
+//!
+//! 2-path blocks (seed 000 §2.4): after the block number, `:` separates the words of the
+//! reference path from those of the secondary path (`N050 : G0 X200 Y0 : G0 U150 V0`). The
+//! separators carry no meaning of their own here: all words form the one block, so both paths are
+//! interpolated together (and an area definition takes the coordinates its `MONITOR_LVL` needs).
 
 mod commands;
 
@@ -258,6 +263,14 @@ fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PRes
                 Item::Command { command, span }
             }
             '%' => return Err(ParseError::at(span, PERCENT_MISPLACED)),
+            // Seed 000 §2.4: `N050 : G0 X200 Y0 : G0 U150 V0` — the words of the reference path
+            // and of the secondary path of a 2-path block, each after a ':'. Both paths run in
+            // the one block (they are interpolated together).
+            ':' if !first || block.number.is_some() => {
+                p.cur.bump();
+                first = false;
+                continue;
+            }
             _ if c.is_ascii_alphabetic() => {
                 return Err(ParseError::at(
                     span,

@@ -3,9 +3,12 @@
 //! - [`sls`]: software limit switches, command and actual side, G98 / G99, manual-mode ranges
 //!   and the PCS display (seed 001, FCT-A2).
 //!
-//! Workspace and protection areas (seeds 000 / 002) join here later.
+//! - [`areas`]: workspace / protection area commands, definitions and states (seeds 000 / 002).
+//! - [`area_geom`]: exact path-versus-area geometry.
+//! - [`area_monitor`]: the active areas bound to channel axes, checking channel paths.
 
 pub mod area_geom;
+pub mod area_monitor;
 pub mod areas;
 pub mod sls;
 

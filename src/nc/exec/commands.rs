@@ -45,6 +45,7 @@ impl Executor {
                 Ok(())
             }
             Command::MeasConfig { args } => self.meas_config(args, span, ch),
+            Command::ControlArea { command } => self.area_command(command, ch),
             Command::MeasPrepare { args } => {
                 for a in args.iter().filter(|a| a.key.eq_ignore_ascii_case("AXNR")) {
                     let i = self.axnr(a, span, ch)?;

@@ -12,6 +12,7 @@
 //! are ACS (seed 001 §2: "The positions of the SLS are always referred to the axis coordinate
 //! system").
 
+mod areas;
 mod commands;
 mod motion;
 mod vars;
@@ -149,6 +150,8 @@ pub struct Executor {
     /// Positions moved by something other than the program (measurement stop, fixed stop):
     /// re-read the programmed positions from the channel before the next block.
     resync: bool,
+    /// An area definition is open (`#CONTROL AREA BEGIN` … `END`).
+    area_def: Option<areas::OpenArea>,
 }
 
 /// Why a block failed.
@@ -194,6 +197,7 @@ impl Executor {
             pending_meas: None,
             pending_reads: Vec::new(),
             resync: false,
+            area_def: None,
         }
     }
 
@@ -574,6 +578,25 @@ impl Executor {
             crate::core::measure::results::g102(&mut self.frames, &list)
                 .map_err(|e| err(ids::NC_EVALUATION, format!("{e}")))?;
             self.frames_changed(ch);
+            return Ok(end);
+        }
+        // Between #CONTROL AREA BEGIN and END a motion block defines geometry only.
+        if self.defining(ch) {
+            let has_motion = !axes.is_empty() || centre.iter().any(Option::is_some);
+            if has_motion || !independent.is_empty() {
+                let at = BlockRef {
+                    number: block.number,
+                    line: block.span.line,
+                };
+                self.area_definition_block(
+                    at,
+                    &axes,
+                    &centre,
+                    meas_g,
+                    !independent.is_empty(),
+                    ch,
+                )?;
+            }
             return Ok(end);
         }
         // 4. Motion.

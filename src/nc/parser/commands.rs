@@ -57,6 +57,7 @@ const COMMANDS: &[(&str, CommandFn)] = &[
     ("MSG", command_msg),
     ("MEAS", command_meas),
     ("CS", command_cs),
+    ("CONTROL", command_control),
     ("TRAFO", command_trafo),
     ("DRIVE", command_drive),
     ("IDENT", command_ident),
@@ -245,6 +246,33 @@ fn command_trafo(p: &mut BlockParser<'_>, _hash: Span) -> PResult<Command> {
     Ok(Command::Trafo {
         on: p.on_off("#TRAFO")?,
     })
+}
+
+/// `#CONTROL AREA …` (seed 000 §3): the rest of the block is the area command text.
+fn command_control(p: &mut BlockParser<'_>, hash: Span) -> PResult<Command> {
+    let t = p.expect_token("AREA after #CONTROL")?;
+    match &t.kind {
+        TokenKind::Ident(w) if w == "AREA" => {}
+        other => {
+            return Err(ParseError::at(
+                t.span,
+                format!("expected AREA after #CONTROL, found {}", other.describe()),
+            ))
+        }
+    }
+    p.cur.skip_ws();
+    let mut text = p.cur.rest();
+    if !text.contains('[') {
+        p.continue_at_next_line_bracket();
+        let more = p.cur.rest();
+        if !more.is_empty() {
+            text.push(' ');
+            text.push_str(&more);
+        }
+    }
+    let command = crate::core::monitor::areas::parse_area_command(&text)
+        .map_err(|e| ParseError::at(hash, e.to_string()))?;
+    Ok(Command::ControlArea { command })
 }
 
 /// `#DRIVE WR|RD [SYN] [AX=.. KEY=.. VAL=..|P=.. [WAIT]]`.
