@@ -605,7 +605,6 @@ impl Machine {
                 }
                 ChannelState::Idle if ended => {
                     self.channel.program_end();
-                    self.channel.area_program_end();
                     for m in self.channel.take_messages() {
                         emit(RunEvent::Message(m), &mut events);
                     }

@@ -190,10 +190,15 @@ impl Channel {
         self.areas.table.is_defining()
     }
 
-    /// Program end or abort: areas stay; an open definition is discarded (and reported).
-    pub fn area_program_end(&mut self) {
-        if let Some(m) = self.areas.table.program_end() {
-            self.push(m);
+    /// Program end or abort: areas stay; an open definition is discarded and reported as an
+    /// error (the program aborts if it was still running). Returns whether one was open.
+    pub fn area_program_end(&mut self) -> bool {
+        match self.areas.table.program_end() {
+            Some(m) => {
+                self.report(m);
+                true
+            }
+            None => false,
         }
     }
 

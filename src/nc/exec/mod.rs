@@ -321,6 +321,11 @@ impl Executor {
         }
         let Some(block) = self.program.blocks.get(self.pc).cloned() else {
             self.ended = true;
+            // An area definition still open at program end is an error (seed 000 §3.1: "Each
+            // control area must be closed by the command #CONTROL AREA END").
+            if ch.area_program_end() {
+                return Step::Abort;
+            }
             return Step::End;
         };
         self.pc += 1;
@@ -334,6 +339,9 @@ impl Executor {
             Ok(end) => {
                 if end {
                     self.ended = true;
+                    if ch.area_program_end() {
+                        return Step::Abort;
+                    }
                     Step::End
                 } else {
                     Step::Continue
