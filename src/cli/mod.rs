@@ -7,6 +7,7 @@
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
 //! 1 aborted by a CNC error, 2 bad input.
 
+mod areas;
 mod bus;
 mod check;
 mod esi;
@@ -40,6 +41,9 @@ struct Cli {
 enum Command {
     /// Run an NC program on the machine (default: emulated CiA 402 axes X, Y, Z).
     Run(run::RunArgs),
+    /// Workspace and protection areas of an NC program: `areas plot` draws them, the executed
+    /// path and the first violation into an SVG or PNG file.
+    Areas(areas::AreasArgs),
     /// Manual mode: jog one axis continuously or by an increment and report where it stopped.
     Jog(jog::JogArgs),
     /// List the parameters of the seeds (ID, name path, type, default, range).
@@ -78,6 +82,7 @@ pub fn main() -> i32 {
     let result = match cli.command {
         Command::Run(a) => run::run(a),
         Command::Jog(a) => jog::run(a),
+        Command::Areas(a) => areas::run(a),
         Command::Params(a) => params::run(a),
         Command::Check(a) => check::run(a),
         Command::Esi(a) => esi::run(a),
