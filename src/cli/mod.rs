@@ -6,6 +6,10 @@
 //! ```
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
 //! 1 aborted by a CNC error, 2 bad input.
+//!
+//! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `idn`,
+//! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (seed 000 control areas,
+//! see `docs/areas.md`).
 
 mod areas;
 mod bus;
