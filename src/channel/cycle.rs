@@ -185,6 +185,11 @@ impl Channel {
                 let mut events = Vec::new();
                 state.step(dt, &mut self.next, &mut events);
                 for e in events {
+                    if let manual::Event::AreaStopped(..) = e {
+                        // PLC datum `area_mon_violation_detected_r` (seed 000 §6.3): set in the
+                        // cycle the jog stops at the area.
+                        self.areas.violation_detected = true;
+                    }
                     let m = manual::event_message(e, &self.axes, self.cfg.move_limit_warning);
                     if let Some(m) = m {
                         self.messages.push(m.at(self.block));
