@@ -6,7 +6,8 @@
 //! ```
 //! `--program` runs an NC program first (positioning, G98 / G99); then manual mode is selected
 //! and the axis jogs. Prints the position where the axis stopped; warnings (50720 with
-//! P-MANU-00014, 150008) go to stderr.
+//! P-MANU-00014, 150008, 900318 at a workspace / protection area) and errors (50961 / 50962 when
+//! manual mode is selected outside the permitted range) go to stderr.
 
 use super::{load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
