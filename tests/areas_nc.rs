@@ -11,6 +11,7 @@ use fieldprobe::channel::areas::AreaRefusal;
 use fieldprobe::core::monitor::area_monitor::{HitKind, AREA_TOLERANCE};
 use fieldprobe::core::monitor::areas::{AreaGeometry, AreaState, MonitorLevel};
 use fieldprobe::machine::{Machine, RunReport, RunStatus};
+use fieldprobe::messages::CncMessage;
 use fieldprobe::nc::parser::parse;
 use fieldprobe::params::MachineConfig;
 
@@ -44,6 +45,21 @@ fn refusal(m: &Machine) -> AreaRefusal {
         .area_refusal()
         .cloned()
         .expect("a refused block")
+}
+
+/// The first error of an aborted run.
+fn first_error(r: &RunReport) -> CncMessage {
+    assert_eq!(r.status, RunStatus::Aborted, "{:?}", r.messages());
+    r.messages()
+        .into_iter()
+        .find(|m| m.is_error())
+        .cloned()
+        .expect("an error")
+}
+
+/// (message ID, block number).
+fn id_block(m: &CncMessage) -> (u32, Option<u32>) {
+    (m.id, m.block.and_then(|b| b.number))
 }
 
 fn assert_close(a: f64, b: f64, tol: f64, what: &str) {
@@ -339,12 +355,8 @@ N30 #CONTROL AREA ON [ID5]
         &mut m,
         &format!("{setup}N40 G03 X50 Y-100 Z-60 I50 J0\nN50 M30\n"),
     );
-    assert_eq!(r.status, RunStatus::Aborted);
-    let msg = r.messages().into_iter().find(|m| m.is_error()).unwrap();
-    assert_eq!(
-        (msg.id, msg.block.and_then(|b| b.number)),
-        (900316, Some(40))
-    );
+    let msg = first_error(&r);
+    assert_eq!(id_block(&msg), (900316, Some(40)));
     let hit = refusal(&m).hit;
     assert_eq!(hit.id, Some(5));
     // The helix enters where it reaches the top of the excursion range (+ tol): Z = 10.001, or
@@ -429,12 +441,8 @@ fn overlapping_workspaces_form_a_union() {
         &mut m,
         &format!("{UNION_SETUP}N60 G01 X50 Y90\nN70 G01 X250 Y90\nN80 M30\n"),
     );
-    assert_eq!(r.status, RunStatus::Aborted);
-    let msg = r.messages().into_iter().find(|m| m.is_error()).unwrap();
-    assert_eq!(
-        (msg.id, msg.block.and_then(|b| b.number)),
-        (900317, Some(70))
-    );
+    let msg = first_error(&r);
+    assert_eq!(id_block(&msg), (900317, Some(70)));
     assert!(msg.text.contains("workspace 1"), "{msg}");
     let hit = refusal(&m).hit;
     assert_eq!((hit.kind, hit.id), (HitKind::Workspace, Some(1)));
@@ -493,12 +501,8 @@ fn activation_needs_a_valid_tcp() {
         &mut m,
         &format!("{SEED_POLY}N150 #CONTROL AREA ON [ID3]\nN160 M30\n"),
     );
-    assert_eq!(r.status, RunStatus::Aborted);
-    let msg = r.messages().into_iter().find(|m| m.is_error()).unwrap();
-    assert_eq!(
-        (msg.id, msg.block.and_then(|b| b.number)),
-        (900314, Some(150))
-    );
+    let msg = first_error(&r);
+    assert_eq!(id_block(&msg), (900314, Some(150)));
     assert_eq!(m.channel().areas().state(3), AreaState::Defined);
     // From inside it activates.
     let r = run_on(
@@ -623,12 +627,8 @@ fn seed_two_path_example_defines_an_imcs_area_on_u_v_and_is_monitored() {
         &mut m,
         "N10 #CONTROL AREA ON [ID=1]\nN20 G01 G90 U100 V100 W50 F5000\nN30 X500 Y-500\nN40 U200\nN50 M30\n",
     );
-    assert_eq!(r.status, RunStatus::Aborted);
-    let msg = r.messages().into_iter().find(|m| m.is_error()).unwrap();
-    assert_eq!(
-        (msg.id, msg.block.and_then(|b| b.number)),
-        (900317, Some(40))
-    );
+    let msg = first_error(&r);
+    assert_eq!(id_block(&msg), (900317, Some(40)));
     assert!(msg.text.contains("U=150.001"), "{msg}");
     let p = pos(&m);
     assert_close(p[0], 500.0, 1e-9, "X moved freely");
@@ -748,12 +748,8 @@ fn definition_left_open_at_program_end_is_an_error_and_discarded() {
         &mut m,
         "N10 #CONTROL AREA BEGIN [ID3 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]\nN20 G01 G90 X0 Y0 F100\nN30 M30\n",
     );
-    assert_eq!(r.status, RunStatus::Aborted);
-    let msg = r.messages().into_iter().find(|m| m.is_error()).unwrap();
-    assert_eq!(
-        (msg.id, msg.block.and_then(|b| b.number)),
-        (900312, Some(10))
-    );
+    let msg = first_error(&r);
+    assert_eq!(id_block(&msg), (900312, Some(10)));
     assert_eq!(m.channel().areas().state(3), AreaState::Cleared);
     assert!(!m.channel().area_defining());
     // The next program starts clean: motion blocks move again.

@@ -32,7 +32,7 @@
 //! written), 2 bad input (unreadable file, parse error as `file:line:col: …`, unknown `--out`
 //! extension).
 
-use super::{load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use super::{load_machine, load_program, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::channel::areas::AreaRefusal;
 use fieldprobe::core::monitor::area_monitor::HitKind;
@@ -40,7 +40,6 @@ use fieldprobe::core::monitor::areas::{AreaGeometry, AreaKind, AreaState};
 use fieldprobe::core::path::Segment;
 use fieldprobe::machine::{LinkChoice, Machine, RunEvent, RunStatus};
 use fieldprobe::nc::exec::Executor;
-use fieldprobe::nc::parser::parse;
 use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
 use std::io::Write;
@@ -114,13 +113,8 @@ fn plot(a: PlotArgs) -> anyhow::Result<i32> {
         }
     };
     let file = a.program.display().to_string();
-    let src = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {file}"))?;
-    let program = match parse(&src) {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
-            return Ok(EXIT_BAD_INPUT);
-        }
+    let Some(program) = load_program(&a.program)? else {
+        return Ok(EXIT_BAD_INPUT);
     };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
     let mut machine = Machine::with_link(&cfg, &LinkChoice::new("sim"))?;

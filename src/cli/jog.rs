@@ -9,11 +9,10 @@
 //! P-MANU-00014, 150008, 900318 at a workspace / protection area) and errors (50961 / 50962 when
 //! manual mode is selected outside the permitted range) go to stderr.
 
-use super::{load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use super::{load_machine, load_program, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::channel::ChannelState;
 use fieldprobe::machine::{Machine, RunStatus};
-use fieldprobe::nc::parser::parse;
 use std::path::PathBuf;
 
 /// Arguments of `fieldprobe jog`.
@@ -57,14 +56,8 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
         .axis_index(&a.axis)
         .with_context(|| format!("jog: unknown axis '{}'", a.axis))?;
     if let Some(p) = &a.program {
-        let file = p.display().to_string();
-        let src = std::fs::read_to_string(p).with_context(|| format!("cannot read {file}"))?;
-        let program = match parse(&src) {
-            Ok(p) => p,
-            Err(e) => {
-                eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
-                return Ok(EXIT_BAD_INPUT);
-            }
+        let Some(program) = load_program(p)? else {
+            return Ok(EXIT_BAD_INPUT);
         };
         let report = m.run_program(&program, &mut |e| {
             if let fieldprobe::machine::RunEvent::Message(msg) = e {

@@ -105,6 +105,21 @@ pub fn main() -> i32 {
     }
 }
 
+/// Read and parse an NC program. A parse error is printed as `file:line:col: message` and gives
+/// `Ok(None)` (the caller exits with [`EXIT_BAD_INPUT`]); an unreadable file is an `Err`.
+fn load_program(path: &std::path::Path) -> anyhow::Result<Option<fieldprobe::nc::ast::Program>> {
+    use anyhow::Context;
+    let file = path.display().to_string();
+    let src = std::fs::read_to_string(path).with_context(|| format!("cannot read {file}"))?;
+    match fieldprobe::nc::parser::parse(&src) {
+        Ok(p) => Ok(Some(p)),
+        Err(e) => {
+            eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
+            Ok(None)
+        }
+    }
+}
+
 /// Load the machine file (or the default machine) and apply `--set` assignments.
 fn load_machine(
     machine: Option<&std::path::Path>,

@@ -1,10 +1,9 @@
 //! `fieldprobe run`.
 
-use super::{load_machine, LinkArgs, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use super::{load_machine, load_program, LinkArgs, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus};
 use fieldprobe::nc::exec::Executor;
-use fieldprobe::nc::parser::parse;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -52,13 +51,8 @@ fn parse_axis_pos(opt: &str, s: &str) -> anyhow::Result<(String, f64)> {
 /// Run the command; returns the exit code.
 pub fn run(a: RunArgs) -> anyhow::Result<i32> {
     let file = a.program.display().to_string();
-    let src = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {file}"))?;
-    let program = match parse(&src) {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
-            return Ok(EXIT_BAD_INPUT);
-        }
+    let Some(program) = load_program(&a.program)? else {
+        return Ok(EXIT_BAD_INPUT);
     };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
     let mut machine = Machine::with_link(&cfg, &a.link.choice(&cfg))?;
