@@ -148,7 +148,12 @@ fn the_master_remaps_pdos_and_reads_objects_over_sdo() {
                 code: 0x0602_0000, ..
             },
         ) => {
-            assert!(e.to_string().contains("object does not exist"), "{e}")
+            assert!(
+                e.to_string()
+                    .starts_with("node 1: access to 0x5fff:00 refused")
+                    && e.to_string().contains("object does not exist"),
+                "{e}"
+            )
         }
         other => panic!("{other:?}"),
     }

@@ -98,7 +98,7 @@ fn sdo_by_node_id_with_aborts_in_words() {
     assert!(
         stderr(&o).contains("node 2")
             && stderr(&o).contains("0x5000:00")
-            && stderr(&o).contains("0x06020000 object does not exist"),
+            && stderr(&o).contains("abort code 0x06020000 (object does not exist"),
         "{}",
         stderr(&o)
     );

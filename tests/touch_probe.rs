@@ -1013,7 +1013,7 @@ fn disabling_the_drive_while_armed_fails_the_latch() {
     assert_eq!(
         b.link.write_object(0, 0x60B9, 0, 1),
         Err(LinkError::Abort {
-            device: 0,
+            device: fieldprobe::link::Peer::Device(0),
             index: 0x60B9,
             sub: 0,
             code: 0x0601_0002

@@ -231,10 +231,10 @@ fn target(to: &SdoTo) -> anyhow::Result<Target> {
 /// Exit code and message for a refused access.
 fn refused(e: LinkError) -> anyhow::Result<i32> {
     eprintln!("fieldprobe: {e}");
-    Ok(match e {
-        LinkError::Abort { .. } => EXIT_CNC_ERROR,
-        LinkError::Other(m) if m.contains("SoE") || m.contains("aborted") => EXIT_CNC_ERROR,
-        _ => EXIT_BAD_INPUT,
+    Ok(if e.is_refusal() {
+        EXIT_CNC_ERROR
+    } else {
+        EXIT_BAD_INPUT
     })
 }
 

@@ -28,7 +28,7 @@
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
-use super::{decode_le, object_type, Link, LinkError, ProcessImage};
+use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
 use crate::bus::can::{
     CanBus, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus, VirtualCan,
     VirtualEndpoint,
@@ -506,7 +506,7 @@ impl CanopenLink {
         self.note(seen, now)?;
         r.map_err(|(e, text)| match e {
             Some(SdoError::Abort { code, .. }) => LinkError::Abort {
-                device: i,
+                device: Peer::Node(node),
                 index,
                 sub,
                 code,
@@ -831,7 +831,15 @@ impl CanSession {
             Ok(())
         });
         self.note(&seen);
-        r.map_err(|(_, text)| other(format!("node {node}: {text}")))
+        r.map_err(|(e, text)| match e {
+            Some(SdoError::Abort { code, .. }) => LinkError::Abort {
+                device: Peer::Node(node),
+                index,
+                sub,
+                code,
+            },
+            _ => other(format!("node {node}: {text}")),
+        })
     }
 
     /// Find the nodes: an SDO upload of 0x1000 to every node id 1 … 127 at once (nodes in

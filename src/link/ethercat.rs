@@ -50,7 +50,7 @@ use ethercrab::{
     DcSync, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceGroup, Timeouts,
 };
 
-use super::{decode_le, object_type, Link, LinkError, ProcessImage};
+use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
 use crate::bus::ethercat::mailbox::{CoeClient, MailboxError};
 use crate::bus::ethercat::pcap::{PcapWriter, TimestampResolution};
 use crate::bus::ethercat::soe::SoeClient;
@@ -712,13 +712,25 @@ impl Session {
         } = e
         {
             return LinkError::Abort {
-                device: position,
+                device: Peer::Device(position),
                 index,
                 sub,
                 code,
             };
         }
         let name = self.devices.get(position).map_or("?", |d| d.name.as_str());
+        if let MailboxError::Soe {
+            idn, code, text, ..
+        } = e
+        {
+            return LinkError::Soe {
+                device: position,
+                name: name.to_string(),
+                idn,
+                code,
+                text,
+            };
+        }
         LinkError::Other(format!("device {position} ({name}): {e}"))
     }
 
@@ -907,7 +919,7 @@ async fn write_pdo_mapping(
 fn mailbox_error(device: usize, index: u16, sub: u8) -> impl Fn(MailboxError) -> LinkError {
     move |e| match e {
         MailboxError::Abort { code, .. } => LinkError::Abort {
-            device,
+            device: Peer::Device(device),
             index,
             sub,
             code,

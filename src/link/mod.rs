@@ -54,10 +54,10 @@ pub enum LinkError {
         images: usize,
     },
     /// An acyclic access was refused by the device (CiA 301 SDO abort code).
-    #[error("device {device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x} ({})", crate::bus::ethercat::mailbox::abort_text(*code))]
+    #[error("{device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x} ({})", crate::bus::ethercat::mailbox::abort_text(*code))]
     Abort {
-        /// Device (axis) index on the link.
-        device: usize,
+        /// Who refused: a device position on the link, or a CANopen node id.
+        device: Peer,
         /// Object index.
         index: u16,
         /// Sub-index.
@@ -65,9 +65,50 @@ pub enum LinkError {
         /// CiA 301 abort code.
         code: u32,
     },
+    /// A SERCOS parameter access was refused by the drive (SoE error reply, IEC 61800-7-204
+    /// error code).
+    #[error("device {device} ({name}): SoE {idn_name} (drive 0): error {code:#06x} ({text})", idn_name = crate::drive::sercos::idn_name(*.idn))]
+    Soe {
+        /// Device position on the link.
+        device: usize,
+        /// Device name (ESI).
+        name: String,
+        /// The IDN.
+        idn: u16,
+        /// SERCOS error code.
+        code: u16,
+        /// The code in words.
+        text: &'static str,
+    },
     /// Anything else (setup, configuration).
     #[error("{0}")]
     Other(String),
+}
+
+impl LinkError {
+    /// The device itself refused the access (SDO abort, SoE error): the request reached it and
+    /// was answered, as opposed to a transport, setup or input problem.
+    pub fn is_refusal(&self) -> bool {
+        matches!(self, LinkError::Abort { .. } | LinkError::Soe { .. })
+    }
+}
+
+/// The peer of an acyclic access, as error messages name it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Peer {
+    /// Device (axis) position on the link (EtherCAT, sim).
+    Device(usize),
+    /// CANopen node id.
+    Node(u8),
+}
+
+impl std::fmt::Display for Peer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Peer::Device(d) => write!(f, "device {d}"),
+            Peer::Node(n) => write!(f, "node {n}"),
+        }
+    }
 }
 
 /// The transport seam: one cyclic exchange.

@@ -202,7 +202,7 @@ impl Link for SimLink {
         self.device(device)?
             .read_object(index, sub)
             .map_err(|code| LinkError::Abort {
-                device,
+                device: super::Peer::Device(device),
                 index,
                 sub,
                 code,
@@ -219,7 +219,7 @@ impl Link for SimLink {
         self.device(device)?
             .write_object(index, sub, value)
             .map_err(|code| LinkError::Abort {
-                device,
+                device: super::Peer::Device(device),
                 index,
                 sub,
                 code,
