@@ -273,6 +273,13 @@ impl Machine {
                 (*g, v)
             })
             .collect();
+        // CANopen node ids: the axis's `node` key, else its axis number.
+        let node_ids = if choice.link.starts_with("canopen") || choice.link.starts_with("socketcan")
+        {
+            cfg.node_ids().map_err(MachineError::Config)?
+        } else {
+            Vec::new()
+        };
         let link: Box<dyn Link> = match choice.link.as_str() {
             "sim" => Box::new(SimLink::from_models(models, cycle)),
             other
@@ -284,6 +291,7 @@ impl Machine {
                     crate::link::canopen::CanopenLink::on_link(
                         other,
                         &defs,
+                        &node_ids,
                         cycle,
                         choice.candump.as_deref(),
                     )

@@ -200,3 +200,45 @@ fn run_over_canopen_with_a_candump_log() {
     ]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn node_ids_from_the_machine_configuration() {
+    // Z at node 42: the scan finds it there, and meas1 runs over it with the seed's value.
+    let o = fieldprobe(&["can", "scan", "--link", "canopen-emu", "--set", "Z.node=42"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    let nodes: Vec<&str> = out
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(nodes, ["1", "2", "42"]);
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("node42.log");
+    let o = fieldprobe(&[
+        "run",
+        "examples/nc/seed004/meas1.nc",
+        "--probe-at",
+        "Z=100",
+        "--link",
+        "canopen-emu",
+        "--set",
+        "Z.node=42",
+        "--candump",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stdout(&o).contains("V.A.MEAS.ACS.VALUE.Z=100.000000"));
+    // Node 42's heartbeat (0x700 + 42 = 0x72A) is on the bus; nothing answers as node 3.
+    let log = std::fs::read_to_string(&log).unwrap();
+    assert!(log.contains(" 72A#"), "{log}");
+    assert!(!log.contains(" 703#"), "{log}");
+    // Two axes on one id: bad input, naming the axes.
+    let o = fieldprobe(&["can", "scan", "--link", "canopen-emu", "--set", "Z.node=1"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("axes X and Z both have CANopen node id 1"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -93,3 +93,31 @@ fn probing_input_is_validated_per_drive_type() {
         .unwrap();
     assert!(Machine::new(&cfg).is_err(), "EXT_PROBE_WITH_DRIVE: 1 … 2");
 }
+
+#[test]
+fn canopen_node_ids_come_from_the_node_key_or_the_axis_number() {
+    let text =
+        "[[axis]]\nname = \"X\"\n[[axis]]\nname = \"Y\"\nnode = 42\n[[axis]]\nname = \"Z\"\n";
+    let mut cfg = MachineConfig::parse(text, "m.toml").unwrap();
+    assert_eq!(cfg.axes[1].node, Some(42));
+    assert_eq!(cfg.node_ids().unwrap(), vec![1, 42, 3]);
+    cfg.apply_set("Z.node=7").unwrap();
+    assert_eq!(cfg.node_ids().unwrap(), vec![1, 42, 7]);
+    // Two axes on one id: named.
+    cfg.apply_set("Z.node=1").unwrap();
+    let e = cfg.node_ids().unwrap_err();
+    assert!(e.contains("axes X and Z") && e.contains("node id 1"), "{e}");
+    // Out of range, in the file (line named) and on the command line.
+    for bad in ["0", "128", "\"5\"", "-1"] {
+        let text = format!("[[axis]]\nname = \"X\"\nnode = {bad}\n");
+        let e = MachineConfig::parse(&text, "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("m.toml") && e.contains(":3") && e.contains("1 … 127"),
+            "{bad}: {e}"
+        );
+    }
+    let e = cfg.apply_set("X.node=300").unwrap_err().to_string();
+    assert!(e.contains("1 … 127"), "{e}");
+}

@@ -47,27 +47,27 @@ impl BusArgs {
         self.link.starts_with("canopen") || self.link.starts_with("socketcan:")
     }
 
+    /// The machine's drives and CANopen node ids.
+    #[allow(clippy::type_complexity)]
     fn drives(
         &self,
-    ) -> anyhow::Result<Vec<std::sync::Arc<fieldprobe::drive::catalogue::DriveDefinition>>> {
+    ) -> anyhow::Result<(
+        Vec<std::sync::Arc<fieldprobe::drive::catalogue::DriveDefinition>>,
+        Vec<u8>,
+    )> {
         let cfg = load_machine(self.machine.as_deref(), &self.sets)?;
-        cfg.axes
-            .iter()
-            .map(|a| {
-                fieldprobe::drive::catalogue::load(&a.drive)
-                    .map(std::sync::Arc::new)
-                    .with_context(|| format!("axis {}: drive '{}'", a.name, a.drive))
-            })
-            .collect()
+        let drives = load_drives(&cfg)?;
+        let ids = cfg.node_ids().map_err(|e| anyhow::anyhow!("{e}"))?;
+        Ok((drives, ids))
     }
 
     fn open_can(&self) -> anyhow::Result<CanSession> {
-        let drives = if self.link == "canopen-emu" {
+        let (drives, ids) = if self.link == "canopen-emu" {
             self.drives()?
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new())
         };
-        CanSession::open(&self.link, &drives, self.candump.as_deref())
+        CanSession::open(&self.link, &drives, &ids, self.candump.as_deref())
             .map_err(|e| anyhow::anyhow!("--link {}: {e}", self.link))
     }
 
@@ -79,15 +79,7 @@ impl BusArgs {
             )
         })?;
         let drives = if wire == Wire::Emulated {
-            let cfg = load_machine(self.machine.as_deref(), &self.sets)?;
-            cfg.axes
-                .iter()
-                .map(|a| {
-                    fieldprobe::drive::catalogue::load(&a.drive)
-                        .map(std::sync::Arc::new)
-                        .with_context(|| format!("axis {}: drive '{}'", a.name, a.drive))
-                })
-                .collect::<anyhow::Result<Vec<_>>>()?
+            load_drives(&load_machine(self.machine.as_deref(), &self.sets)?)?
         } else {
             Vec::new()
         };
@@ -98,6 +90,20 @@ impl BusArgs {
         };
         Session::open(&wire, &spec).map_err(|e| anyhow::anyhow!("--link {}: {e}", self.link))
     }
+}
+
+/// The drive definition of every axis of `cfg`.
+fn load_drives(
+    cfg: &fieldprobe::params::MachineConfig,
+) -> anyhow::Result<Vec<std::sync::Arc<fieldprobe::drive::catalogue::DriveDefinition>>> {
+    cfg.axes
+        .iter()
+        .map(|a| {
+            fieldprobe::drive::catalogue::load(&a.drive)
+                .map(std::sync::Arc::new)
+                .with_context(|| format!("axis {}: drive '{}'", a.name, a.drive))
+        })
+        .collect()
 }
 
 /// Arguments of `fieldprobe scan`.

@@ -2,7 +2,7 @@
 //!
 //! | `--link` | bus | nodes |
 //! |---|---|---|
-//! | `canopen-emu` | in-process [`VirtualCan`]: the master on one endpoint, the [`CanopenSegment`] on another | one emulated CiA 402 node per axis (node id = axis number + 1) |
+//! | `canopen-emu` | in-process [`VirtualCan`]: the master on one endpoint, the [`CanopenSegment`] on another | one emulated CiA 402 node per axis at the node ids the machine gives (default 1, 2, …) |
 //! | `canopen-udp[:GROUP:PORT]`, `socketcan:IF` | a [`CanBus`] given to [`CanopenLink::open`] | whatever answers |
 //!
 //! # Start-up
@@ -143,11 +143,12 @@ impl Transport {
         Ok(v)
     }
 
-    /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives`, ids 1 …;
-    /// `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
+    /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives` at node ids
+    /// `ids`; `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
     fn open(
         link: &str,
         drives: &[Arc<DriveDefinition>],
+        ids: &[u8],
         cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Transport, LinkError> {
@@ -163,7 +164,8 @@ impl Transport {
                             d.profile.name()
                         )));
                     }
-                    EmulatedNode::new((i + 1) as u8, d)
+                    let id = ids.get(i).copied().unwrap_or((i + 1) as u8);
+                    EmulatedNode::new(id, d)
                         .map_err(|e| other(format!("axis {i}: {e}")))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
@@ -266,6 +268,29 @@ fn other(m: String) -> LinkError {
     LinkError::Other(m)
 }
 
+/// Node ids 1 … n.
+fn default_ids(n: usize) -> Result<Vec<u8>, LinkError> {
+    if n > 127 {
+        return Err(other(format!(
+            "{n} drives: a CAN link has at most 127 nodes"
+        )));
+    }
+    Ok((1..=n as u8).collect())
+}
+
+/// Node ids must be 1 … 127 and distinct.
+fn check_ids(ids: &[u8]) -> Result<(), LinkError> {
+    for (k, id) in ids.iter().enumerate() {
+        if !(1..=127).contains(id) {
+            return Err(other(format!("node id {id} (axis {k}): allowed 1 … 127")));
+        }
+        if let Some(j) = ids[..k].iter().position(|x| x == id) {
+            return Err(other(format!("node id {id} is given to axes {j} and {k}")));
+        }
+    }
+    Ok(())
+}
+
 impl CanopenLink {
     /// `canopen-emu`: one emulated CiA 402 node per drive (node id = position + 1) and the
     /// master, in process; brought to operational.
@@ -279,22 +304,24 @@ impl CanopenLink {
         cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
-        let bus = Transport::open("canopen-emu", drives, cycle, candump)?;
-        let ids: Vec<u8> = (1..=drives.len() as u8).collect();
+        let ids = default_ids(drives.len())?;
+        let bus = Transport::open("canopen-emu", drives, &ids, cycle, candump)?;
         CanopenLink::start(bus, drives, &ids)
     }
 
-    /// A master for `drives` (node ids 1 …) on the CAN link named `link` (`canopen-emu`,
-    /// `canopen-udp[:GROUP:PORT]`, `socketcan:IF`), brought to operational.
+    /// A master for `drives` at node ids `ids` (one per drive, distinct, 1 … 127) on the CAN
+    /// link named `link` (`canopen-emu`: emulated nodes at those ids, `canopen-udp[:GROUP:PORT]`,
+    /// `socketcan:IF`), brought to operational.
     pub fn on_link(
         link: &str,
         drives: &[Arc<DriveDefinition>],
+        ids: &[u8],
         cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
-        let bus = Transport::open(link, drives, cycle, candump)?;
-        let ids: Vec<u8> = (1..=drives.len() as u8).collect();
-        CanopenLink::start(bus, drives, &ids)
+        check_ids(ids)?;
+        let bus = Transport::open(link, drives, ids, cycle, candump)?;
+        CanopenLink::start(bus, drives, ids)
     }
 
     /// A master on `bus` for nodes `ids` (one per drive), brought to operational.
@@ -738,14 +765,16 @@ impl std::fmt::Debug for CanSession {
 }
 
 impl CanSession {
-    /// Open `link` (`canopen-emu`: the emulated nodes of `drives`, ids 1 …;
+    /// Open `link` (`canopen-emu`: the emulated nodes of `drives` at node ids `ids`;
     /// `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
     pub fn open(
         link: &str,
         drives: &[Arc<DriveDefinition>],
+        ids: &[u8],
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
-        let bus = Transport::open(link, drives, Nanos::from_micros(1000), candump)?;
+        check_ids(ids)?;
+        let bus = Transport::open(link, drives, ids, Nanos::from_micros(1000), candump)?;
         let mut s = CanSession {
             bus,
             t0: Instant::now(),

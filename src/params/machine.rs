@@ -12,6 +12,8 @@
 //! name = "X"                           # project key, required: X Y Z A B C U V W (+ digits)
 //! drive = "cia402-generic"             # project key: drives/<name>.toml
 //! referenced = true                    # project key: axis referenced at start
+//! node = 5                             # project key: CANopen node id 1 ..= 127 on CAN links
+//!                                      # (default: axis number, i.e. 1, 2, …)
 //! list = "x_axis.lis"                  # project key (also in [channel] / [manual]): an ISG
 //!                                      # parameter-list file, relative to this file, applied
 //!                                      # before the table's own keys
@@ -53,6 +55,9 @@ pub struct AxisConfig {
     /// Whether the axis is referenced at start (software limit switches are active only on
     /// referenced axes, seed 001 §1).
     pub referenced: bool,
+    /// CANopen node id (1 ..= 127) of the axis's drive on a CAN link; `None`: the axis number
+    /// (1-based position in the file).
+    pub node: Option<u8>,
     /// The axis parameter list (P-AXIS-*).
     pub params: ParamSet,
 }
@@ -193,6 +198,7 @@ impl MachineConfig {
                     name: name.to_string(),
                     drive: DEFAULT_DRIVE.to_string(),
                     referenced: true,
+                    node: None,
                     params,
                 }
             })
@@ -280,6 +286,35 @@ impl MachineConfig {
             }
         }
         Err(unknown_parameter(key, &origin))
+    }
+
+    /// CANopen node id per axis: its `node` key, else its axis number (1, 2, …). Two axes
+    /// with the same id, or more than 127 axes without ids, are an error naming the axes.
+    pub fn node_ids(&self) -> Result<Vec<u8>, String> {
+        let mut ids: Vec<u8> = Vec::with_capacity(self.axes.len());
+        for (i, a) in self.axes.iter().enumerate() {
+            let id = match a.node {
+                Some(n) => n,
+                None => u8::try_from(i + 1)
+                    .ok()
+                    .filter(|n| *n <= 127)
+                    .ok_or_else(|| {
+                        format!(
+                            "axis {}: no 'node' key and axis number {} > 127",
+                            a.name,
+                            i + 1
+                        )
+                    })?,
+            };
+            if let Some(j) = ids.iter().position(|x| *x == id) {
+                return Err(format!(
+                    "axes {} and {} both have CANopen node id {id} (set 'node' in the machine file)",
+                    self.axes[j].name, a.name
+                ));
+            }
+            ids.push(id);
+        }
+        Ok(ids)
     }
 
     /// The axis with this name.
@@ -455,6 +490,7 @@ impl MachineConfig {
         let mut name: Option<(String, usize)> = None;
         let mut drive = DEFAULT_DRIVE.to_string();
         let mut referenced = true;
+        let mut node = None;
         let mut params = ParamSet::new(Scope::Axis);
         for leaf in leaves.iter().filter(|l| l.key == "list") {
             apply_list_leaf(&mut params, leaf, ctx)?;
@@ -501,11 +537,18 @@ impl MachineConfig {
                         })
                     }
                 },
+                "node" => {
+                    let text = match leaf.value {
+                        Value::Integer(i) => i.value().to_string(),
+                        _ => String::new(),
+                    };
+                    node = Some(node_id(&text, &origin)?);
+                }
                 _ => set_leaf(
                     &mut params,
                     leaf,
                     ctx,
-                    &["name", "drive", "referenced", "list"],
+                    &["name", "drive", "referenced", "node", "list"],
                 )?,
             }
         }
@@ -522,15 +565,39 @@ impl MachineConfig {
             name,
             drive,
             referenced,
+            node,
             params,
         });
         Ok(())
     }
 }
 
+/// A CANopen node id `1 ..= 127` (project key `node`).
+fn node_id(text: &str, origin: &Origin) -> Result<u8, ParamError> {
+    text.trim()
+        .parse::<u8>()
+        .ok()
+        .filter(|n| (1..=127).contains(n))
+        .ok_or_else(|| ParamError::Config {
+            origin: origin.clone(),
+            message: format!(
+                "'node' = {}: expected a CANopen node id, an integer 1 … 127",
+                if text.is_empty() {
+                    "(not an integer)"
+                } else {
+                    text
+                }
+            ),
+        })
+}
+
 impl AxisConfig {
     fn apply(&mut self, key: &str, value: &str, origin: &Origin) -> Result<(), ParamError> {
         match key {
+            "node" => {
+                self.node = Some(node_id(strip_quotes(value), origin)?);
+                Ok(())
+            }
             "name" => Err(ParamError::Config {
                 origin: origin.clone(),
                 message: format!(

@@ -10,6 +10,7 @@
 #![allow(dead_code)] // each test crate uses its own subset
 
 use std::{
+    ffi::OsStr,
     io::Read,
     path::{Path, PathBuf},
     process::{Child, Command, Stdio},
@@ -87,12 +88,18 @@ pub const NETNS_SETUP: &str =
 
 /// Can this machine create a user + network namespace with multicast on `lo`?
 pub fn namespace_probe() -> Result<(), String> {
+    namespace_probe_with(NETNS_SETUP, "multicast on lo")
+}
+
+/// Can this machine create a user + network namespace and run `setup` (`what`, for the message)
+/// in it? At most 10 s.
+pub fn namespace_probe_with(setup: &str, what: &str) -> Result<(), String> {
     let mut cmd = Command::new("unshare");
-    cmd.args(["-rn", "sh", "-c", NETNS_SETUP]);
+    cmd.args(["-rn", "sh", "-c", setup]);
     match try_run_bounded(&mut cmd, Duration::from_secs(10))? {
         (Some(s), _, _) if s.success() => Ok(()),
         (Some(s), _, err) => Err(format!(
-            "`unshare -rn` + multicast on lo failed ({s}): {}",
+            "`unshare -rn` + {what} failed ({s}): {}",
             err.trim()
         )),
         (None, _, _) => Err("`unshare -rn` did not finish within 10 s".into()),
@@ -114,27 +121,32 @@ pub fn ensure_venv() -> PathBuf {
         Some(v) => PathBuf::from(v),
         None => manifest_path("target/can-venv"),
     };
-    let t0 = Instant::now();
-    let (status, out, err) = run_bounded(
-        Command::new("bash")
-            .arg(manifest_path("scripts/python-can-venv.sh"))
-            .arg(&venv),
+    let python = build_venv(
+        "scripts/python-can-venv.sh",
+        &venv,
         VENV_TIMEOUT,
+        "python-can / canopen could not be installed (PyPI unreachable?)",
     );
-    eprintln!("python-can venv ({:?}): {}{}", t0.elapsed(), out, err);
-    match status {
-        Some(s) if s.success() => {}
-        Some(s) => panic!(
-            "scripts/python-can-venv.sh failed ({s}); python-can / canopen could not be \
-             installed (PyPI unreachable?):\n{out}\n{err}"
-        ),
-        None => panic!(
-            "scripts/python-can-venv.sh did not finish within {VENV_TIMEOUT:?}:\n{out}\n{err}"
-        ),
-    }
-    let python = venv.join("bin/python");
     *done = Some(python.clone());
     python
+}
+
+/// Run `bash SCRIPT VENV` (idempotent venv builder, `script` relative to the crate) at most
+/// `timeout`; returns the venv's python. A failure panics with the script's output and
+/// `on_failure` (registry unreachable is a test failure, not a skip).
+pub fn build_venv(script: &str, venv: &Path, timeout: Duration, on_failure: &str) -> PathBuf {
+    let t0 = Instant::now();
+    let (status, out, err) = run_bounded(
+        Command::new("bash").arg(manifest_path(script)).arg(venv),
+        timeout,
+    );
+    eprintln!("{script} ({:?}): {}{}", t0.elapsed(), out, err);
+    match status {
+        Some(s) if s.success() => {}
+        Some(s) => panic!("{script} failed ({s}); {on_failure}:\n{out}\n{err}"),
+        None => panic!("{script} did not finish within {timeout:?}:\n{out}\n{err}"),
+    }
+    venv.join("bin/python")
 }
 
 /// Outer half of a test: re-run `test_name` inside a new namespace with `inner_env` = the
@@ -149,6 +161,12 @@ pub fn run_in_namespace(test_name: &str, inner_env: &str, timeout: Duration, nee
     } else {
         PathBuf::from("python3")
     };
+    rerun_in_namespace(test_name, inner_env, python.as_os_str(), timeout);
+}
+
+/// Re-run this test binary's `test_name` under `unshare -rn` with `inner_env` = `value`, at
+/// most `timeout` (killed then); the child must succeed and print `INNER OK`.
+pub fn rerun_in_namespace(test_name: &str, inner_env: &str, value: &OsStr, timeout: Duration) {
     let exe = std::env::current_exe().expect("current_exe");
     let t0 = Instant::now();
     let (status, out, err) = run_bounded(
@@ -157,7 +175,7 @@ pub fn run_in_namespace(test_name: &str, inner_env: &str, timeout: Duration, nee
             .arg("--")
             .arg(&exe)
             .args([test_name, "--exact", "--nocapture", "--test-threads=1"])
-            .env(inner_env, &python),
+            .env(inner_env, value),
         timeout,
     );
     eprintln!(
@@ -186,4 +204,55 @@ pub fn netns_setup() {
         .status()
         .expect("run sh");
     assert!(s.success(), "{NETNS_SETUP}: {s}");
+}
+
+/// What `fieldprobe run examples/nc/seed004/meas1.nc` prints (seed 004 §5 meas1 annotations).
+pub const SEED004_MEAS1: [&str; 9] = [
+    "V.A.MESS.Z=100.000000",
+    "V.A.MEAS.ACS.VALUE.Z=100.000000",
+    "V.A.MEAS.PCS.VALUE.Z=100.000000",
+    "V.A.MOFFS.Z=80.000000",
+    "V.A.MEIN.Z=0.000000",
+    "V.A.MEIN.Z=80.000000",
+    "V.A.ABS.Z=180.000000",
+    "V.A.MEIN.Z=0.000000",
+    "V.A.ABS.Z=100.000000",
+];
+
+/// `fieldprobe run examples/nc/seed004/meas1.nc --link LINK` against `fieldprobe sim SIM`
+/// started in the background, both in one shell in a private namespace: `timeout 90 WRAP… sh
+/// -c 'PRELUDE timeout 60 fieldprobe sim SIM --seconds 60 & sleep 0.5; timeout 60 fieldprobe
+/// run …'` in the crate directory (`wrap` makes the namespace, e.g. `unshare -rn` or
+/// `scripts/netns.sh`). `probe` first: on `Err` prints `SKIP test_name` and returns `None`.
+/// Otherwise the exit code of the run (`None`: killed), its stdout and its stderr.
+pub fn meas1_against_sim(
+    test_name: &str,
+    probe: impl FnOnce() -> Result<(), String>,
+    wrap: &[&str],
+    prelude: &str,
+    sim: &str,
+    link: &str,
+) -> Option<(Option<i32>, String, String)> {
+    if let Err(why) = probe() {
+        eprintln!("SKIP {test_name}: {why}");
+        return None;
+    }
+    let bin = env!("CARGO_BIN_EXE_fieldprobe");
+    let script = format!(
+        "{prelude}timeout 60 {bin} sim {sim} --seconds 60 2>/dev/null & \
+         sleep 0.5; timeout 60 {bin} run examples/nc/seed004/meas1.nc --link {link}; \
+         rc=$?; kill %1 2>/dev/null; exit $rc"
+    );
+    let out = Command::new("timeout")
+        .arg("90")
+        .args(wrap)
+        .args(["sh", "-c", &script])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap_or_else(|e| panic!("run {wrap:?}: {e}"));
+    Some((
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    ))
 }

@@ -107,14 +107,6 @@ impl super::DriveModel for El1252Device {
         let _ = self.write_image(tx);
     }
 
-    fn trajectory(&self) -> &[(Nanos, f64)] {
-        &[]
-    }
-
-    fn position_at(&self, _t: Nanos) -> Option<f64> {
-        None
-    }
-
     fn set_input_level(&mut self, input: u8, level: bool) {
         if let Some(c) = usize::from(input)
             .checked_sub(1)
@@ -133,12 +125,6 @@ impl super::DriveModel for El1252Device {
         Some(c.status & ST_LEVEL != 0)
     }
 
-    fn set_fixed_stop(&mut self, _position: Option<f64>) {}
-
-    fn fixed_stop(&self) -> Option<f64> {
-        None
-    }
-
     fn state(&self) -> super::PowerState {
         super::PowerState::OperationEnabled
     }
@@ -146,14 +132,6 @@ impl super::DriveModel for El1252Device {
     fn last_error_code(&self) -> u16 {
         0
     }
-
-    fn actual(&self) -> f64 {
-        0.0
-    }
-
-    fn set_actual(&mut self, _inc: f64) {}
-
-    fn set_disturbance(&mut self, _offset_inc: f64) {}
 
     fn inject_fault(&mut self, _code: u16) {}
 

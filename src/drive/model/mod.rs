@@ -4,6 +4,7 @@
 //! the cycle length, and writes its input image. Object access for SDO / CoE servers returns CiA
 //! 301 abort codes ([`abort`]).
 
+pub mod axis;
 pub mod ds402;
 pub mod el1252;
 pub mod lightbus;
@@ -11,6 +12,7 @@ pub mod profidrive;
 pub mod sercos;
 pub mod terminal;
 
+pub use self::axis::AxisPlant;
 use super::PowerState;
 use crate::units::Nanos;
 use std::fmt;
@@ -25,6 +27,11 @@ use std::fmt;
 /// objects `index:sub`; for SERCOS the IDN number in `index` (bit 15 P-/S-IDN, bits 12–14 the
 /// parameter set); for PROFIdrive the PNU in `index` with `sub` as its sub-index. Refusals are
 /// CiA 301 abort codes ([`abort`]).
+///
+/// The axis physics (trajectory, fixed stop, actual position, disturbance) lives in the model's
+/// [`AxisPlant`] ([`plant`](Self::plant) / [`plant_mut`](Self::plant_mut)); the methods that
+/// only delegate to it have default implementations. A model without an axis (a timestamp
+/// terminal) overrides them.
 pub trait DriveModel: Send + fmt::Debug {
     /// Bytes of the output image the model reads.
     fn rx_len(&self) -> usize;
@@ -41,28 +48,57 @@ pub trait DriveModel: Send + fmt::Debug {
         self.begin_step(now, dt_s, rx);
         self.finish_step(tx);
     }
+    /// The axis physics (position loop, trajectory of the last cycle, wall, disturbance);
+    /// `None` for a device without an axis (the EL1252 input terminal).
+    fn plant(&self) -> Option<&AxisPlant> {
+        None
+    }
+    /// The axis physics, mutable.
+    fn plant_mut(&mut self) -> Option<&mut AxisPlant> {
+        None
+    }
     /// Trajectory of the last cycle: (time, position in increments).
-    fn trajectory(&self) -> &[(Nanos, f64)];
+    fn trajectory(&self) -> &[(Nanos, f64)] {
+        self.plant().map_or(&[], AxisPlant::trajectory)
+    }
     /// Position (increments) at `t` within the last cycle.
-    fn position_at(&self, t: Nanos) -> Option<f64>;
+    fn position_at(&self, t: Nanos) -> Option<f64> {
+        self.plant()?.position_at(t)
+    }
     /// Static level of a digital input.
     fn set_input_level(&mut self, input: u8, level: bool);
     /// Level of a digital input (`None`: no such input).
     fn input_level(&self, input: u8) -> Option<bool>;
     /// A mechanical wall at this position (increments), or none.
-    fn set_fixed_stop(&mut self, position: Option<f64>);
+    fn set_fixed_stop(&mut self, position: Option<f64>) {
+        if let Some(p) = self.plant_mut() {
+            p.set_fixed_stop(position)
+        }
+    }
     /// The wall, if any.
-    fn fixed_stop(&self) -> Option<f64>;
+    fn fixed_stop(&self) -> Option<f64> {
+        self.plant()?.fixed_stop()
+    }
     /// Power state in the common state model.
     fn state(&self) -> PowerState;
     /// Last error code (profile-specific; CiA 402 0x603F style).
     fn last_error_code(&self) -> u16;
     /// Actual position (increments, including the disturbance).
-    fn actual(&self) -> f64;
+    fn actual(&self) -> f64 {
+        self.plant().map_or(0.0, AxisPlant::actual)
+    }
     /// Put the axis at this actual position (increments).
-    fn set_actual(&mut self, inc: f64);
+    fn set_actual(&mut self, inc: f64) {
+        if let Some(p) = self.plant_mut() {
+            p.set_actual(inc)
+        }
+    }
     /// Constant offset of the reported position (collision / overshoot emulation).
-    fn set_disturbance(&mut self, offset_inc: f64);
+    fn set_disturbance(&mut self, offset_inc: f64) {
+        if let Some(p) = self.plant_mut() {
+            p.set_disturbance(offset_inc)
+        }
+    }
     /// Force a drive fault with this error code.
     fn inject_fault(&mut self, code: u16);
     /// Acyclic read.
@@ -91,11 +127,11 @@ impl DriveModel for ds402::Ds402Model {
     fn finish_step(&mut self, tx: &mut [u8]) {
         ds402::Ds402Model::finish_step(self, tx)
     }
-    fn trajectory(&self) -> &[(Nanos, f64)] {
-        ds402::Ds402Model::trajectory(self)
+    fn plant(&self) -> Option<&AxisPlant> {
+        Some(&self.plant)
     }
-    fn position_at(&self, t: Nanos) -> Option<f64> {
-        ds402::Ds402Model::position_at(self, t)
+    fn plant_mut(&mut self) -> Option<&mut AxisPlant> {
+        Some(&mut self.plant)
     }
     fn set_input_level(&mut self, input: u8, level: bool) {
         ds402::Ds402Model::set_input_level(self, input, level)
@@ -103,26 +139,11 @@ impl DriveModel for ds402::Ds402Model {
     fn input_level(&self, input: u8) -> Option<bool> {
         ds402::Ds402Model::input_level(self, input)
     }
-    fn set_fixed_stop(&mut self, position: Option<f64>) {
-        ds402::Ds402Model::set_fixed_stop(self, position)
-    }
-    fn fixed_stop(&self) -> Option<f64> {
-        ds402::Ds402Model::fixed_stop(self)
-    }
     fn state(&self) -> PowerState {
         ds402::Ds402Model::state(self)
     }
     fn last_error_code(&self) -> u16 {
         ds402::Ds402Model::last_error_code(self)
-    }
-    fn actual(&self) -> f64 {
-        ds402::Ds402Model::actual(self)
-    }
-    fn set_actual(&mut self, inc: f64) {
-        ds402::Ds402Model::set_actual(self, inc)
-    }
-    fn set_disturbance(&mut self, offset_inc: f64) {
-        ds402::Ds402Model::set_disturbance(self, offset_inc)
     }
     fn inject_fault(&mut self, code: u16) {
         ds402::Ds402Model::inject_fault(self, code)

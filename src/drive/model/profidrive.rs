@@ -43,7 +43,8 @@
 //!   position (bit 13), else 0.
 
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::model::ds402::motion::{self, interpolate, Cycle, Wall, SUBSAMPLES};
+use crate::drive::model::axis::AxisPlant;
+use crate::drive::model::ds402::motion::{self, Cycle, Wall, SUBSAMPLES};
 use crate::drive::model::{abort, DriveModel};
 use crate::drive::profidrive::{
     g1_stw, g1_zsw, n4_to_speed, speed_to_n4, stw1, zsw1, ProfidriveConfig, Telegram, Word,
@@ -96,14 +97,12 @@ pub struct ProfidriveModel {
     xerr: i32,
     kpc: u32,
 
-    position: f64,
-    disturbance: f64,
-    setpoint: f64,
+    /// Loop position, set-point (`prev_target`), disturbance, wall, trajectory of the last
+    /// cycle.
+    plant: AxisPlant,
     velocity: f64,
     torque: f64,
     limited: bool,
-    wall: Option<Wall>,
-    trajectory: Vec<(Nanos, f64)>,
     fe_over_ns: u64,
 
     inputs: [bool; NUM_INPUTS],
@@ -150,14 +149,10 @@ impl ProfidriveModel {
             g1_stw: 0,
             xerr: 0,
             kpc: 0,
-            position: 0.0,
-            disturbance: 0.0,
-            setpoint: 0.0,
+            plant: AxisPlant::default(),
             velocity: 0.0,
             torque: 0.0,
             limited: false,
-            wall: None,
-            trajectory: Vec::with_capacity(SUBSAMPLES + 1),
             fe_over_ns: 0,
             inputs: [false; NUM_INPUTS],
             active: 0,
@@ -352,7 +347,7 @@ impl ProfidriveModel {
     }
 
     fn move_axis(&mut self, now: Nanos, dt: f64) {
-        self.trajectory.clear();
+        self.plant.trajectory.clear();
         let dt_ns = (dt * 1e9).round() as u64;
         let start = now.0.saturating_sub(dt_ns);
         let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
@@ -360,15 +355,16 @@ impl ProfidriveModel {
             let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
             Nanos(now.0.saturating_sub(back as u64).max(start))
         };
-        let x0 = self.position;
-        self.trajectory.push((time(0), x0 + self.disturbance));
+        let x0 = self.plant.position;
+        let d = self.plant.disturbance;
+        self.plant.trajectory.push((time(0), x0 + d));
         self.limited = false;
         if self.state != PowerState::OperationEnabled || dt <= 0.0 {
             self.velocity = 0.0;
-            self.setpoint = self.position;
+            self.plant.prev_target = self.plant.position;
             self.torque = 0.0;
             for k in 1..=n {
-                self.trajectory.push((time(k), x0 + self.disturbance));
+                self.plant.trajectory.push((time(k), x0 + d));
             }
             return;
         }
@@ -396,30 +392,29 @@ impl ProfidriveModel {
             speed = speed.clamp(-vmax, vmax);
             Cycle {
                 x0,
-                r0: self.setpoint,
-                r1: self.setpoint + speed * dt,
+                r0: self.plant.prev_target,
+                r1: self.plant.prev_target + speed * dt,
                 dt,
                 kv: SPEED_LOOP_GAIN,
                 v_pos: vmax.min(self.torque_speed(SPEED_LOOP_GAIN, limit)),
                 v_neg: vmax.min(self.torque_speed(SPEED_LOOP_GAIN, limit)),
             }
         };
-        let d = self.disturbance;
-        let mut wall = self.wall.map(|w| Wall {
+        let mut wall = self.plant.wall.map(|w| Wall {
             at: w.at - d,
             side: w.side,
         });
         let mut xs = [0.0; SUBSAMPLES];
         let outcome = motion::integrate(&cycle, wall.as_mut(), &mut xs);
-        if let (Some(w), Some(moved)) = (self.wall.as_mut(), wall) {
+        if let (Some(w), Some(moved)) = (self.plant.wall.as_mut(), wall) {
             w.side = moved.side;
         }
         for (k, x) in xs.iter().enumerate() {
-            self.trajectory.push((time(k + 1), x + d));
+            self.plant.trajectory.push((time(k + 1), x + d));
         }
         let x1 = xs[SUBSAMPLES - 1];
         self.velocity = (x1 - x0) / dt;
-        self.position = x1;
+        self.plant.position = x1;
         let mut r1 = cycle.r1;
         let demand = (r1 - x1) * self.torque_per_inc;
         let clipped = demand.clamp(-limit, limit);
@@ -427,7 +422,7 @@ impl ProfidriveModel {
             // Anti wind-up: the speed controller's integral stays at the torque limit.
             r1 = x1 + clipped / self.torque_per_inc;
         }
-        self.setpoint = if r1.is_finite() { r1 } else { x1 };
+        self.plant.prev_target = if r1.is_finite() { r1 } else { x1 };
         self.torque = if clipped.is_finite() { clipped } else { 0.0 };
         self.limited = outcome.limited || clipped != demand;
     }
@@ -440,7 +435,7 @@ impl ProfidriveModel {
         let dev = if self.tg.dsc() {
             f64::from(self.xerr).abs()
         } else {
-            (self.setpoint - self.position).abs()
+            (self.plant.prev_target - self.plant.position).abs()
         };
         if dev > f64::from(self.lag_window) {
             self.fe_over_ns = self.fe_over_ns.saturating_add((dt * 1e9) as u64);
@@ -454,16 +449,11 @@ impl ProfidriveModel {
     }
 
     fn position_clamped(&self, t: Nanos) -> f64 {
-        match (self.trajectory.first(), self.trajectory.last()) {
-            (Some(&(t0, _)), Some(&(t1, _))) => {
-                interpolate(&self.trajectory, t.clamp(t0, t1)).unwrap_or(self.actual_pos())
-            }
-            _ => self.actual_pos(),
-        }
+        self.plant.position_clamped(t)
     }
 
     fn actual_pos(&self) -> f64 {
-        self.position + self.disturbance
+        self.plant.actual()
     }
 
     fn xist2(&self) -> u32 {
@@ -558,12 +548,12 @@ impl DriveModel for ProfidriveModel {
         tg.put(tx, Word::G1Xist2, self.xist2());
     }
 
-    fn trajectory(&self) -> &[(Nanos, f64)] {
-        &self.trajectory
+    fn plant(&self) -> Option<&AxisPlant> {
+        Some(&self.plant)
     }
 
-    fn position_at(&self, t: Nanos) -> Option<f64> {
-        interpolate(&self.trajectory, t)
+    fn plant_mut(&mut self) -> Option<&mut AxisPlant> {
+        Some(&mut self.plant)
     }
 
     fn set_input_level(&mut self, input: u8, level: bool) {
@@ -579,44 +569,12 @@ impl DriveModel for ProfidriveModel {
         self.inputs.get(usize::from(input.checked_sub(1)?)).copied()
     }
 
-    fn set_fixed_stop(&mut self, position: Option<f64>) {
-        match position {
-            None => self.wall = None,
-            Some(p) if p.is_finite() => self.wall = Some(Wall::new(p, self.actual_pos())),
-            Some(_) => {}
-        }
-    }
-
-    fn fixed_stop(&self) -> Option<f64> {
-        self.wall.map(|w| w.at)
-    }
-
     fn state(&self) -> PowerState {
         self.state
     }
 
     fn last_error_code(&self) -> u16 {
         self.error_code
-    }
-
-    fn actual(&self) -> f64 {
-        self.actual_pos()
-    }
-
-    fn set_actual(&mut self, inc: f64) {
-        if inc.is_finite() {
-            self.position = inc - self.disturbance;
-            self.setpoint = self.position;
-            if let Some(w) = self.wall {
-                self.wall = Some(Wall::new(w.at, inc));
-            }
-        }
-    }
-
-    fn set_disturbance(&mut self, offset_inc: f64) {
-        if offset_inc.is_finite() {
-            self.disturbance = offset_inc;
-        }
     }
 
     fn inject_fault(&mut self, code: u16) {

@@ -35,7 +35,8 @@
 //!   stored but the unit works without it (assumption).
 
 use super::abort;
-use super::ds402::motion::{self, interpolate, round_i32, Cycle, Wall, SUBSAMPLES};
+use super::axis::AxisPlant;
+use super::ds402::motion::{self, round_i32, Cycle, Wall, SUBSAMPLES};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::sercos::{self, idn, rt_mask, Telegram, CW_DRIVE_ON, CW_ENABLE, CW_RUN};
 use crate::drive::{DriveError, PowerState};
@@ -67,13 +68,10 @@ pub struct SercosModel {
     prev_drive_on: bool,
     target: i32,
 
-    position: f64,
-    disturbance: f64,
-    prev_target: f64,
+    /// Loop position, set-point ramp start, disturbance, wall, trajectory of the last cycle.
+    plant: AxisPlant,
     velocity: f64,
     torque: f64,
-    wall: Option<Wall>,
-    trajectory: Vec<(Nanos, f64)>,
 
     torque_limit: u16,
     window: u32,
@@ -120,13 +118,9 @@ impl SercosModel {
             control: 0,
             prev_drive_on: false,
             target: 0,
-            position: 0.0,
-            disturbance: 0.0,
-            prev_target: 0.0,
+            plant: AxisPlant::default(),
             velocity: 0.0,
             torque: 0.0,
-            wall: None,
-            trajectory: Vec::with_capacity(SUBSAMPLES + 1),
             torque_limit: 1000,
             window: m.following_error_window,
             probe_control: 1,
@@ -236,7 +230,7 @@ impl SercosModel {
                 if drive_on && self.control & CW_ENABLE != 0 {
                     if self.enable_count >= self.enable_delay_cycles {
                         self.ready = 3;
-                        self.prev_target = self.position;
+                        self.plant.prev_target = self.plant.position;
                     } else {
                         self.enable_count += 1;
                     }
@@ -277,22 +271,22 @@ impl SercosModel {
     }
 
     fn move_axis(&mut self, now: Nanos, dt: f64, dt_ns: u64) {
-        self.trajectory.clear();
+        self.plant.trajectory.clear();
         let start = now.0.saturating_sub(dt_ns);
         let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
         let time = |k: usize| {
             let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
             Nanos(now.0.saturating_sub(back as u64).max(start))
         };
-        let x0 = self.position;
-        let d = self.disturbance;
-        self.trajectory.push((time(0), x0 + d));
+        let x0 = self.plant.position;
+        let d = self.plant.disturbance;
+        self.plant.trajectory.push((time(0), x0 + d));
         if !self.following() || dt <= 0.0 {
             self.velocity = 0.0;
-            self.prev_target = self.position;
+            self.plant.prev_target = self.plant.position;
             self.torque = 0.0;
             for k in 1..=n {
-                self.trajectory.push((time(k), x0 + d));
+                self.plant.trajectory.push((time(k), x0 + d));
             }
             return;
         }
@@ -308,29 +302,29 @@ impl SercosModel {
             .min(torque_speed);
         let cycle = Cycle {
             x0,
-            r0: self.prev_target,
+            r0: self.plant.prev_target,
             r1: f64::from(self.target),
             dt,
             kv: self.kv,
             v_pos: vmax,
             v_neg: vmax,
         };
-        let mut wall = self.wall.map(|w| Wall {
+        let mut wall = self.plant.wall.map(|w| Wall {
             at: w.at - d,
             side: w.side,
         });
         let mut xs = [0.0; SUBSAMPLES];
         motion::integrate(&cycle, wall.as_mut(), &mut xs);
-        if let (Some(w), Some(moved)) = (self.wall.as_mut(), wall) {
+        if let (Some(w), Some(moved)) = (self.plant.wall.as_mut(), wall) {
             w.side = moved.side;
         }
         for (k, x) in xs.iter().enumerate() {
-            self.trajectory.push((time(k + 1), x + d));
+            self.plant.trajectory.push((time(k + 1), x + d));
         }
         let x1 = xs[SUBSAMPLES - 1];
         self.velocity = (x1 - x0) / dt;
-        self.position = x1;
-        self.prev_target = cycle.r1;
+        self.plant.position = x1;
+        self.plant.prev_target = cycle.r1;
         let demand = (cycle.r1 - x1) * self.torque_per_inc;
         let clipped = demand.clamp(-limit, limit);
         self.torque = if clipped.is_finite() { clipped } else { 0.0 };
@@ -377,17 +371,12 @@ impl SercosModel {
     }
 
     fn position_clamped(&self, t: Nanos) -> f64 {
-        match (self.trajectory.first(), self.trajectory.last()) {
-            (Some(&(t0, _)), Some(&(t1, _))) => {
-                interpolate(&self.trajectory, t.clamp(t0, t1)).unwrap_or_else(|| self.actual())
-            }
-            _ => self.actual(),
-        }
+        self.plant.position_clamped(t)
     }
 
     /// Position feedback S-0-0051 (rounded).
     fn feedback(&self) -> i32 {
-        round_i32(self.position + self.disturbance)
+        round_i32(self.plant.actual())
     }
 
     /// Following distance S-0-0189 = S-0-0047 − S-0-0051 while following, else 0.
@@ -505,7 +494,7 @@ impl SercosModel {
 
     /// Actual position incl. the disturbance.
     pub fn actual(&self) -> f64 {
-        self.position + self.disturbance
+        self.plant.actual()
     }
 
     /// MDTs ignored because they were shorter than the telegram.
@@ -530,11 +519,11 @@ impl super::DriveModel for SercosModel {
     fn finish_step(&mut self, tx: &mut [u8]) {
         SercosModel::finish_step(self, tx)
     }
-    fn trajectory(&self) -> &[(Nanos, f64)] {
-        &self.trajectory
+    fn plant(&self) -> Option<&AxisPlant> {
+        Some(&self.plant)
     }
-    fn position_at(&self, t: Nanos) -> Option<f64> {
-        interpolate(&self.trajectory, t)
+    fn plant_mut(&mut self) -> Option<&mut AxisPlant> {
+        Some(&mut self.plant)
     }
     fn set_input_level(&mut self, input: u8, level: bool) {
         if let Some(l) = usize::from(input)
@@ -547,38 +536,11 @@ impl super::DriveModel for SercosModel {
     fn input_level(&self, input: u8) -> Option<bool> {
         self.inputs.get(usize::from(input).checked_sub(1)?).copied()
     }
-    fn set_fixed_stop(&mut self, position: Option<f64>) {
-        match position {
-            None => self.wall = None,
-            Some(p) if p.is_finite() => self.wall = Some(Wall::new(p, self.actual())),
-            Some(_) => {}
-        }
-    }
-    fn fixed_stop(&self) -> Option<f64> {
-        self.wall.map(|w| w.at)
-    }
     fn state(&self) -> PowerState {
         SercosModel::state(self)
     }
     fn last_error_code(&self) -> u16 {
         self.c1d
-    }
-    fn actual(&self) -> f64 {
-        SercosModel::actual(self)
-    }
-    fn set_actual(&mut self, inc: f64) {
-        if inc.is_finite() {
-            self.position = inc - self.disturbance;
-            self.prev_target = self.position;
-            if let Some(w) = self.wall {
-                self.wall = Some(Wall::new(w.at, inc));
-            }
-        }
-    }
-    fn set_disturbance(&mut self, offset_inc: f64) {
-        if offset_inc.is_finite() {
-            self.disturbance = offset_inc;
-        }
     }
     fn inject_fault(&mut self, code: u16) {
         self.pending_fault = Some(code);

@@ -21,7 +21,7 @@
 //! - **Parameters**: none (`read_object` / `write_object` answer "no object").
 
 use super::abort;
-use super::lightbus::{clean_dt, AxisPlant};
+use super::axis::{clean_dt, AxisPlant};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::terminal::image::{self, Outputs};
 use crate::drive::terminal::{TerminalConfig, Variant};
@@ -235,12 +235,12 @@ impl super::DriveModel for TerminalModel {
         let _ = i.encode(tx);
     }
 
-    fn trajectory(&self) -> &[(Nanos, f64)] {
-        self.plant.trajectory()
+    fn plant(&self) -> Option<&AxisPlant> {
+        Some(&self.plant)
     }
 
-    fn position_at(&self, t: Nanos) -> Option<f64> {
-        self.plant.position_at(t)
+    fn plant_mut(&mut self) -> Option<&mut AxisPlant> {
+        Some(&mut self.plant)
     }
 
     fn set_input_level(&mut self, _input: u8, level: bool) {
@@ -249,14 +249,6 @@ impl super::DriveModel for TerminalModel {
 
     fn input_level(&self, input: u8) -> Option<bool> {
         (1..=4).contains(&input).then_some(self.input)
-    }
-
-    fn set_fixed_stop(&mut self, position: Option<f64>) {
-        self.plant.set_fixed_stop(position)
-    }
-
-    fn fixed_stop(&self) -> Option<f64> {
-        self.plant.fixed_stop()
     }
 
     fn state(&self) -> PowerState {
@@ -273,18 +265,6 @@ impl super::DriveModel for TerminalModel {
 
     fn last_error_code(&self) -> u16 {
         self.error_code
-    }
-
-    fn actual(&self) -> f64 {
-        self.plant.actual()
-    }
-
-    fn set_actual(&mut self, inc: f64) {
-        self.plant.set_actual(inc)
-    }
-
-    fn set_disturbance(&mut self, offset_inc: f64) {
-        self.plant.set_disturbance(offset_inc)
     }
 
     fn inject_fault(&mut self, code: u16) {

@@ -83,8 +83,9 @@ mod power;
 mod tests;
 pub mod touch_probe;
 
-use self::motion::{interpolate, round_i32, Cycle, Wall, SUBSAMPLES};
+use self::motion::{round_i32, Cycle, Wall, SUBSAMPLES};
 use self::touch_probe::{Signal, TouchProbes, NUM_INPUTS};
+use super::axis::AxisPlant;
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::PdoLayout;
 use crate::drive::PowerState;
@@ -128,22 +129,18 @@ pub struct Ds402Model {
     mode: i8,
     target: i32,
 
-    /// Loop position in increments (what the position loop controls).
-    position: f64,
-    /// Constant offset outside the loop (see [`Ds402Model::set_disturbance`]).
-    disturbance: f64,
-    /// Set-point of the previous cycle (start of the interpolation ramp).
-    prev_target: f64,
+    /// Loop position in increments (what the position loop controls), set-point of the previous
+    /// cycle (start of the interpolation ramp), constant offset outside the loop (see
+    /// [`Ds402Model::set_disturbance`]), fixed stop in actual-position coordinates (including
+    /// the disturbance) and trajectory of the last step (time, actual position incl.
+    /// disturbance).
+    pub(super) plant: AxisPlant,
     /// Velocity in increments/s over the last cycle.
     velocity: f64,
     /// A speed / torque limit cut the motion in the last cycle, or the torque is clipped.
     limited: bool,
-    /// Fixed stop in actual-position coordinates (including the disturbance).
-    wall: Option<Wall>,
     /// Torque actual value 0x6077 in ‰ (demand clipped to the limit).
     torque: f64,
-    /// Trajectory of the last step: (time, actual position incl. disturbance).
-    trajectory: Vec<(Nanos, f64)>,
 
     fe_window: u32,
     fe_timeout_ms: u16,
@@ -198,14 +195,10 @@ impl Ds402Model {
             enable_count: 0,
             mode: 0,
             target: 0,
-            position: 0.0,
-            disturbance: 0.0,
-            prev_target: 0.0,
+            plant: AxisPlant::default(),
             velocity: 0.0,
             limited: false,
-            wall: None,
             torque: 0.0,
-            trajectory: Vec::with_capacity(SUBSAMPLES + 1),
             fe_window: m.following_error_window,
             fe_timeout_ms: m.following_error_timeout_ms,
             position_window: DEFAULT_POSITION_WINDOW,
@@ -299,24 +292,19 @@ impl Ds402Model {
     /// disturbance)`, [`motion::SUBSAMPLES`] + 1 points from the start to the end of the cycle
     /// (one point for a zero-length step; empty before the first step).
     pub fn trajectory(&self) -> &[(Nanos, f64)] {
-        &self.trajectory
+        self.plant.trajectory()
     }
 
     /// Actual position (increments, incl. the disturbance) at `t` within the last step,
     /// linearly interpolated between the sub-samples; `None` outside the last step.
     pub fn position_at(&self, t: Nanos) -> Option<f64> {
-        interpolate(&self.trajectory, t)
+        self.plant.position_at(t)
     }
 
     /// [`position_at`](Self::position_at) with `t` clamped into the last step; the actual
     /// position when there is no trajectory yet.
     fn position_clamped(&self, t: Nanos) -> f64 {
-        match (self.trajectory.first(), self.trajectory.last()) {
-            (Some(&(t0, _)), Some(&(t1, _))) => {
-                interpolate(&self.trajectory, t.clamp(t0, t1)).unwrap_or_else(|| self.actual())
-            }
-            _ => self.actual(),
-        }
+        self.plant.position_clamped(t)
     }
 
     /// Set digital input `input` (1..=4) to a static level without an edge (nothing latches).
@@ -338,16 +326,12 @@ impl Ds402Model {
     /// remove it with `None`. The axis cannot pass it from the side it is on now (standing
     /// exactly at it, the first motion away decides). Non-finite positions are ignored.
     pub fn set_fixed_stop(&mut self, position: Option<f64>) {
-        match position {
-            None => self.wall = None,
-            Some(p) if p.is_finite() => self.wall = Some(Wall::new(p, self.actual())),
-            Some(_) => {}
-        }
+        self.plant.set_fixed_stop(position)
     }
 
     /// The wall of [`set_fixed_stop`](Self::set_fixed_stop), in increments.
     pub fn fixed_stop(&self) -> Option<f64> {
-        self.wall.map(|w| w.at)
+        self.plant.fixed_stop()
     }
 
     fn read_rx(&mut self, rx: &[u8]) {
@@ -376,23 +360,24 @@ impl Ds402Model {
 
     /// Advance the loop over the cycle `[now − dt, now]` and record the trajectory.
     fn move_axis(&mut self, now: Nanos, dt: f64, dt_ns: u64) {
-        self.trajectory.clear();
+        self.plant.trajectory.clear();
         let start = now.0.saturating_sub(dt_ns);
         let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
         let time = |k: usize| {
             let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
             Nanos(now.0.saturating_sub(back as u64).max(start))
         };
-        let x0 = self.position;
-        self.trajectory.push((time(0), x0 + self.disturbance));
+        let x0 = self.plant.position;
+        let d = self.plant.disturbance;
+        self.plant.trajectory.push((time(0), x0 + d));
         self.limited = false;
         if !self.following() || dt <= 0.0 {
             // Brake: hold the position.
             self.velocity = 0.0;
-            self.prev_target = self.position;
+            self.plant.prev_target = self.plant.position;
             self.torque = 0.0;
             for k in 1..=n {
-                self.trajectory.push((time(k), x0 + self.disturbance));
+                self.plant.trajectory.push((time(k), x0 + d));
             }
             return;
         }
@@ -407,31 +392,30 @@ impl Ds402Model {
         let vmax = self.max_velocity_inc.unwrap_or(f64::INFINITY);
         let cycle = Cycle {
             x0,
-            r0: self.prev_target,
+            r0: self.plant.prev_target,
             r1: f64::from(self.target),
             dt,
             kv: self.kv,
             v_pos: vmax.min(torque_speed(t_pos)),
             v_neg: vmax.min(torque_speed(t_neg)),
         };
-        let d = self.disturbance;
         // The wall is kept in actual coordinates; the loop runs without the disturbance.
-        let mut wall = self.wall.map(|w| Wall {
+        let mut wall = self.plant.wall.map(|w| Wall {
             at: w.at - d,
             side: w.side,
         });
         let mut xs = [0.0; SUBSAMPLES];
         let outcome = motion::integrate(&cycle, wall.as_mut(), &mut xs);
-        if let (Some(w), Some(moved)) = (self.wall.as_mut(), wall) {
+        if let (Some(w), Some(moved)) = (self.plant.wall.as_mut(), wall) {
             w.side = moved.side;
         }
         for (k, x) in xs.iter().enumerate() {
-            self.trajectory.push((time(k + 1), x + d));
+            self.plant.trajectory.push((time(k + 1), x + d));
         }
         let x1 = xs[SUBSAMPLES - 1];
         self.velocity = (x1 - x0) / dt;
-        self.position = x1;
-        self.prev_target = cycle.r1;
+        self.plant.position = x1;
+        self.plant.prev_target = cycle.r1;
         // Torque demand from the loop's lag, clipped to the limit of its sign.
         let demand = (cycle.r1 - x1) * self.torque_per_inc;
         let clipped = demand.clamp(-t_neg, t_pos);
@@ -447,7 +431,7 @@ impl Ds402Model {
         }
         let p = self.zero_pulse_period;
         let mut fired = 0;
-        for w in self.trajectory.windows(2) {
+        for w in self.plant.trajectory.windows(2) {
             let (xa, xb) = (w[0].1, w[1].1);
             let (na, nb) = ((xa / p).floor(), (xb / p).floor());
             if !(na.is_finite() && nb.is_finite()) || na == nb {
@@ -512,7 +496,7 @@ impl Ds402Model {
 
     /// Position actual value 0x6064 (rounded, saturated to `INTEGER32`).
     fn position_actual(&self) -> i32 {
-        round_i32(self.position + self.disturbance)
+        round_i32(self.plant.actual())
     }
 
     /// Following error actual value 0x60F4 = 0x607A − 0x6064 while following, else 0.
@@ -542,20 +526,14 @@ impl Ds402Model {
     /// Actual position in increments, unrounded (what 0x6064 reports rounded), including the
     /// disturbance.
     pub fn actual(&self) -> f64 {
-        self.position + self.disturbance
+        self.plant.actual()
     }
 
     /// Put the axis at `inc` increments (actual position including the disturbance), e.g. for a
     /// referenced start position. A fixed stop takes the side of the new position. Non-finite
     /// values are ignored.
     pub fn set_actual(&mut self, inc: f64) {
-        if inc.is_finite() {
-            self.position = inc - self.disturbance;
-            self.prev_target = self.position;
-            if let Some(w) = self.wall {
-                self.wall = Some(Wall::new(w.at, inc));
-            }
-        }
+        self.plant.set_actual(inc)
     }
 
     /// Add a constant offset of `offset_inc` increments to the actual position, outside the
@@ -563,9 +541,7 @@ impl Ds402Model {
     /// back to 0 (an overshoot or a deflected axis, for monitoring tests). The torque follows
     /// the loop's own lag and does not see it. Non-finite values are ignored.
     pub fn set_disturbance(&mut self, offset_inc: f64) {
-        if offset_inc.is_finite() {
-            self.disturbance = offset_inc;
-        }
+        self.plant.set_disturbance(offset_inc)
     }
 
     /// Make the drive fault with `code` (0x603F) at the next step: FAULT REACTION ACTIVE for one

@@ -74,7 +74,7 @@ impl Ds402Model {
         };
         if next == OperationEnabled && self.state != OperationEnabled {
             // Start the set-point ramp at the actual position.
-            self.prev_target = self.position;
+            self.plant.prev_target = self.plant.position;
             self.fe_over_ns = 0;
         }
         self.state = next;

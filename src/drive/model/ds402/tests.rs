@@ -71,10 +71,14 @@ fn constant_set_point_is_the_step_formula() {
     let mut m = following();
     m.max_velocity_inc = None;
     m.target = 1000;
-    m.prev_target = 1000.0;
+    m.plant.prev_target = 1000.0;
     m.move_axis(Nanos(1_000_000), 0.001, 1_000_000);
     let expect = 1000.0 * (1.0 - (-40.0f64 * 0.001).exp());
-    assert!((m.position - expect).abs() < 1e-9, "{}", m.position);
+    assert!(
+        (m.plant.position - expect).abs() < 1e-9,
+        "{}",
+        m.plant.position
+    );
 }
 
 #[test]
@@ -83,7 +87,7 @@ fn trajectory_times_and_interpolation() {
     m.max_velocity_inc = None;
     m.set_disturbance(0.5);
     m.target = 1600;
-    m.prev_target = 0.0;
+    m.plant.prev_target = 0.0;
     m.move_axis(Nanos(5_000_000), 0.001, 1_000_000);
     let traj = m.trajectory().to_vec();
     assert_eq!(traj.len(), SUBSAMPLES + 1);
@@ -152,7 +156,7 @@ fn torque_limit_and_wall() {
     m.set_fixed_stop(Some(100.0));
     assert_eq!(m.fixed_stop(), Some(100.0));
     m.target = 50_000;
-    m.prev_target = 50_000.0;
+    m.plant.prev_target = 50_000.0;
     m.move_axis(Nanos(1_000_000), 0.001, 1_000_000);
     assert_eq!(m.actual(), 100.0);
     // Demand 0.004 * 49900 = 199.6 per mille, limit min(100, 50) = 50.
@@ -161,7 +165,7 @@ fn torque_limit_and_wall() {
     // Negative side: min(6072, 60E1 = 3000) = 100.
     m.set_fixed_stop(None);
     m.target = -50_000;
-    m.prev_target = -50_000.0;
+    m.plant.prev_target = -50_000.0;
     m.set_fixed_stop(Some(0.0));
     m.move_axis(Nanos(2_000_000), 0.001, 1_000_000);
     assert_eq!(m.actual(), 0.0);
