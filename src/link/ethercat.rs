@@ -573,6 +573,10 @@ fn connect(
         pdu: Duration::from_millis(if emulated { 20 } else { 30 }),
         state_transition: Duration::from_secs(5),
         mailbox_response: Duration::from_secs(2),
+        // One SII (EEPROM) word read, busy bit polled over the wire: ethercrab's 10 ms is
+        // shorter than a raw-socket round trip to a busy emulator (or a long segment) can take;
+        // it only matters at start-up.
+        eeprom: Duration::from_millis(100),
         ..Timeouts::default()
     };
     let md: &'static MainDevice<'static> = Box::leak(Box::new(MainDevice::new(
