@@ -510,6 +510,9 @@ impl Machine {
             }
             Err(e) => self.channel.link_lost(&e),
         }
+        for e in self.link.take_drive_emergencies() {
+            self.channel.drive_emergency(e.device, e.code, e.text);
+        }
         if let Some(tr) = self.trace.as_mut() {
             tr.t.push(self.now.as_secs_f64());
             for (i, a) in self.channel.axes().iter().enumerate() {

@@ -182,6 +182,10 @@ pub mod ids {
     pub const DRIVE_ENABLE_TIMEOUT: u32 = 900011;
     /// Project: the link lost a process-data exchange (frame lost, wrong working counter).
     pub const LINK_LOST: u32 = 900012;
+    /// Project: a drive sent an emergency message (CiA 301 EMCY over CANopen, CoE emergency
+    /// over EtherCAT) — warning with the error code in words; the fault itself is handled by
+    /// the statusword (900010).
+    pub const DRIVE_EMERGENCY: u32 = 900015;
     /// Project: a command position does not fit the drive's INTEGER32 position range.
     pub const DRIVE_RANGE: u32 = 900013;
     /// Project: an NC feature that is recognised but not supported in this build.

@@ -3,7 +3,7 @@
 //! canopen-emu` (our CiA 301 master: NMT, PDO remap by SDO, SYNC, heartbeat consumer; emulated
 //! CiA 402 nodes) as over `--link sim`; and the fault cases: lost TPDOs and a lost heartbeat
 //! during a measuring run stop the axes with 900012 and publish no latch, a drive fault sends
-//! an EMCY and stops the run with 900010, SDO abort and SDO timeout are reported in words.
+//! an EMCY (warning 900015 in the channel) and stops the run with 900010, SDO abort and SDO timeout are reported in words.
 //!
 //! Reference values: the seed's (seed 004 §5) where annotated, else the same program over the
 //! in-memory link (checked against the seed by `tests/drive_matrix.rs`).
@@ -264,6 +264,12 @@ fn lost_tpdos_a_lost_heartbeat_or_a_drive_fault_during_a_measuring_run_publish_n
             900012
         };
         assert_eq!(ids.first(), Some(&want), "{fault}: {ids:?}");
+        // The node's EMCY (0x8611) reaches the channel as warning 900015 after the fault.
+        assert_eq!(
+            ids.contains(&900015),
+            fault == "drive fault",
+            "{fault}: {ids:?}"
+        );
         assert_eq!(exec.result(Z), None, "{fault}: no latch published");
         let z = m.channel().axes()[Z].command();
         assert!(z < 80.0, "{fault}: stopped at {z}, before the probe");

@@ -144,3 +144,34 @@ fn after_a_drive_fault_the_next_program_start_resets_and_runs() {
     assert_eq!(r.status, RunStatus::Completed, "{:?}", r.message_ids());
     assert_eq!(m.channel().axes()[0].command(), 10.0);
 }
+
+#[test]
+fn drive_emergencies_reach_the_channel_as_warning_900015_on_canopen_and_ethercat() {
+    use fieldprobe::machine::LinkChoice;
+    use fieldprobe::messages::Severity;
+    for link in ["canopen-emu", "ethercat-emu"] {
+        let cfg = MachineConfig::default_machine();
+        let mut m = Machine::with_link(&cfg, &LinkChoice::new(link)).unwrap();
+        m.settle(10_000);
+        m.channel_mut().take_messages();
+        m.link_mut().model_mut(2).unwrap().inject_fault(0x8611);
+        for _ in 0..5 {
+            m.step();
+        }
+        // EtherCAT: the CoE emergency waits in the SubDevice's mailbox until the master's next
+        // mailbox access collects it.
+        if link == "ethercat-emu" {
+            m.link_mut().read_object(2, 0x6041, 0).unwrap();
+            m.step();
+        }
+        let msgs = m.channel_mut().take_messages();
+        let e: Vec<_> = msgs.iter().filter(|x| x.id == 900015).collect();
+        assert_eq!(e.len(), 1, "{link}: {msgs:?}");
+        assert_eq!(e[0].severity, Severity::Warning);
+        assert_eq!(
+            e[0].text, "axis Z: drive emergency 0x8611 (following error (CiA 402))",
+            "{link}"
+        );
+        assert_eq!(e[0].axis.as_deref(), Some("Z"));
+    }
+}

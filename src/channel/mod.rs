@@ -487,6 +487,22 @@ impl Channel {
         }
     }
 
+    /// A drive's emergency message (EMCY / CoE emergency): warning 900015 naming the axis and
+    /// the code in words. Code 0x0000 ("error reset or no error") is not reported.
+    pub fn drive_emergency(&mut self, axis: usize, code: u16, text: &str) {
+        if code == 0 {
+            return;
+        }
+        let name = self.axes.get(axis).map_or("?", |a| a.name()).to_string();
+        self.push(
+            CncMessage::warning(
+                crate::messages::ids::DRIVE_EMERGENCY,
+                format!("axis {name}: drive emergency {code:#06x} ({text})"),
+            )
+            .on_axis(&name),
+        );
+    }
+
     pub(super) fn push(&mut self, m: CncMessage) {
         let m = m.at(self.block);
         tracing::debug!(id = m.id, "{m}");

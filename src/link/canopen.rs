@@ -565,6 +565,21 @@ impl CanopenLink {
 }
 
 impl Link for CanopenLink {
+    fn take_drive_emergencies(&mut self) -> Vec<super::DriveEmergency> {
+        let axes = &self.axes;
+        std::mem::take(&mut self.emergencies)
+            .into_iter()
+            .filter_map(|e| {
+                let device = axes.iter().position(|a| a.node == e.node)?;
+                Some(super::DriveEmergency {
+                    device,
+                    code: e.code,
+                    text: e.text(),
+                })
+            })
+            .collect()
+    }
+
     fn exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError> {
         if images.len() != self.axes.len() {
             return Err(LinkError::Mismatch {

@@ -933,6 +933,23 @@ fn mailbox_error(device: usize, index: u16, sub: u8) -> impl Fn(MailboxError) ->
 }
 
 impl Link for EthercatLink {
+    fn take_drive_emergencies(&mut self) -> Vec<super::DriveEmergency> {
+        let mut out = Vec::new();
+        for (device, ax) in self.axes.iter_mut().enumerate() {
+            let list = match &mut ax.mailbox {
+                Mailbox::Coe(c) => c.take_emergencies(),
+                Mailbox::Soe(s) => s.take_emergencies(),
+                Mailbox::None => Vec::new(),
+            };
+            out.extend(list.into_iter().map(|e| super::DriveEmergency {
+                device,
+                code: e.code,
+                text: crate::bus::canopen::nmt::emergency_text(e.code),
+            }));
+        }
+        out
+    }
+
     fn exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError> {
         if images.len() != self.axes.len() {
             return Err(LinkError::Mismatch {

@@ -93,6 +93,17 @@ impl LinkError {
     }
 }
 
+/// An emergency message of a drive (CiA 301 EMCY / CoE emergency).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DriveEmergency {
+    /// Device (axis) index on the link.
+    pub device: usize,
+    /// Error code (CiA 301 / CiA 402).
+    pub code: u16,
+    /// The code in words.
+    pub text: &'static str,
+}
+
 /// The peer of an acyclic access, as error messages name it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Peer {
@@ -137,6 +148,12 @@ pub trait Link: Send {
         Err(LinkError::Other(
             "this link has no acyclic (mailbox) access".into(),
         ))
+    }
+
+    /// Emergency messages the drives sent since the last call (CANopen EMCY, CoE emergency
+    /// received with a mailbox answer), oldest first. Links without them return none.
+    fn take_drive_emergencies(&mut self) -> Vec<DriveEmergency> {
+        Vec::new()
     }
 
     /// The simulated plant (probe surfaces, fixed stops) behind the link, if it has one
