@@ -119,5 +119,55 @@ fn bench_area_geom(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_area_geom);
+/// The same sparse scenario through the channel's `AreaMonitor` (areas defined through the
+/// definition rules, bound to channel axes X/Y/Z, the block as a channel `Segment`): what block
+/// preparation pays per block.
+fn bench_area_monitor(c: &mut Criterion) {
+    use fieldprobe::core::monitor::area_monitor::{AreaMonitor, ChannelAxes};
+    use fieldprobe::core::monitor::areas::{
+        AreaDefinition, AreaHeader, AreaKind, AreaShape as Shape, DefBlock, DefMotion, MonitorLevel,
+    };
+    use fieldprobe::core::path::Segment;
+    use fieldprobe::messages::BlockRef;
+    let at = BlockRef {
+        number: None,
+        line: 1,
+    };
+    let defined: Vec<_> = (0..20u32)
+        .map(|i| {
+            let v = star(
+                [(i % 5) as f64 * 25.0, (i / 5) as f64 * 25.0],
+                10.0,
+                0.1 * f64::from(i),
+            );
+            let mut d = AreaDefinition::begin(
+                AreaHeader {
+                    id: i + 1,
+                    kind: AreaKind::Prot,
+                    shape: Shape::Poly,
+                    min_excur: -100.0,
+                    max_excur: 100.0,
+                    excur_axis: None,
+                    monitor_level: MonitorLevel::Mcs,
+                },
+                None,
+            )
+            .unwrap();
+            for p in v.iter().chain(std::iter::once(&v[0])) {
+                d.block(&DefBlock::new(at, DefMotion::G01).xy(p[0], p[1]))
+                    .unwrap();
+            }
+            d.end(None).unwrap()
+        })
+        .collect();
+    let axes = ChannelAxes::new(vec!["X".into(), "Y".into(), "Z".into()]);
+    let monitor = AreaMonitor::from_areas(&defined, &axes).unwrap();
+    let seg = Segment::line(vec![12.5, 10.0, 0.0], vec![12.5, 15.0, 0.0]).unwrap();
+    assert!(monitor.check_segment(&seg).is_ok());
+    c.bench_function("area_monitor_block_20x20/sparse", |b| {
+        b.iter(|| black_box(&monitor).check_segment(black_box(&seg)))
+    });
+}
+
+criterion_group!(benches, bench_area_geom, bench_area_monitor);
 criterion_main!(benches);
