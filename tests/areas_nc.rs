@@ -849,3 +849,74 @@ mod robustness {
         Ok(())
     }
 }
+
+/// A workspace box X/Y ±200, Z ∈ [−100, 100], active; TCP at the origin.
+const BOX: &str = "\
+N10 #CONTROL AREA BEGIN [ID1 WORK POLY MIN_EXCUR=-100 MAX_EXCUR=100]
+N11 G01 G90 F2000 X-200 Y-200
+N12 X200
+N13 Y200
+N14 X-200
+N15 Y-200
+N16 #CONTROL AREA END
+N20 #CONTROL AREA ON [ID1]
+";
+
+fn z(m: &Machine) -> f64 {
+    pos(m)[2]
+}
+
+#[test]
+fn measuring_block_beyond_the_workspace_is_refused_or_limited_with_p_chan_00268() {
+    // P-CHAN-00268 = 0: the programmed target Z−150 lies outside: refused, nothing moves.
+    let mut m = machine();
+    let r = run_on(&mut m, &format!("{BOX}N30 G100 Z-150 F1000\nN40 M30\n"));
+    assert_eq!(id_block(&first_error(&r)), (900317, Some(30)));
+    assert_close(z(&m), 0.0, 1e-9, "Z");
+    // P-CHAN-00268 = 1, no probe: the run stops one tolerance band ahead of the first
+    // violation (Z = −100 − tol + tol = −100), error 50706.
+    let mut cfg = MachineConfig::default_machine();
+    cfg.apply_set("P-CHAN-00268=1").unwrap();
+    let mut m = Machine::new(&cfg).unwrap();
+    let r = run_on(&mut m, &format!("{BOX}N30 G100 Z-150 F1000\nN40 M30\n"));
+    assert_eq!(id_block(&first_error(&r)), (50706, Some(30)));
+    assert!(
+        (-100.0 - 1e-6..=-100.0 + 1e-6).contains(&z(&m)),
+        "stopped at Z = {}",
+        z(&m)
+    );
+    // … and with a probe surface at Z = −50 it measures there.
+    let mut m = Machine::new(&cfg).unwrap();
+    m.add_probe("Z", -50.0).unwrap();
+    let r = run_on(
+        &mut m,
+        &format!(
+            "{BOX}N30 G100 Z-150 F1000\nN40 #MSG SYN [\"%f\", V.A.MEAS.ACS.VALUE.Z]\nN50 M30\n"
+        ),
+    );
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    assert_eq!(r.output(), vec!["-50.000000"]);
+}
+
+#[test]
+fn measuring_overtravel_stops_at_the_workspace_instead_of_refusing_the_block() {
+    // Target Z−95 is inside; the overtravel of 20 mm past it (P-AXIS-00467 = 200000 × 0.1 µm,
+    // no probe) would leave the workspace at Z = −100: it is cut there silently, as at a
+    // software limit switch, and the axis travels beyond the target up to the boundary.
+    let mut cfg = MachineConfig::default_machine();
+    cfg.apply_set("Z.P-AXIS-00467=200000").unwrap();
+    let mut m = Machine::new(&cfg).unwrap();
+    let r = run_on(&mut m, &format!("{BOX}N30 G100 Z-95 F1000\nN40 M30\n"));
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    assert!(
+        r.messages().iter().all(|x| x.id != 900317),
+        "{:?}",
+        r.messages()
+    );
+    assert!(z(&m) >= -100.0 - 1e-6, "Z = {}", z(&m));
+    assert!(
+        z(&m) < -95.0 - 1.0,
+        "the overtravel ran past the target: Z = {}",
+        z(&m)
+    );
+}

@@ -287,11 +287,27 @@ impl Channel {
                 total = s_cut;
             }
         }
+        // Workspace / protection areas bound it the same way (seed 000 §6.2 P-CHAN-00268: "the
+        // CNC stops the movement before the software limit switch or … workspace or protection
+        // area"), stopping one tolerance band ahead of the first violation; without P-CHAN-00268 a
+        // programmed part that violates is refused by the area check of block preparation.
+        if !self.areas.monitor.is_empty() {
+            let far: Vec<f64> = (0..n).map(|i| start[i] + dir[i] * total).collect();
+            if let Some(free) = self.areas.monitor.free_distance(&start, &far) {
+                let s_cut = (free - self.areas.monitor.tolerance()).max(0.0);
+                if s_cut < total && (s_cut >= len || limit_target) {
+                    if s_cut < len {
+                        limited = true;
+                    }
+                    total = s_cut;
+                }
+            }
+        }
         let target_len = len.min(total);
         if total <= 1e-12 {
             return Err(CncMessage::error(
                 ids::MEAS_PATH_LIMITED,
-                "measurement run cannot start: the axis stands at the software limit switch in the direction of measurement",
+                "measurement run cannot start: the axis stands at a software limit switch or control-area boundary in the direction of measurement",
             ));
         }
         let end: Vec<f64> = (0..n).map(|i| start[i] + dir[i] * total).collect();

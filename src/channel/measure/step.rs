@@ -218,7 +218,7 @@ impl Channel {
             let error = if run.limited_at_sls {
                 Some(CncMessage::error(
                     ids::MEAS_PATH_LIMITED,
-                    format!("measurement run stopped at the software limit switch without probing signal (axes {list})"),
+                    format!("measurement run stopped at the software limit switch or control-area boundary (P-CHAN-00268) without probing signal (axes {list})"),
                 ))
             } else {
                 match run.mtype {

@@ -263,23 +263,43 @@ impl AreaMonitor {
     /// before the position would violate an area (0 if `from` itself violates). Axes not
     /// monitored travel `max`.
     pub fn free_travel(&self, from: &[f64], axis: usize, dir: f64, max: f64) -> f64 {
-        let mut best = max.max(0.0);
+        let max = max.max(0.0);
+        let mut to = from.to_vec();
+        if let Some(t) = to.get_mut(axis) {
+            *t += dir.signum() * max;
+        }
+        self.free_distance(from, &to).unwrap_or(max)
+    }
+
+    /// Distance along the straight line `from` → `to` (channel coordinates, the line's own
+    /// length) to the point where it starts to violate an area; `None` if it never does.
+    pub fn free_distance(&self, from: &[f64], to: &[f64]) -> Option<f64> {
+        let total = from
+            .iter()
+            .zip(to)
+            .map(|(a, b)| (b - a) * (b - a))
+            .sum::<f64>()
+            .sqrt();
+        let mut best: Option<f64> = None;
         for g in &self.groups {
-            let Some(k) = g.axes.iter().position(|&a| a == axis) else {
+            let a = local(from, g.axes);
+            let b = local(to, g.axes);
+            let el = PathElement::Line(geo::Line { from: a, to: b });
+            let Err(h) = self.verdict(g, &el, self.tol, self.tol) else {
                 continue;
             };
-            let a = local(from, g.axes);
-            let mut b = a;
-            b[k] += dir.signum() * best;
-            let el = PathElement::Line(geo::Line { from: a, to: b });
-            if let Err(h) = self.verdict(g, &el, self.tol, self.tol) {
-                let d = if h.point[k].is_finite() {
-                    ((h.point[k] - a[k]) * dir.signum()).max(0.0)
-                } else {
-                    0.0
-                };
-                best = best.min(d);
-            }
+            let ab: f64 = (0..3).map(|k| (b[k] - a[k]) * (b[k] - a[k])).sum();
+            let s = if ab > 0.0 && h.point.iter().all(|v| v.is_finite()) {
+                ((0..3)
+                    .map(|k| (h.point[k] - a[k]) * (b[k] - a[k]))
+                    .sum::<f64>()
+                    / ab)
+                    .clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = s * total;
+            best = Some(best.map_or(d, |x: f64| x.min(d)));
         }
         best
     }
