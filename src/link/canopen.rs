@@ -268,6 +268,20 @@ fn other(m: String) -> LinkError {
     LinkError::Other(m)
 }
 
+/// A failed SDO transfer as a link error: an abort keeps its CiA 301 code, anything else
+/// (timeout, protocol) is described in words.
+fn sdo_failure(node: u8, index: u16, sub: u8) -> impl Fn((Option<SdoError>, String)) -> LinkError {
+    move |(e, text)| match e {
+        Some(SdoError::Abort { code, .. }) => LinkError::Abort {
+            device: Peer::Node(node),
+            index,
+            sub,
+            code,
+        },
+        _ => other(format!("node {node}: SDO {index:#06x}:{sub:02x}: {text}")),
+    }
+}
+
 /// Node ids 1 … n.
 fn default_ids(n: usize) -> Result<Vec<u8>, LinkError> {
     if n > 127 {
@@ -531,15 +545,7 @@ impl CanopenLink {
         });
         self.axes[i].sdo = client;
         self.note(seen, now)?;
-        r.map_err(|(e, text)| match e {
-            Some(SdoError::Abort { code, .. }) => LinkError::Abort {
-                device: Peer::Node(node),
-                index,
-                sub,
-                code,
-            },
-            _ => other(format!("node {node}: SDO {index:#06x}:{sub:02x}: {text}")),
-        })
+        r.map_err(sdo_failure(node, index, sub))
     }
 
     /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus (dropped before
@@ -875,15 +881,7 @@ impl CanSession {
             Ok(())
         });
         self.note(&seen);
-        r.map_err(|(e, text)| match e {
-            Some(SdoError::Abort { code, .. }) => LinkError::Abort {
-                device: Peer::Node(node),
-                index,
-                sub,
-                code,
-            },
-            _ => other(format!("node {node}: {text}")),
-        })
+        r.map_err(sdo_failure(node, index, sub))
     }
 
     /// Find the nodes: an SDO upload of 0x1000 to every node id 1 … 127 at once (nodes in
