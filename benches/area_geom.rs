@@ -119,45 +119,37 @@ fn bench_area_geom(c: &mut Criterion) {
     g.finish();
 }
 
-/// The same sparse scenario through the channel's `AreaMonitor` (areas defined through the
-/// definition rules, bound to channel axes X/Y/Z, the block as a channel `Segment`): what block
-/// preparation pays per block.
+/// The same sparse scenario through the channel's `AreaMonitor` (20 protection areas of 20
+/// edges bound to channel axes X/Y/Z, the block as a channel `Segment`): what block preparation
+/// pays per block. The areas are built as values: an NC definition allows at most 20 G01 blocks
+/// including the starting point, i.e. 19 edges (docs/interpretations.md A2).
 fn bench_area_monitor(c: &mut Criterion) {
     use fieldprobe::core::monitor::area_monitor::{AreaMonitor, ChannelAxes};
     use fieldprobe::core::monitor::areas::{
-        AreaDefinition, AreaHeader, AreaKind, AreaShape as Shape, DefBlock, DefMotion, MonitorLevel,
+        Area as TableArea, AreaAxes, AreaGeometry, AreaHeader, AreaKind, AreaShape as Shape,
+        MonitorLevel,
     };
     use fieldprobe::core::path::Segment;
-    use fieldprobe::messages::BlockRef;
-    let at = BlockRef {
-        number: None,
-        line: 1,
-    };
-    let defined: Vec<_> = (0..20u32)
-        .map(|i| {
-            let v = star(
-                [(i % 5) as f64 * 25.0, (i / 5) as f64 * 25.0],
-                10.0,
-                0.1 * f64::from(i),
-            );
-            let mut d = AreaDefinition::begin(
-                AreaHeader {
-                    id: i + 1,
-                    kind: AreaKind::Prot,
-                    shape: Shape::Poly,
-                    min_excur: -100.0,
-                    max_excur: 100.0,
-                    excur_axis: None,
-                    monitor_level: MonitorLevel::Mcs,
-                },
-                None,
-            )
-            .unwrap();
-            for p in v.iter().chain(std::iter::once(&v[0])) {
-                d.block(&DefBlock::new(at, DefMotion::G01).xy(p[0], p[1]))
-                    .unwrap();
-            }
-            d.end(None).unwrap()
+    let defined: Vec<TableArea> = (0..20u32)
+        .map(|i| TableArea {
+            header: AreaHeader {
+                id: i + 1,
+                kind: AreaKind::Prot,
+                shape: Shape::Poly,
+                min_excur: -100.0,
+                max_excur: 100.0,
+                excur_axis: None,
+                monitor_level: MonitorLevel::Mcs,
+            },
+            axes: AreaAxes::Main,
+            geometry: AreaGeometry::Polygon {
+                vertices: star(
+                    [(i % 5) as f64 * 25.0, (i / 5) as f64 * 25.0],
+                    10.0,
+                    0.1 * f64::from(i),
+                ),
+            },
+            defined_at: None,
         })
         .collect();
     let axes = ChannelAxes::new(vec!["X".into(), "Y".into(), "Z".into()]);

@@ -343,8 +343,7 @@ fn poly_takes_g01_only() {
 
 #[test]
 fn poly_limit_is_20_blocks() {
-    // The starting point + 19 more points + the closing point: 20 contour blocks (20 edges),
-    // accepted; one point more is a 21st contour block.
+    // 19 distinct points on a circle + the closing point = 20 blocks: accepted.
     let ring = |count: usize| -> Vec<DefBlock> {
         let mut v: Vec<DefBlock> = (0..count)
             .map(|k| {
@@ -356,12 +355,12 @@ fn poly_limit_is_20_blocks() {
         v
     };
     let mut t = AreaTable::new();
-    define(&mut t, SEED_POLY, &ring(20)).unwrap();
+    define(&mut t, SEED_POLY, &ring(19)).unwrap();
     match &t.area(3).unwrap().geometry {
-        AreaGeometry::Polygon { vertices } => assert_eq!(vertices.len(), 20),
+        AreaGeometry::Polygon { vertices } => assert_eq!(vertices.len(), 19),
         g => panic!("{g:?}"),
     }
-    let e = def_err(SEED_POLY, &ring(21));
+    let e = def_err(SEED_POLY, &ring(20));
     assert_eq!(e.kind, AreaErrorKind::TooManyBlocks { id: 3 });
     assert_eq!(e.at, Some(n(900)));
     assert_eq!(e.message().id, ids::AREA_TOO_MANY_BLOCKS);

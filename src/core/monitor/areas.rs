@@ -26,9 +26,8 @@
 //!
 //! # Interpretations (where the seed is silent or ambiguous)
 //!
-//! - "≤ 20 blocks" for POLY (§2.3) counts the blocks that draw the contour (its edges); the
-//!   block of the starting point only positions the chain. A polygon thus has at most 20
-//!   vertices / edges: the starting point, 19 more points and the closing point (21 blocks).
+//! - "≤ 20 blocks" for POLY (§2.3) counts the motion blocks including the starting point, so a
+//!   polygon has at most 20 points, i.e. 19 distinct vertices plus the closing point.
 //! - The seed's "convex" (§2.3, §3.1.1) means a simple closed chain: no two edges may cross or
 //!   touch except adjacent edges at their common vertex (the seed's own example is not convex).
 //! - The first definition block must program both plane coordinates (the starting point "must be
@@ -60,10 +59,7 @@ use crate::messages::{ids, BlockRef, CncMessage};
 /// Seed 000 §2.3 / §3.1: at most 20 workspace and protection areas.
 pub const MAX_AREAS: usize = 20;
 
-/// Seed 000 §2.3: at most 20 motion blocks define a polygon's contour — its edges; the block
-/// that programs the starting point only positions the chain and does not count, so a polygon
-/// has at most 20 vertices and 20 edges (the geometry module's limit, and the issue's
-/// benchmark of "20 polygon areas of 20 edges each").
+/// Seed 000 §2.3: at most 20 motion blocks define a polygon (starting point included).
 pub const MAX_POLY_BLOCKS: usize = 20;
 
 /// Length tolerance in mm (or inch) for "same point", "on the boundary" and "touching": 1 nm.
@@ -916,7 +912,7 @@ pub enum AreaErrorKind {
         expected: &'static str,
     },
     /// §2.3: more than [`MAX_POLY_BLOCKS`] blocks define the polygon.
-    #[error("control area {id}: more than {max} contour blocks (edges) after the starting point in the polygon", max = MAX_POLY_BLOCKS)]
+    #[error("control area {id}: more than {max} motion blocks in the polygon", max = MAX_POLY_BLOCKS)]
     TooManyBlocks {
         /// Area ID.
         id: u32,
@@ -1219,8 +1215,7 @@ impl AreaDefinition {
                         expected: "G01",
                     });
                 }
-                // `blocks` counts the starting point too.
-                if self.blocks > MAX_POLY_BLOCKS {
+                if self.blocks >= MAX_POLY_BLOCKS {
                     return err(AreaErrorKind::TooManyBlocks { id });
                 }
             }
