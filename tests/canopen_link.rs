@@ -11,11 +11,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use fieldprobe::channel::ChannelState;
 use fieldprobe::link::canopen::CanopenLink;
 use fieldprobe::link::{Link, LinkError, ProcessImage};
 use fieldprobe::machine::{LinkChoice, Machine, RunStatus};
-use fieldprobe::nc::exec::{Event, Executor, Step};
 use fieldprobe::nc::parser::parse;
 use fieldprobe::params::MachineConfig;
 use fieldprobe::units::Nanos;
@@ -200,44 +198,9 @@ fn a_drive_fault_sends_an_emcy() {
     assert_ne!(sw & 0x0008, 0, "statusword {sw:#06x}");
 }
 
-/// Step a G100 run; `each(machine, cycle)` after every cycle. Returns the message IDs and the
-/// executor (for the results).
-fn measuring_run(
-    m: &mut Machine,
-    mut each: impl FnMut(&mut Machine, usize),
-) -> (Vec<u32>, Executor) {
-    assert_eq!(m.settle(10_000), ChannelState::Idle);
-    let names = m
-        .channel()
-        .axes()
-        .iter()
-        .map(|a| a.name().to_string())
-        .collect();
-    let mut exec = Executor::new(parse("N10 G100 Z100 F3000\nN20 M30\n").unwrap(), names);
-    exec.sync(m.channel());
-    let (mut ids, mut out, mut k) = (Vec::new(), Vec::new(), 0usize);
-    loop {
-        ids.extend(m.channel_mut().take_messages().iter().map(|x| x.id));
-        match m.channel().state() {
-            ChannelState::Aborted => break,
-            ChannelState::Idle => {
-                let step = exec.step(m.channel_mut(), &mut out);
-                for Event::Output(_) in out.drain(..) {}
-                if step == Step::End {
-                    break;
-                }
-            }
-            _ => {
-                assert!(k < 100_000);
-                m.step();
-                k += 1;
-                each(m, k);
-            }
-        }
-    }
-    ids.extend(m.channel_mut().take_messages().iter().map(|x| x.id));
-    (ids, exec)
-}
+#[path = "common/measuring.rs"]
+mod measuring;
+use measuring::measuring_run;
 
 #[test]
 fn lost_tpdos_a_lost_heartbeat_or_a_drive_fault_during_a_measuring_run_publish_nothing() {

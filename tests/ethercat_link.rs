@@ -10,11 +10,9 @@
 
 use std::time::Duration;
 
-use fieldprobe::channel::ChannelState;
 use fieldprobe::link::ethercat::{EthercatLink, EthercatSpec, Wire};
 use fieldprobe::link::Link;
 use fieldprobe::machine::{LinkChoice, Machine, RunReport, RunStatus};
-use fieldprobe::nc::exec::{Event, Executor, Step};
 use fieldprobe::nc::parser::parse;
 use fieldprobe::params::MachineConfig;
 use fieldprobe::units::Nanos;
@@ -271,43 +269,9 @@ fn a_lost_frame_is_reported_and_leaves_the_inputs_alone() {
         .unwrap();
 }
 
-/// Step a G100 run cycle by cycle; `each(machine, cycle)` after every cycle.
-fn measuring_run(
-    m: &mut Machine,
-    mut each: impl FnMut(&mut Machine, usize),
-) -> (Vec<u32>, Executor) {
-    assert_eq!(m.settle(10_000), ChannelState::Idle);
-    let names = m
-        .channel()
-        .axes()
-        .iter()
-        .map(|a| a.name().to_string())
-        .collect();
-    let mut exec = Executor::new(parse("N10 G100 Z100 F3000\nN20 M30\n").unwrap(), names);
-    exec.sync(m.channel());
-    let (mut ids, mut out, mut k) = (Vec::new(), Vec::new(), 0usize);
-    loop {
-        ids.extend(m.channel_mut().take_messages().iter().map(|x| x.id));
-        match m.channel().state() {
-            ChannelState::Aborted => break,
-            ChannelState::Idle => {
-                let step = exec.step(m.channel_mut(), &mut out);
-                for Event::Output(_) in out.drain(..) {}
-                if step == Step::End {
-                    break;
-                }
-            }
-            _ => {
-                assert!(k < 100_000);
-                m.step();
-                k += 1;
-                each(m, k);
-            }
-        }
-    }
-    ids.extend(m.channel_mut().take_messages().iter().map(|x| x.id));
-    (ids, exec)
-}
+#[path = "common/measuring.rs"]
+mod measuring;
+use measuring::measuring_run;
 
 #[test]
 fn a_lost_frame_or_a_drive_fault_during_a_measuring_run_publishes_nothing() {
