@@ -19,11 +19,11 @@ use fieldprobe::drive::model::ds402::Ds402Model;
 use fieldprobe::esi::{self, sii, to_sii::sii_from_device, Pdo};
 use fieldprobe::sim::esc::coe::{ds402_objects, Access, CoeServer, ObjectEntry};
 use fieldprobe::sim::esc::device::pdo_objects;
-use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig, NullApp};
+use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig};
 
 #[path = "common/wire.rs"]
 mod wire;
-use wire::spawn_wire;
+use wire::{coupler, spawn_wire};
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_FRAMES: usize = 16;
@@ -35,15 +35,7 @@ const SERVO_XML: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/esi/fieldprobe-cia402-servo.xml"
 );
-const EK1100_XML: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/esi/fieldprobe-ek1100.xml");
 const DRIVE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/drives/cia402-generic.toml");
-
-fn coupler() -> Esc {
-    let file = esi::load(EK1100_XML).expect("EK1100 ESI");
-    let content = sii_from_device(&file, &file.devices[0]).expect("EK1100 SII");
-    let cfg = EscConfig::from_sii(sii::encode_padded(&content).expect("encode"));
-    Esc::new(cfg, Box::new(NullApp))
-}
 
 /// Mailbox-only application sharing its CoE server with the test.
 struct SharedCoe(Arc<Mutex<CoeServer>>);

@@ -23,11 +23,11 @@ use fieldprobe::drive::model::sercos::SercosModel;
 use fieldprobe::drive::sercos;
 use fieldprobe::esi::{self, sii, to_sii::sii_from_device, SmKind};
 use fieldprobe::sim::esc::soe::{sercos_idns, SoeServer};
-use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig, NullApp};
+use fieldprobe::sim::esc::{segment::Segment, Esc, EscApplication, EscConfig};
 
 #[path = "common/wire.rs"]
 mod wire;
-use wire::spawn_wire;
+use wire::{coupler, spawn_wire};
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_FRAMES: usize = 16;
@@ -39,15 +39,7 @@ const SERCOS_XML: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/esi/fieldprobe-ax5000-sercos.xml"
 );
-const EK1100_XML: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/esi/fieldprobe-ek1100.xml");
 const DRIVE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/drives/sercos-ax5000.toml");
-
-fn coupler() -> Esc {
-    let file = esi::load(EK1100_XML).expect("EK1100 ESI");
-    let content = sii_from_device(&file, &file.devices[0]).expect("EK1100 SII");
-    let cfg = EscConfig::from_sii(sii::encode_padded(&content).expect("encode"));
-    Esc::new(cfg, Box::new(NullApp))
-}
 
 /// The SoE server of one drive plus test knobs, shared with the wire thread.
 struct Drive {

@@ -18,12 +18,12 @@ use ethercrab::{
 };
 use fieldprobe::drive::catalogue;
 use fieldprobe::drive::model::ds402::Ds402Model;
-use fieldprobe::esi::{self, sii, to_sii::sii_from_device};
-use fieldprobe::sim::esc::{device::emulated_servo, segment::Segment, Esc, EscConfig, NullApp};
+use fieldprobe::esi::{self};
+use fieldprobe::sim::esc::{device::emulated_servo, segment::Segment};
 
 #[path = "common/wire.rs"]
 mod wire;
-use wire::spawn_wire;
+use wire::{coupler, spawn_wire};
 
 const TEST_TIMEOUT: Duration = Duration::from_secs(30);
 const MAX_SUBDEVICES: usize = 8;
@@ -53,13 +53,6 @@ fn product_code_from_xml(path: &str) -> u32 {
         .take_while(|c| c.is_ascii_hexdigit())
         .collect();
     u32::from_str_radix(&hex, 16).expect("hex product code")
-}
-
-fn coupler() -> Esc {
-    let file = esi::load(EK1100_XML).expect("EK1100 ESI");
-    let content = sii_from_device(&file, &file.devices[0]).expect("EK1100 SII");
-    let cfg = EscConfig::from_sii(sii::encode_padded(&content).expect("encode"));
-    Esc::new(cfg, Box::new(NullApp))
 }
 
 #[derive(Debug)]

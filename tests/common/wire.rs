@@ -90,3 +90,15 @@ pub fn bounded<T: Send + 'static>(timeout: Duration, f: impl FnOnce() -> T + Sen
         .recv_timeout(timeout)
         .unwrap_or_else(|e| panic!("MainDevice side did not finish within {timeout:?}: {e}"))
 }
+
+/// The EK1100-kind coupler ESC of `esi/fieldprobe-ek1100.xml` (no application), first on every
+/// emulated segment of the tests.
+pub fn coupler() -> fieldprobe::sim::esc::Esc {
+    use fieldprobe::esi::{self, sii, to_sii::sii_from_device};
+    use fieldprobe::sim::esc::{Esc, EscConfig, NullApp};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/esi/fieldprobe-ek1100.xml");
+    let file = esi::load(path).expect("EK1100 ESI");
+    let content = sii_from_device(&file, &file.devices[0]).expect("EK1100 SII");
+    let cfg = EscConfig::from_sii(sii::encode_padded(&content).expect("encode"));
+    Esc::new(cfg, Box::new(NullApp))
+}
