@@ -277,6 +277,10 @@ fn syntax_errors_name_keyword_and_allowed_values() {
             "EXCUR_AX | EXCUR_AXNR programmed twice",
         ),
         (
+            "BEGIN [ID=1 WORK POLY MIN_EXCUR=0 MAX_EXCUR=1 EXCUR_AXNR=0]",
+            "EXCUR_AXNR: bad value `0`, allowed: a logical axis number 1",
+        ),
+        (
             "BEGIN [ID=1 WORK POLY MIN_EXCUR=abc MAX_EXCUR=1]",
             "MIN_EXCUR: bad value `ABC`",
         ),

@@ -458,10 +458,12 @@ fn parse_begin(items: &[Item]) -> Result<AreaHeader, AreaSyntaxError> {
             }
             "EXCUR_AXNR" => {
                 let v = item.value.clone().unwrap_or_default();
-                let n = v.parse::<u32>().map_err(|_| AreaSyntaxError::BadValue {
-                    keyword: "EXCUR_AXNR",
-                    found: v.clone(),
-                    allowed: "a logical axis number",
+                let n = v.parse::<u32>().ok().filter(|n| *n >= 1).ok_or_else(|| {
+                    AreaSyntaxError::BadValue {
+                        keyword: "EXCUR_AXNR",
+                        found: v.clone(),
+                        allowed: "a logical axis number 1, 2, … (AXNR numbering)",
+                    }
                 })?;
                 set(
                     &mut excur,
