@@ -238,6 +238,7 @@ impl Machine {
             axes.push(axis);
             models.push(model);
             let mut axis_cfg = channel_axis_config(a, cycle);
+            axis_cfg.servo_lag_time = servo_lag_time(&defs[defs.len() - 1].model);
             // Measurement type 6 needs a SERCOS axis (seed 004 §3 table).
             axis_cfg.meas.sercos = sercos;
             axis_cfgs.push(axis_cfg);
@@ -250,6 +251,10 @@ impl Machine {
             move_limit_warning: cfg.manual.int("P-MANU-00014") != 0,
             workspace_manual_mode: u16::try_from(cfg.channel.int("P-CHAN-00442")).unwrap_or(0),
             enable_timeout_cycles: 1000,
+            in_position_timeout_cycles: in_position_timeout_cycles(
+                cfg.in_position_timeout_ms,
+                cycle,
+            ),
             meas: channel_meas_config(&cfg.channel),
         };
         // P-AXIS-00777 > 1000: warning 110757 at controller start (seed 004 §8.2.2).
@@ -324,6 +329,10 @@ impl Machine {
             return Err(MachineError::Config(
                 "--pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE)".into(),
             ));
+        }
+        let mut channel = channel;
+        for (i, a) in cfg.axes.iter().enumerate() {
+            channel.set_dead_time_cycles(i, a.dead_time_cycles.unwrap_or(link.dead_time_cycles()));
         }
         Ok(Machine {
             channel,
@@ -716,7 +725,33 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
         a_emergency,
         limits,
         meas,
+        in_position: param_pos_to_mm(i64::from(a.in_position_window)),
+        servo_lag_time: 0.0,
     }
+}
+
+/// Time a drive's actual position lags its set-point at constant speed, s (lag = v × this):
+/// `(1 − velocity_feed_forward) / kv`, i.e. 0 with full velocity feed-forward and 1/kv for a
+/// drive without feed-forward.
+pub fn servo_lag_time(m: &crate::drive::catalogue::ModelConfig) -> f64 {
+    let kv = if m.kv.is_finite() && m.kv > 0.0 {
+        m.kv
+    } else {
+        40.0
+    };
+    let vff = if m.feed_forward {
+        m.velocity_feed_forward.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (1.0 - vff) / kv
+}
+
+/// `in_position_timeout_ms` in interpolation cycles (at least 1).
+fn in_position_timeout_cycles(ms: u32, cycle: Nanos) -> u32 {
+    let c = cycle.0.max(1);
+    let n = (u64::from(ms) * 1_000_000).div_ceil(c);
+    u32::try_from(n).unwrap_or(u32::MAX).max(1)
 }
 
 /// The channel's measurement settings from its parameter list (seed 004 §8.2.1, seed 000 §6.2).

@@ -188,6 +188,9 @@ pub mod ids {
     pub const DRIVE_EMERGENCY: u32 = 900015;
     /// Project: a command position does not fit the drive's INTEGER32 position range.
     pub const DRIVE_RANGE: u32 = 900013;
+    /// Project: an exact stop timed out: an axis did not come inside its in-position window
+    /// (machine key `in_position_window`) within `in_position_timeout_ms`.
+    pub const IN_POSITION_TIMEOUT: u32 = 900016;
     /// Project: an NC feature that is recognised but not supported in this build.
     pub const NC_UNSUPPORTED: u32 = 900020;
     /// Project: a motion block has no valid feed (F missing or zero for G01/G02/G03).

@@ -63,9 +63,11 @@ fn drive_fault_during_motion_aborts() {
 
 #[test]
 fn following_error_window_fault_stops_the_run() {
-    // A tight 0x6065 window (drive file default is wide): 1000 inc = 0.1 mm; lag at 100 mm/s
-    // with kv = 40 is 2.5 mm, so the drive faults (0x8611) and the channel stops.
+    // A tight 0x6065 window (drive file default is wide): 1000 inc = 0.1 mm for 10 ms (0x6066).
+    // An obstacle at X = 50 stalls the axis while the set-points run on at 100 mm/s: the drive's
+    // following error passes 0.1 mm after 1 ms, the drive faults (0x8611), the channel stops.
     let mut m = default_machine();
+    m.add_fixed_stop("X", 50.0).unwrap();
     m.link_mut()
         .model_mut(0)
         .unwrap()
@@ -122,6 +124,8 @@ fn target_beyond_drive_position_range_is_refused_in_preparation() {
 fn after_a_drive_fault_the_next_program_start_resets_and_runs() {
     let mut m = default_machine();
     let prog = parse("N10 G01 G90 X10 F6000\nN20 M30\n").unwrap();
+    // An obstacle at X = 5 and a 1 µm window (0x6065 = 10 inc): the drive faults.
+    m.add_fixed_stop("X", 5.0).unwrap();
     m.link_mut()
         .model_mut(0)
         .unwrap()
@@ -133,8 +137,9 @@ fn after_a_drive_fault_the_next_program_start_resets_and_runs() {
         m.link_mut().model_mut(0).unwrap().state(),
         fieldprobe::drive::PowerState::Fault
     );
-    // Open the window again; the controller reset at program start sends the fault-reset edge
-    // (controlword bit 7) and re-enables.
+    // Clear the obstacle and open the window again; the controller reset at program start
+    // sends the fault-reset edge (controlword bit 7) and re-enables.
+    m.link_mut().plant_mut().unwrap().fixed_stops_mut().clear();
     m.link_mut()
         .model_mut(0)
         .unwrap()

@@ -50,9 +50,12 @@ impl Bench {
     }
     fn with(def: &DriveDefinition) -> Bench {
         let def = def.clone();
-        let a =
+        let mut a =
             fieldprobe::drive::adapter_for(&def, &ParamSet::new(fieldprobe::params::Scope::Axis))
                 .unwrap();
+        // The bench steps adapter and model in lockstep: the image read in a cycle was written
+        // by the model in the same cycle (no bus in between), so no feedback delay.
+        a.set_feedback_delay(0);
         let m = model::for_definition(&def).unwrap();
         Bench {
             out: vec![0; a.output_len()],

@@ -210,15 +210,20 @@ fn meas4_cs_offset_and_rotation_matches_the_seed_and_the_trigonometry() {
 fn meas_run_latches_both_axes_on_the_line() {
     // N30 G100 X10 Y10 from (5, 0): the line is Y = 2·(X − 5); the probe at X = 8 is crossed
     // at Y = 6, so X latches 8 and Y latches 6. N40 G01 X7 moves X on.
+    // X latches where the probe is (the plant switches it on X's own trajectory): 8 to the
+    // increment. Y latches where Y is at that instant: on the line up to the drives' tracking
+    // error (servos with feed-forward: well below 0.1 µm at constant speed) plus the rounding
+    // to an increment — within two increments.
     let r = run_json("meas_run.nc", &["--probe-at", "X=8"], 0);
     completed_without_messages(&r);
+    let on_line = 2.0 * LATCH_TOL;
     close("X latched", meas(&r, "X", "acs").unwrap(), 8.0, LATCH_TOL);
-    close("Y latched", meas(&r, "Y", "acs").unwrap(), 6.0, LATCH_TOL);
+    close("Y latched", meas(&r, "Y", "acs").unwrap(), 6.0, on_line);
     close("X MESS", meas(&r, "X", "mess").unwrap(), 8.0, LATCH_TOL);
-    close("Y MESS", meas(&r, "Y", "mess").unwrap(), 6.0, LATCH_TOL);
+    close("Y MESS", meas(&r, "Y", "mess").unwrap(), 6.0, on_line);
     // MOFFS = measured − target (10, 10).
     close("X MOFFS", meas(&r, "X", "moffs").unwrap(), -2.0, LATCH_TOL);
-    close("Y MOFFS", meas(&r, "Y", "moffs").unwrap(), -4.0, LATCH_TOL);
+    close("Y MOFFS", meas(&r, "Y", "moffs").unwrap(), -4.0, on_line);
     assert!(merf(&r, "X") && merf(&r, "Y"));
     assert_eq!(command(&r, "X"), 7.0);
     // Y stopped after the latch: beyond 6 (the command leads the actual), well before 10.

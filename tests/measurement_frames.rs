@@ -58,16 +58,33 @@ fn trafo_is_refused_as_bad_input() {
 
 #[test]
 fn cnc_lag_monitoring_trips_but_not_for_a_fixed_stop_run() {
-    // P-AXIS-00168 = 1 mm; at 100 mm/s the drive model's lag is v/kv = 2.5 mm.
+    // P-AXIS-00168 = 1 mm. A free G01 at 100 mm/s on a drive with feed-forward lags by far less
+    // (µm), so it runs; an obstacle at Z = 50 in its way stalls the axis and the lag grows with
+    // the command (100 mm/s): the monitoring trips.
     let mut cfg = MachineConfig::default_machine();
     cfg.apply_set("Z.P-AXIS-00168=10000").unwrap();
     let mut m = Machine::new(&cfg).unwrap();
+    let r = m.run_program(
+        &parse("N10 G01 G90 Z100 F6000\nN20 G01 Z0\nN30 M30\n").unwrap(),
+        &mut |_| {},
+    );
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    let mut m = Machine::new(&cfg).unwrap();
+    m.add_fixed_stop("Z", 50.0).unwrap();
     let r = m.run_program(
         &parse("N10 G01 G90 Z100 F6000\nN20 M30\n").unwrap(),
         &mut |_| {},
     );
     assert_eq!(r.status, RunStatus::Aborted);
     assert_eq!(r.message_ids(), vec![900014]);
+    // It trips in the first cycle the lag exceeds 1 mm: the lag grows by v·T = 0.1 mm a cycle.
+    let text = &r.messages()[0].text;
+    let lag: f64 = text
+        .split_whitespace()
+        .nth(2)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!((1.0..=1.1 + 1e-9).contains(&lag), "{text}");
     // The same axis measuring to a fixed stop at the same feed: monitoring is off for it.
     for s in [
         "P-CHAN-00057=7",

@@ -28,12 +28,17 @@ fn def_with(telegram: u16) -> DriveDefinition {
     catalogue::parse(&text, "t.toml").unwrap()
 }
 
-/// Adapter and model on one simulated bus.
+/// Adapter and model on one simulated bus, with the bus's timing: the master writes its
+/// outputs, the drive takes them at the next SYNC0 and steps, and the input image it writes
+/// there travels with the *next* frame (as on every link; `DriveAdapter::set_feedback_delay`
+/// 1, the adapter's default).
 struct Bus {
     a: ProfidriveAdapter,
     m: ProfidriveModel,
     out: Vec<u8>,
     inp: Vec<u8>,
+    /// The image the drive wrote at its last step, delivered with the next exchange.
+    sampled: Vec<u8>,
     now: u64,
     cmd: DriveCommand,
 }
@@ -49,6 +54,7 @@ impl Bus {
             a,
             m,
             out,
+            sampled: inp.clone(),
             inp,
             now: 0,
             cmd: DriveCommand::default(),
@@ -63,11 +69,13 @@ impl Bus {
         self.a.write_outputs(now, &self.cmd, &mut self.out).unwrap();
         self.now += 1_000_000;
         let end = Nanos(self.now);
+        // The frame delivers what the drive sampled at the previous SYNC0.
+        std::mem::swap(&mut self.inp, &mut self.sampled);
         self.m.begin_step(end, DT, &self.out);
         for &(input, rising) in edges {
             self.m.input_edge(input, rising, Nanos(self.now - 500_000));
         }
-        self.m.finish_step(&mut self.inp);
+        self.m.finish_step(&mut self.sampled);
     }
 
     fn cycle(&mut self) {

@@ -155,6 +155,8 @@ fn p_err_70021_from_the_drive_overshooting() {
     }
     assert!((x(&m).1 - 199.95).abs() < 1e-3);
     m.link_mut().model_mut(0).unwrap().set_disturbance(2000.0);
+    // The drive samples the pushed position at the next SYNC0; the frame after that carries it.
+    m.step();
     let r = run_on(&mut m, "N10 #MSG SYN[\"not reached\"]\nN20 M30\n");
     assert_eq!(r.message_ids(), vec![70021]);
     assert_eq!(r.status, RunStatus::Aborted);

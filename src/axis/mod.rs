@@ -31,7 +31,19 @@ pub enum AxisError {
     },
 }
 
+/// Largest dead time (cycles) an axis accepts ([`Axis::set_dead_time_cycles`]).
+pub const MAX_DEAD_TIME_CYCLES: u32 = 16;
+
 /// One axis of the channel.
+///
+/// # Lag
+///
+/// The CNC's position lag ([`Axis::lag`]) compares the actual value with the command *delayed
+/// by the link's dead time* (the cycles between sending a set-point and reading the position it
+/// produced, [`crate::link::Link::dead_time_cycles`]): the actual value read now was produced
+/// by the set-point sent that many cycles ago. A drive with feed-forward at constant speed thus
+/// shows ≈ 0 lag, a stalled one its real lag — as in a production CNC's lag monitoring. The
+/// drive's own following error, where its image carries one, is [`Axis::drive_lag`].
 #[derive(Debug)]
 pub struct Axis {
     name: String,
@@ -44,8 +56,15 @@ pub struct Axis {
     command: f64,
     /// Last actual position (mm / °).
     actual: f64,
-    /// Following error (mm / °): the drive's 0x60F4 where mapped, else command − actual.
+    /// Position lag (mm / °) as the CNC sees it: the command of [`Axis::dead_time_cycles`]
+    /// cycles ago − the actual position.
     lag: f64,
+    /// The drive's own following error (0x60F4, S-0-0189 …) where its image carries one.
+    drive_lag: Option<f64>,
+    /// Commands sent, newest first ([`Axis::dead_time_cycles`] of them are needed).
+    sent: [f64; MAX_DEAD_TIME_CYCLES as usize],
+    /// Cycles between sending a set-point and reading the position it produced.
+    dead_time: u32,
     feedback: Option<DriveFeedback>,
     /// The command has been aligned with the actual position (before enabling).
     aligned: bool,
@@ -71,6 +90,9 @@ impl Axis {
             command: 0.0,
             actual: 0.0,
             lag: 0.0,
+            drive_lag: None,
+            sent: [0.0; MAX_DEAD_TIME_CYCLES as usize],
+            dead_time: crate::link::DEFAULT_DEAD_TIME_CYCLES,
             feedback: None,
             aligned: false,
             definition: None,
@@ -123,21 +145,40 @@ impl Axis {
                 source,
             })?;
         self.actual = self.scaling.to_units(fb.position);
-        self.lag = match fb.following_error {
-            Some(fe) => self.scaling.delta_to_units(fe),
-            None => self.command - self.actual,
-        };
+        self.drive_lag = fb.following_error.map(|fe| self.scaling.delta_to_units(fe));
         if !self.aligned || !fb.operational {
             // Cyclic synchronous position: while the drive does not follow, the target must
             // track the actual position so that enabling causes no jump (CiA 402 §8.3 CSP).
             self.command = self.actual;
+            self.sent = [self.actual; MAX_DEAD_TIME_CYCLES as usize];
             self.aligned = true;
         }
+        self.lag = self.delayed_command() - self.actual;
         if self.feedback.map(|f| f.state) != Some(fb.state) {
             tracing::debug!(axis = %self.name, state = ?fb.state, statusword = format_args!("{:#06x}", fb.statusword), "drive power state");
         }
         let fb = self.feedback.insert(fb);
         Ok(fb)
+    }
+
+    /// The command sent [`dead_time_cycles`](Self::dead_time_cycles) cycles ago: the one the
+    /// actual position read now belongs to.
+    pub fn delayed_command(&self) -> f64 {
+        let d = self.dead_time.clamp(1, MAX_DEAD_TIME_CYCLES) as usize;
+        self.sent[d - 1]
+    }
+
+    /// Cycles between sending a set-point and reading the position it produced (default
+    /// [`crate::link::DEFAULT_DEAD_TIME_CYCLES`]).
+    pub fn dead_time_cycles(&self) -> u32 {
+        self.dead_time
+    }
+
+    /// Set the dead time (clamped to 1 ..= [`MAX_DEAD_TIME_CYCLES`]).
+    pub fn set_dead_time_cycles(&mut self, cycles: u32) {
+        self.dead_time = cycles.clamp(1, MAX_DEAD_TIME_CYCLES);
+        self.adapter
+            .set_feedback_delay(self.dead_time.saturating_sub(1));
     }
 
     /// Encode this cycle's command into the output image.
@@ -160,7 +201,11 @@ impl Axis {
             .map_err(|source| AxisError::Drive {
                 axis: self.name.clone(),
                 source,
-            })
+            })?;
+        self.sent
+            .copy_within(0..MAX_DEAD_TIME_CYCLES as usize - 1, 1);
+        self.sent[0] = self.command;
+        Ok(())
     }
 
     /// Ask for *operation enabled* (`true`) or disable.
@@ -191,10 +236,18 @@ impl Axis {
         self.actual
     }
 
-    /// Following error (mm / °).
+    /// Position lag (mm / °): the command sent [`dead_time_cycles`](Self::dead_time_cycles)
+    /// ago − the actual position (see the type's documentation).
     #[inline]
     pub fn lag(&self) -> f64 {
         self.lag
+    }
+
+    /// The drive's own following error (mm / °), where its image carries one (0x60F4,
+    /// S-0-0189, XERR …).
+    #[inline]
+    pub fn drive_lag(&self) -> Option<f64> {
+        self.drive_lag
     }
 
     /// Last feedback, if any arrived.

@@ -3,8 +3,9 @@
 use super::manual;
 use super::measure::MeasStep;
 use super::profile::Braking;
-use super::{AxisBrake, Channel, ChannelState, Mode, Motion};
+use super::{AxisBrake, Channel, ChannelState, Mode, Motion, MotionKind, MotionRequest};
 use crate::axis::Axis;
+use crate::core::path::Segment;
 use crate::link::{LinkError, ProcessImage};
 use crate::messages::{ids, CncMessage};
 use crate::units::Nanos;
@@ -51,6 +52,7 @@ impl Channel {
         self.now = now;
         let dt = self.cfg.cycle.as_secs_f64();
         self.poll_handshakes(now);
+        self.record_plc_view(now);
         if images.len() != self.axes.len() {
             self.push(CncMessage::error(
                 ids::LINK_LOST,
@@ -196,7 +198,12 @@ impl Channel {
                     }
                 }
             }
-            Mode::Stopping { brakes, k, then } => {
+            Mode::Stopping {
+                brakes,
+                k,
+                then,
+                settle,
+            } => {
                 *k += 1;
                 let t = *k as f64 * dt;
                 let mut done = true;
@@ -206,7 +213,19 @@ impl Channel {
                     done &= v <= 0.0;
                 }
                 if done {
-                    finished = Some(*then);
+                    // The set-points stand; the axes that still follow them come to rest (what
+                    // `--json` and the messages report are settled positions). Bounded by the
+                    // in-position timeout, without an error of its own: a drive that faulted
+                    // does not follow.
+                    let resting = self.axes.iter().zip(&self.next).zip(&self.cfg.axes).all(
+                        |((a, &cmd), c)| {
+                            !a.is_operational() || (cmd - a.actual()).abs() <= c.in_position
+                        },
+                    );
+                    *settle += 1;
+                    if resting || *settle > self.cfg.in_position_timeout_cycles {
+                        finished = Some(*then);
+                    }
                 }
             }
         }
@@ -252,8 +271,15 @@ impl Channel {
     }
 
     /// One cycle of a motion block (path interpolation, measurement, braking after the probing
-    /// signal). Writes the set-points into `self.next` — only axis `only` for an independent-axis
-    /// motion — and says how the motion goes on.
+    /// signal, the exact stop at its end). Writes the set-points of the axes the motion moves
+    /// into `self.next` — only axis `only` for an independent-axis motion — and says how the
+    /// motion goes on.
+    ///
+    /// A motion ends at rest *in position*: once the interpolation has reached the end (or
+    /// braked to a stop), every moved axis's actual position must come within its in-position
+    /// window of the final set-point ([`ChannelAxisConfig::in_position`](super::ChannelAxisConfig));
+    /// a measurement keeps collecting latches meanwhile, so a contact that the axis reaches
+    /// only while it settles still counts. Error 900016 after `in_position_timeout_cycles`.
     pub(super) fn step_motion(
         &mut self,
         mut m: Box<Motion>,
@@ -287,19 +313,6 @@ impl Channel {
                         m.braking = Some((Braking::new(s_now, v_now, a), m.k));
                     }
                 }
-                MeasStep::Settle(positions) => {
-                    // Fixed stop: every axis of the run moves to its latched position at once.
-                    for (i, p) in positions {
-                        if only.is_none() || only == Some(i) {
-                            self.next[i] = p;
-                        }
-                    }
-                    if let Err(msg) = self.finish_measurement(*run, false) {
-                        self.push(msg);
-                        return MotionStep::FailAtRest;
-                    }
-                    return MotionStep::Done;
-                }
                 MeasStep::Fail(msg) => {
                     self.disarm_sources(&run);
                     self.push(msg);
@@ -323,42 +336,60 @@ impl Channel {
                 (sp, end, end)
             }
         };
-        match only {
-            None => {
-                if at_end {
-                    self.next.copy_from_slice(m.segment.end());
-                } else {
-                    m.segment.point_at(s, &mut self.next);
-                }
-            }
-            Some(i) => {
-                let mut p = std::mem::take(&mut self.scratch);
-                p.resize(self.next.len(), 0.0);
-                if at_end {
-                    p.copy_from_slice(m.segment.end());
-                } else {
-                    m.segment.point_at(s, &mut p);
-                }
-                self.next[i] = p[i];
-                self.scratch = p;
+        // The set-points of the axes this motion moves, and no others: an independent axis
+        // beside the path (or one that finished before it) keeps its own command.
+        let mut p = std::mem::take(&mut self.scratch);
+        p.resize(self.next.len(), 0.0);
+        if at_end {
+            p.copy_from_slice(m.segment.end());
+        } else {
+            m.segment.point_at(s, &mut p);
+        }
+        for (i, (&pi, &moved)) in p.iter().zip(&m.moved).enumerate() {
+            if moved && only.is_none_or(|o| o == i) {
+                self.next[i] = pi;
             }
         }
+        self.scratch = p;
         if !done {
             return MotionStep::Running(m);
         }
+        // At the end of the path: the exact stop. A fixed-stop run has its own rest criterion
+        // (the axes may stand pressed against something, never in position).
+        let fixed_stop_run = m
+            .meas
+            .as_ref()
+            .is_some_and(|r| r.mtype() == crate::core::measure::MeasType::Type7);
         if let Some(run) = m.meas.as_mut() {
-            if !run.end_settled(&self.axes) {
+            if fixed_stop_run && !run.end_settled(&self.axes) {
                 return MotionStep::Running(m);
+            }
+        }
+        if !fixed_stop_run {
+            match self.in_position(&mut m, only) {
+                InPosition::Wait => return MotionStep::Running(m),
+                InPosition::Timeout(msg) => {
+                    if let Some(run) = m.meas.take() {
+                        self.disarm_sources(&run);
+                    }
+                    self.push(msg);
+                    return MotionStep::Fail;
+                }
+                InPosition::Reached => {}
             }
         }
         if let Some(run) = m.meas.take() {
             let reached = m.braking.is_none();
             match self.finish_measurement(*run, reached) {
                 Ok(settle) => {
-                    for (i, p) in settle {
-                        if only.is_none() || only == Some(i) {
-                            self.next[i] = p;
-                        }
+                    let settle: Vec<(usize, f64)> = settle
+                        .into_iter()
+                        .filter(|(i, _)| only.is_none_or(|o| o == *i))
+                        .collect();
+                    if let Some(back) = self.follow_up(&settle, m.feed) {
+                        // "Reduce interpolation to measured value" (seed 004 §7.3): a move
+                        // within the axes' dynamics, then the exact stop.
+                        return MotionStep::Running(Box::new(back));
                     }
                 }
                 Err(msg) => {
@@ -368,7 +399,83 @@ impl Channel {
                 }
             }
         }
-        MotionStep::Done
+        match self.in_position(&mut m, only) {
+            InPosition::Wait => MotionStep::Running(m),
+            InPosition::Timeout(msg) => {
+                self.push(msg);
+                MotionStep::Fail
+            }
+            InPosition::Reached => MotionStep::Done,
+        }
+    }
+
+    /// The exact stop at the end of motion `m`: every axis it moves (only `only` for an
+    /// independent axis) within its in-position window of its final set-point.
+    fn in_position(&self, m: &mut Motion, only: Option<usize>) -> InPosition {
+        let mut worst: Option<(usize, f64)> = None;
+        for (i, &moved) in m.moved.iter().enumerate() {
+            if !moved || only.is_some_and(|o| o != i) {
+                continue;
+            }
+            let off = (self.next[i] - self.axes[i].actual()).abs();
+            if !(off <= self.cfg.axes[i].in_position) && worst.is_none_or(|(_, w)| off > w) {
+                worst = Some((i, off));
+            }
+        }
+        let Some((i, _)) = worst else {
+            m.settle = 0;
+            return InPosition::Reached;
+        };
+        m.settle += 1;
+        if m.settle <= self.cfg.in_position_timeout_cycles {
+            return InPosition::Wait;
+        }
+        let a = &self.axes[i];
+        let name = a.name().to_string();
+        let waited = self.cfg.cycle.0.saturating_mul(u64::from(m.settle)) as f64 * 1e-6;
+        InPosition::Timeout(
+            CncMessage::error(
+                ids::IN_POSITION_TIMEOUT,
+                format!(
+                    "axis {name} did not come to rest within its in-position window ±{:.6} (in_position_window) after {waited:.0} ms: set-point {:.6}, actual {:.6}; axes stopped",
+                    self.cfg.axes[i].in_position,
+                    self.next[i],
+                    a.actual()
+                ),
+            )
+            .on_axis(&name),
+        )
+    }
+
+    /// The move of the listed axes from their set-points to the given positions after a
+    /// fixed-stop run, with the rapid dynamics (P-AXIS-00212 / 00004), or `None` when they are
+    /// there.
+    fn follow_up(&self, to: &[(usize, f64)], feed: f64) -> Option<Motion> {
+        if to.is_empty() {
+            return None;
+        }
+        let start = self.next.clone();
+        let mut target = start.clone();
+        for &(i, p) in to {
+            if let Some(t) = target.get_mut(i) {
+                *t = p;
+            }
+        }
+        let segment = Segment::line(start, target.clone()).ok()?;
+        if segment.is_empty() {
+            return None;
+        }
+        // A repositioning move: rapid dynamics.
+        let req = MotionRequest {
+            kind: MotionKind::Rapid,
+            target,
+            feed,
+            measure: None,
+        };
+        let profile = self.plan(&segment, &req);
+        let mut m = Motion::new(segment, profile, None, feed);
+        m.fixed_stop_return = true;
+        Some(m)
     }
 
     /// Stop all axes: each decelerates linearly from its current command velocity with
@@ -407,8 +514,23 @@ impl Channel {
                 braking: Braking::new(0.0, v.abs(), c.a_emergency.max(1e-6)),
             })
             .collect();
-        self.mode = Mode::Stopping { brakes, k: 0, then };
+        self.mode = Mode::Stopping {
+            brakes,
+            k: 0,
+            then,
+            settle: 0,
+        };
     }
+}
+
+/// Where the exact stop at the end of a motion stands.
+enum InPosition {
+    /// Every moved axis is inside its window.
+    Reached,
+    /// Not yet.
+    Wait,
+    /// Waited too long: error 900016.
+    Timeout(CncMessage),
 }
 
 /// How a motion goes on after one cycle.

@@ -167,13 +167,7 @@ impl Channel {
             None => self.plan(&segment, &req),
         };
         self.indp[axis] = Some(IndependentSlot {
-            motion: Box::new(Motion {
-                segment,
-                profile,
-                k: 0,
-                braking: None,
-                meas,
-            }),
+            motion: Box::new(Motion::new(segment, profile, meas, feed)),
             sync,
         });
         Prepared::Started

@@ -55,6 +55,12 @@ pub struct ChannelAxisConfig {
     pub limits: AxisLimitConfig,
     /// Measurement configuration (seed 004).
     pub meas: AxisMeasConfig,
+    /// In-position window of an exact stop (mm / °, machine key `in_position_window`): a block
+    /// that ends at rest is over when |command − actual| of every moved axis is inside it.
+    pub in_position: f64,
+    /// Time the drive's actual position lags its set-point at constant speed (s): lag = v × this.
+    /// 0 for a drive with velocity feed-forward; 1/kv for one without (drive file `[model]`).
+    pub servo_lag_time: f64,
 }
 
 /// Channel configuration.
@@ -76,6 +82,9 @@ pub struct ChannelConfig {
     pub workspace_manual_mode: u16,
     /// Cycles the drives may take to reach *operation enabled*.
     pub enable_timeout_cycles: u32,
+    /// Cycles an exact stop may wait for the axes to come inside their in-position windows
+    /// (machine key `in_position_timeout_ms`); then error 900016.
+    pub in_position_timeout_cycles: u32,
     /// Channel measurement settings (seed 004 §8.2.1).
     pub meas: ChannelMeasConfig,
 }
@@ -178,6 +187,42 @@ struct Motion {
     braking: Option<(Braking, u64)>,
     /// The measurement of a measuring block.
     meas: Option<Box<measure::MeasRun>>,
+    /// The axes this motion moves (the only ones it writes set-points for).
+    moved: Vec<bool>,
+    /// Feed of the block, mm/min (a follow-up move after a fixed stop uses it).
+    feed: f64,
+    /// Cycles waited at the end of the path for the axes to come in position.
+    settle: u32,
+    /// The move back to the latched positions after a fixed-stop run: still part of the
+    /// measuring block, so the CNC's lag monitoring stays off for its axes.
+    fixed_stop_return: bool,
+}
+
+impl Motion {
+    fn new(
+        segment: Segment,
+        profile: Trapezoid,
+        meas: Option<Box<measure::MeasRun>>,
+        feed: f64,
+    ) -> Self {
+        let moved = (0..segment.dims())
+            .map(|i| {
+                let (lo, hi) = segment.extent(i);
+                hi - lo > 1e-12
+            })
+            .collect();
+        Motion {
+            segment,
+            profile,
+            k: 0,
+            braking: None,
+            meas,
+            moved,
+            feed,
+            settle: 0,
+            fixed_stop_return: false,
+        }
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -192,6 +237,8 @@ enum Mode {
         brakes: Vec<AxisBrake>,
         k: u64,
         then: ChannelState,
+        /// Cycles waited after braking for the axes to come to rest.
+        settle: u32,
     },
     /// Waiting for an acyclic answer (`#DRIVE … WAIT`, `#IDENT … SYN`).
     WaitAcyclic {
@@ -241,6 +288,9 @@ pub struct Channel {
     prepared: Vec<bool>,
     /// PLC interface per axis (seed 004 §8.2.3 control units, §7.2 / §7.4 handshake).
     plc: Vec<crate::core::measure::plc::AxisPlc>,
+    /// What the PLC interface showed in the last cycles, newest first (see
+    /// [`Channel::plc_view`]).
+    plc_seen: Vec<std::collections::VecDeque<(Nanos, crate::core::measure::plc::AxisPlc)>>,
     /// External-latch handshake clients per axis.
     ext_latch: Vec<Option<crate::core::measure::plc::ExtLatchClient>>,
     /// Time of the current cycle.
@@ -295,6 +345,7 @@ impl Channel {
             scratch: vec![0.0; n],
             prepared: vec![false; n],
             plc: vec![Default::default(); n],
+            plc_seen: vec![Default::default(); n],
             ext_latch: vec![None; n],
             now: Nanos::ZERO,
             latch_log: None,
@@ -467,6 +518,14 @@ impl Channel {
         }
         self.prepared.iter_mut().for_each(|p| *p = false);
         self.measurement = None;
+    }
+
+    /// The dead time of axis `i` in cycles (from its link or machine file; see
+    /// [`Axis::lag`]).
+    pub fn set_dead_time_cycles(&mut self, i: usize, cycles: u32) {
+        if let Some(a) = self.axes.get_mut(i) {
+            a.set_dead_time_cycles(cycles);
+        }
     }
 
     /// Mark axis `i` referenced or not.

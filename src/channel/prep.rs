@@ -180,13 +180,7 @@ impl Channel {
             return Prepared::Empty;
         }
         self.log_path(&segment);
-        self.mode = Mode::Moving(Box::new(Motion {
-            segment,
-            profile,
-            k: 0,
-            braking: None,
-            meas,
-        }));
+        self.mode = Mode::Moving(Box::new(Motion::new(segment, profile, meas, req.feed)));
         Prepared::Started
     }
 

@@ -99,8 +99,26 @@ impl Profile {
 /// Behaviour knobs of the emulated drive (`[model]`); the real drive ignores them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ModelConfig {
-    /// Position loop gain kv in 1/s (default 40): steady-state lag = v / kv.
+    /// Position loop gain kv in 1/s (default 40). With feed-forward it only corrects residual
+    /// errors; without (`feed_forward = false`) the steady-state lag is v / kv.
     pub kv: f64,
+    /// The drive runs its cascade with velocity and acceleration feed-forward from the
+    /// set-point sequence, as CSP servo drives do (default `true`). `false` is a plain
+    /// first-order position loop without feed-forward: lag v / kv at constant speed, torque =
+    /// lag × `torque_per_increment` (a drive of that kind exists in the field).
+    pub feed_forward: bool,
+    /// Velocity feed-forward gain, fraction of the set-point velocity (default 1.0).
+    pub velocity_feed_forward: f64,
+    /// Acceleration (torque) feed-forward gain, fraction of the set-point acceleration
+    /// (default 1.0).
+    pub acceleration_feed_forward: f64,
+    /// Time constant of the speed loop in ms (default 1.0): the actual speed follows the
+    /// speed command as a first-order lag.
+    pub velocity_loop_ms: f64,
+    /// Acceleration of the axis at rated torque, units/s² (default 20000): the torque demand
+    /// (0x6077, ‰) is the demanded acceleration / this × 1000, and a torque limit caps the
+    /// acceleration at limit / 1000 × this.
+    pub rated_acceleration: f64,
     /// Initial following error window 0x6065 in increments (default 30000; `u32::MAX` = off).
     pub following_error_window: u32,
     /// Initial following error time out 0x6066 in ms (default 10).
@@ -126,6 +144,13 @@ pub struct ModelConfig {
 /// a fixed stop the lag grows with the commanded feed and a 10 % limit (100 ‰) is reached at
 /// 25000 inc = 2.5 mm of lag.
 pub const DEFAULT_TORQUE_PER_INCREMENT: f64 = 0.004;
+
+/// Default `[model] velocity_loop_ms`: a speed loop with a bandwidth of about 160 Hz.
+pub const DEFAULT_VELOCITY_LOOP_MS: f64 = 1.0;
+
+/// Default `[model] rated_acceleration` in units/s² (20 m/s² at rated torque: a 10 % torque
+/// limit still allows 2 m/s², twice the seeds' default P-AXIS-00004).
+pub const DEFAULT_RATED_ACCELERATION: f64 = 20_000.0;
 
 /// Default `[model] zero_pulse_period` in increments.
 pub const DEFAULT_ZERO_PULSE_PERIOD: f64 = 10_000.0;
@@ -161,6 +186,11 @@ impl Default for ModelConfig {
     fn default() -> Self {
         ModelConfig {
             kv: 40.0,
+            feed_forward: true,
+            velocity_feed_forward: 1.0,
+            acceleration_feed_forward: 1.0,
+            velocity_loop_ms: DEFAULT_VELOCITY_LOOP_MS,
+            rated_acceleration: DEFAULT_RATED_ACCELERATION,
             following_error_window: 30_000,
             following_error_timeout_ms: 10,
             enable_delay_cycles: 0,
@@ -784,6 +814,11 @@ impl Cx<'_> {
             w,
             &[
                 "kv",
+                "feed_forward",
+                "velocity_feed_forward",
+                "acceleration_feed_forward",
+                "velocity_loop_ms",
+                "rated_acceleration",
                 "following_error_window",
                 "following_error_timeout_ms",
                 "enable_delay_cycles",
@@ -800,6 +835,48 @@ impl Cx<'_> {
                 ));
             }
             m.kv = kv;
+        }
+        if let Some(v) = self.bool(t.1, w, "feed_forward")? {
+            m.feed_forward = v;
+        }
+        for (key, slot) in [
+            ("velocity_feed_forward", &mut m.velocity_feed_forward),
+            (
+                "acceleration_feed_forward",
+                &mut m.acceleration_feed_forward,
+            ),
+        ] {
+            if let Some(v) = self.float(t.1, w, key)? {
+                if !(0.0..=1.5).contains(&v) {
+                    return Err(self.err(
+                        self.value_span(t.1, key),
+                        format!(
+                            "{w} {key}: must be 0 ..= 1.5 (fraction of the set-point's), got {v}"
+                        ),
+                    ));
+                }
+                *slot = v;
+            }
+        }
+        if let Some(v) = self.float(t.1, w, "velocity_loop_ms")? {
+            if !(v > 0.0 && v <= 100.0) {
+                return Err(self.err(
+                    self.value_span(t.1, "velocity_loop_ms"),
+                    format!("{w} velocity_loop_ms: must be > 0 and <= 100 (ms), got {v}"),
+                ));
+            }
+            m.velocity_loop_ms = v;
+        }
+        if let Some(v) = self.float(t.1, w, "rated_acceleration")? {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(self.err(
+                    self.value_span(t.1, "rated_acceleration"),
+                    format!(
+                        "{w} rated_acceleration: must be > 0 (units/s² at rated torque), got {v}"
+                    ),
+                ));
+            }
+            m.rated_acceleration = v;
         }
         if let Some(v) = self.int(t.1, w, "following_error_window", 0, u32::MAX.into())? {
             m.following_error_window = v as u32;

@@ -187,6 +187,65 @@ pub enum DriveError {
     },
 }
 
+/// The set-points an adapter sent, newest first, for loops closed on the master side: the
+/// actual value in an input image was sampled `delay` cycles before the exchange that carries
+/// it, so it must be compared with the set-point of that time, not the last one
+/// ([`DriveAdapter::set_feedback_delay`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SentSetpoints {
+    buf: [i32; SentSetpoints::CAPACITY],
+    len: usize,
+    delay: u32,
+}
+
+impl Default for SentSetpoints {
+    fn default() -> Self {
+        SentSetpoints {
+            buf: [0; SentSetpoints::CAPACITY],
+            len: 0,
+            delay: 1,
+        }
+    }
+}
+
+impl SentSetpoints {
+    /// Set-points kept (the largest delay + 1).
+    pub const CAPACITY: usize = 17;
+
+    /// Feedback delay in cycles (clamped to the capacity).
+    pub fn set_delay(&mut self, cycles: u32) {
+        self.delay = cycles.min(Self::CAPACITY as u32 - 1);
+    }
+
+    /// The feedback delay in cycles.
+    pub fn delay(&self) -> u32 {
+        self.delay
+    }
+
+    /// Forget the history (the drive stopped following).
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Record the set-point just sent.
+    pub fn push(&mut self, target: i32) {
+        self.buf.copy_within(0..Self::CAPACITY - 1, 1);
+        self.buf[0] = target;
+        self.len = (self.len + 1).min(Self::CAPACITY);
+    }
+
+    /// The last set-point sent (`T_{k−1}` while `T_k` is being written).
+    pub fn last(&self) -> Option<i32> {
+        (self.len > 0).then(|| self.buf[0])
+    }
+
+    /// The set-point the axis should have reached when the latest actual value was sampled:
+    /// `T_{k−1−delay}` (the oldest one kept while the history is shorter).
+    pub fn reference(&self) -> Option<i32> {
+        (self.len > 0).then(|| self.buf[(self.delay as usize).min(self.len - 1)])
+    }
+}
+
 /// Master-side adapter of one drive (sans-IO).
 pub trait DriveAdapter: Send + fmt::Debug {
     /// Bytes of the output image (master → drive).
@@ -241,6 +300,15 @@ pub trait DriveAdapter: Send + fmt::Debug {
         Err(DriveError::Unsupported(format!(
             "this drive has no cyclic function {index:#06x}:{sub:02x}"
         )))
+    }
+
+    /// The actual values in an input image were sampled this many cycles before the exchange
+    /// that carries them (1 on every link fieldprobe has: sampled at SYNC0, sent with the next
+    /// frame; [`crate::link::Link::dead_time_cycles`] − 1). Adapters that close a loop on the
+    /// master side (PROFIdrive speed control and DSC, the terminal drives' velocity output)
+    /// compare the actual value with the set-point of that time. Default 1; others ignore it.
+    fn set_feedback_delay(&mut self, cycles: u32) {
+        let _ = cycles;
     }
 }
 

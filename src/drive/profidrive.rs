@@ -18,16 +18,18 @@
 //! # Control law
 //!
 //! The axis layer gives a position target `T_k` per cycle; the telegrams carry a speed set-point.
-//! With `x` the last G1_XIST1 (the position at the start of the cycle), `T_{k−1}` the previous
-//! target and `Δt` the time since the previous output image:
+//! With `x` the last G1_XIST1, sampled `d` cycles before the exchange that carried it
+//! ([`DriveAdapter::set_feedback_delay`], 1 on every link: sampled at SYNC0, sent with the next
+//! frame), `T_{k−1−d}` the target the axis should have reached when `x` was sampled, and `Δt`
+//! the time since the previous output image:
 //!
 //! - feed-forward `v_ff = (T_k − T_{k−1}) / Δt` (0 in the first operational cycle),
-//! - tg 3 / 102: `NSOLL_B = v_ff + kv · (T_{k−1} − x)`,
-//! - tg 5 / 105 (DSC): `NSOLL_B = v_ff`, `XERR = T_{k−1} − x`, `KPC = kv` in 0.001 1/s
-//!   (assumption); the drive closes `n = NSOLL_B + KPC · XERR`.
+//! - tg 3 / 102: `NSOLL_B = v_ff + kv · (T_{k−1−d} − x)`,
+//! - tg 5 / 105 (DSC): `NSOLL_B = v_ff`, `XERR = T_{k−1−d} − x`, `KPC = kv` in 0.001 1/s
+//!   (assumption); the drive closes `n = NSOLL_B + KPC · e` on its own fine set-point.
 //!
-//! An axis exactly on `T_{k−1}` thus travels exactly to `T_k` over the cycle; kv (`[model] kv`)
-//! removes residual errors. NSOLL_B / NIST_B: `0x4000_0000` = `[profidrive] reference_speed`
+//! An axis that follows its set-points shows no position error; kv (`[model] kv`) removes
+//! residual errors. NSOLL_B / NIST_B: `0x4000_0000` = `[profidrive] reference_speed`
 //! increments/s (PROFIdrive N4 normalisation against P2000; the unit is an assumption).
 //!
 //! # Power state (STW1 / ZSW1)
@@ -540,7 +542,8 @@ pub struct ProfidriveAdapter {
     zsw1: u16,
     g1_zsw: u16,
     state: PowerState,
-    prev_target: Option<i32>,
+    /// Set-points sent while operational (for XERR / the speed loop's position error).
+    sent: super::SentSetpoints,
     prev_now: Option<Nanos>,
     last_ack: bool,
     sign_of_life: u16,
@@ -570,7 +573,7 @@ impl ProfidriveAdapter {
             zsw1: 0,
             g1_zsw: 0,
             state: PowerState::NotReadyToSwitchOn,
-            prev_target: None,
+            sent: super::SentSetpoints::default(),
             prev_now: None,
             last_ack: false,
             sign_of_life: 0,
@@ -602,6 +605,11 @@ impl ProfidriveAdapter {
         Ok(())
     }
 
+    /// Cycles the input images run behind the output images written.
+    fn sent_delay(&self) -> u32 {
+        self.sent.delay()
+    }
+
     fn fail(&mut self, why: String) {
         if let Some(a) = self.arming.as_mut() {
             a.phase = Phase::Failed;
@@ -629,11 +637,14 @@ impl ProfidriveAdapter {
             return;
         }
         let timeout = self.arm_timeout;
+        let delay = self.sent_delay();
         let Some(a) = self.arming.as_mut() else {
             return;
         };
-        if a.writes == 0 {
-            // This image does not yet answer a word of this phase.
+        if a.writes <= delay {
+            // This image does not yet answer a word of this phase: the drive sampled it before
+            // the word arrived (the actual values travel `delay` cycles behind, see
+            // `set_feedback_delay`) — XIST2 would still hold the old content.
             return;
         }
         a.waited += 1;
@@ -807,10 +818,15 @@ impl DriveAdapter for ProfidriveAdapter {
         };
         self.prev_now = Some(now);
         let (mut nsoll, mut xerr) = (0.0, 0.0);
-        match (operational, self.prev_target, self.position) {
-            (true, Some(prev), Some(x)) if dt > 0.0 => {
+        match (
+            operational,
+            self.sent.last(),
+            self.sent.reference(),
+            self.position,
+        ) {
+            (true, Some(prev), Some(reference), Some(x)) if dt > 0.0 => {
                 let v_ff = (f64::from(command.target) - f64::from(prev)) / dt;
-                xerr = f64::from(prev) - f64::from(x);
+                xerr = f64::from(reference) - f64::from(x);
                 nsoll = if tg.dsc() {
                     v_ff
                 } else {
@@ -819,7 +835,11 @@ impl DriveAdapter for ProfidriveAdapter {
             }
             _ => {}
         }
-        self.prev_target = operational.then_some(command.target);
+        if operational {
+            self.sent.push(command.target);
+        } else {
+            self.sent.clear();
+        }
         self.sign_of_life = (self.sign_of_life + 1) & 0xF;
         let g1 = self.g1_stw();
         tg.put(outputs, Stw1, u32::from(stw));
@@ -926,6 +946,10 @@ impl DriveAdapter for ProfidriveAdapter {
         }
         // Back to per mille, rounded (the word is ‰ × 0x4000 / 1000, truncated).
         Ok((i64::from(self.momred) * 1000 + 0x2000) / 0x4000)
+    }
+
+    fn set_feedback_delay(&mut self, cycles: u32) {
+        self.sent.set_delay(cycles);
     }
 }
 

@@ -35,11 +35,13 @@
 //!
 //! # Control law (assumption)
 //!
-//! Velocity output `v = (r_k − r_{k−1}) / T + kp · (r_{k−1} − x_k)` (set-point feed-forward plus a
-//! P position loop on the error to the previous set-point, which the axis should have reached
-//! now). With the model's integrating amplifier the error obeys `e_{k+1} = (1 − kp·T) · e_k`:
-//! stable for `kp·T < 2`, default kp = 200 1/s. The output is `round(v / full_scale · 32767)`
-//! clipped to ±32767. Disabled: output 0.
+//! Velocity output `v = (r_k − r_{k−1}) / T + kp · (r_{k−1−d} − x_k)` (set-point feed-forward
+//! plus a P position loop on the error to the set-point the axis should have reached when the
+//! counter value `x_k` was sampled, `d` cycles before the exchange that carried it:
+//! [`DriveAdapter::set_feedback_delay`], 1 on every link). With the model's integrating
+//! amplifier the error obeys `e_{k+1} = e_k − kp·T · e_{k−d}`; kp (default 200 1/s) is capped at
+//! `1 / ((1 + d)·T)` so that the delayed loop stays damped at long cycles. The output is
+//! `round(v / full_scale · 32767)` clipped to ±32767. Disabled: output 0.
 //!
 //! # Latch (re-arm protocol, notes §4.1)
 //!
@@ -360,13 +362,17 @@ pub struct TerminalAdapter {
     arming: Option<Arming>,
     failure: Option<String>,
     events: VecDeque<ProbeEvent>,
-    /// Set-point of the previous write and its time.
-    prev: Option<(Nanos, f64)>,
+    /// Time of the previous write.
+    prev: Option<Nanos>,
+    /// Set-points sent (the position while disabled), newest first.
+    sent: super::SentSetpoints,
     /// Extended position of the last read.
     position: i64,
     enabled_in: bool,
     /// Counter set in progress: the extended position wanted and the cycles waited.
     preset: Option<(i64, u32)>,
+    /// Cycles between sampling the counter and reading it ([`DriveAdapter::set_feedback_delay`]).
+    delay: u32,
 }
 
 impl TerminalAdapter {
@@ -386,9 +392,11 @@ impl TerminalAdapter {
             failure: None,
             events: VecDeque::new(),
             prev: None,
+            sent: super::SentSetpoints::default(),
             position: 0,
             enabled_in: false,
             preset: None,
+            delay: 1,
         })
     }
 
@@ -440,6 +448,11 @@ impl TerminalAdapter {
 }
 
 impl DriveAdapter for TerminalAdapter {
+    fn set_feedback_delay(&mut self, cycles: u32) {
+        self.delay = cycles;
+        self.sent.set_delay(cycles);
+    }
+
     fn output_len(&self) -> usize {
         image::OUTPUT_LEN
     }
@@ -549,10 +562,18 @@ impl DriveAdapter for TerminalAdapter {
         }
         let target = f64::from(command.target);
         let x = self.position as f64;
-        let velocity = match self.prev {
-            Some((t, r_prev)) if command.enable && self.enabled_in && now > t => {
+        let following = command.enable && self.enabled_in;
+        let velocity = match (self.prev, self.sent.last(), self.sent.reference()) {
+            (Some(t), Some(r_prev), Some(r_ref)) if following && now > t => {
                 let dt = (now.0 - t.0) as f64 * 1e-9;
-                let v = (target - r_prev) / dt + self.config.kp * (r_prev - x);
+                // The actual value was sampled `delay` cycles back: compare it with the
+                // set-point of that time; the gain is capped so that the delayed loop stays
+                // well damped (kp·T ≤ 1 / (1 + delay)).
+                let kp = self
+                    .config
+                    .kp
+                    .min(1.0 / ((1.0 + f64::from(self.delay)) * dt));
+                let v = (target - f64::from(r_prev)) / dt + kp * (f64::from(r_ref) - x);
                 let full = self.config.full_scale_velocity * self.inc_per_unit;
                 let raw = (v / full * 32767.0).round();
                 if raw.is_finite() {
@@ -563,14 +584,15 @@ impl DriveAdapter for TerminalAdapter {
             }
             _ => 0,
         };
-        self.prev = Some((
-            now,
-            if command.enable && self.enabled_in {
-                target
-            } else {
-                x
-            },
-        ));
+        self.prev = Some(now);
+        if !following {
+            self.sent.clear();
+        }
+        self.sent.push(if following {
+            command.target
+        } else {
+            x.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        });
         let mut drive = 0;
         if command.enable {
             drive |= DO_ENABLE;

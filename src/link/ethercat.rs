@@ -971,13 +971,16 @@ impl Link for EthercatLink {
                 seg.miscount_frame_at(next);
             }
         }
+        // One frame per cycle, as on the bus: it carries this cycle's set-points and reads the
+        // inputs the devices latched at the previous SYNC0; the emulated segment's SYNC0 follows
+        // (a network interface's emulator steps after the frame by itself). The actual values
+        // thus arrive one exchange after they were sampled (dead time: docs/ethercat.md).
         self.copy_outputs(images)?;
         self.cycle_frame(now)?;
         if self.emulated {
             if let Some(seg) = self.wire.segment.as_mut() {
                 seg.sync0(now);
             }
-            self.cycle_frame(now)?;
         }
         self.copy_inputs(images)
     }

@@ -188,7 +188,21 @@ pub trait Link: Send {
     fn exchanges(&self) -> u64 {
         0
     }
+
+    /// The link's dead time in cycles: from the exchange after which a set-point is written to
+    /// the one whose input images carry the position it produced. A set-point goes out with
+    /// the next exchange and is reached by the drive at the SYNC0 / SYNC that follows (one
+    /// cycle); the drive samples its actual value there and sends it with the next frame (one
+    /// more): 2 on every link fieldprobe has (EtherCAT with DC, CANopen synchronous PDOs, and
+    /// the in-memory link, which plays the same timing). A machine file may set another value
+    /// per axis for a drive with its own extra delay (`dead_time_cycles`).
+    fn dead_time_cycles(&self) -> u32 {
+        DEFAULT_DEAD_TIME_CYCLES
+    }
 }
+
+/// Dead time of every link fieldprobe has, in cycles ([`Link::dead_time_cycles`]).
+pub const DEFAULT_DEAD_TIME_CYCLES: u32 = 2;
 
 impl<'a> dyn Link + 'a {
     /// The model of device `device` as its concrete type `T`, if it is one.

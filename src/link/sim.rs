@@ -9,7 +9,12 @@
 //!
 //! One [`World::step`] over the cycle `[now − cycle, now]`: fixed stops and static input levels,
 //! every model's `begin_step`, the plant's probe edges, every model's `finish_step` (see
-//! [`crate::sim::world`]; the emulated EtherCAT segment runs the same step at SYNC0).
+//! [`crate::sim::world`]; the emulated EtherCAT segment runs the same step at SYNC0). The input
+//! images the exchange returns are the ones the models wrote at the *previous* exchange: the
+//! drives sample at SYNC0 and the values travel with the next frame, as on EtherCAT and with
+//! CANopen synchronous PDOs. A set-point written after exchange k is thus reached at exchange
+//! k + 1 and read back at exchange k + 2: the link's dead time is two cycles
+//! ([`Link::dead_time_cycles`]).
 //!
 //! Acyclic access ([`Link::read_object`] / [`Link::write_object`]) goes straight to the model's
 //! object dictionary, as an SDO / CoE mailbox transfer between two cycles would; refusals come
@@ -34,6 +39,8 @@ pub struct SimLink {
     exchanges: u64,
     lose: BTreeSet<u64>,
     world: World,
+    /// Input images the models wrote at the last exchange: delivered with the next one.
+    sampled: Vec<Vec<u8>>,
 }
 
 impl SimLink {
@@ -66,6 +73,7 @@ impl SimLink {
             exchanges: 0,
             lose: BTreeSet::new(),
             world: World::new(plant),
+            sampled: Vec::new(),
         };
         let models = &mut link.models;
         link.world
@@ -158,14 +166,23 @@ impl Link for SimLink {
                 reason: format!("frame lost (injected at exchange {n})"),
             });
         }
+        // The inputs of this exchange are what the models sampled at the previous one (the
+        // end of their last step), as on a bus whose drives latch their actual values at SYNC0
+        // and send them with the next frame.
+        self.sampled.resize_with(images.len(), Vec::new);
+        for (img, s) in images.iter_mut().zip(self.sampled.iter_mut()) {
+            s.resize(img.inputs.len(), 0);
+            std::mem::swap(&mut img.inputs, s);
+        }
         let mut ports: Vec<Port<'_>> = self
             .models
             .iter_mut()
-            .zip(images.iter_mut())
-            .map(|(m, img)| Port {
+            .zip(images.iter())
+            .zip(self.sampled.iter_mut())
+            .map(|((m, img), s)| Port {
                 model: m.as_mut(),
                 outputs: &img.outputs,
-                inputs: &mut img.inputs,
+                inputs: s.as_mut_slice(),
             })
             .collect();
         self.world.step(now, self.cycle, &mut ports);

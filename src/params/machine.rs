@@ -39,6 +39,12 @@ pub const DEFAULT_CYCLE_TIME_US: u32 = 1000;
 pub const MIN_CYCLE_TIME_US: u32 = 100;
 /// Largest accepted interpolation cycle in µs.
 pub const MAX_CYCLE_TIME_US: u32 = 100_000;
+/// Default in-position window of an axis (0.1 µm units: 1 µm).
+pub const DEFAULT_IN_POSITION_WINDOW: u32 = 10;
+/// Default time an exact stop waits for the in-position windows, ms.
+pub const DEFAULT_IN_POSITION_TIMEOUT_MS: u32 = 1000;
+/// Largest dead time (cycles) an axis may declare.
+pub const MAX_DEAD_TIME_CYCLES: u32 = 16;
 /// Default drive definition (`drives/cia402-generic.toml`).
 pub const DEFAULT_DRIVE: &str = "cia402-generic";
 
@@ -58,6 +64,12 @@ pub struct AxisConfig {
     /// CANopen node id (1 ..= 127) of the axis's drive on a CAN link; `None`: the axis number
     /// (1-based position in the file).
     pub node: Option<u8>,
+    /// Cycles between sending a set-point and reading the position it produced (project key
+    /// `dead_time_cycles`, 1 ..= 16); `None`: the link's (2 on every link fieldprobe has).
+    pub dead_time_cycles: Option<u32>,
+    /// In-position window for exact stops, 0.1 µm / 0.0001° (project key
+    /// `in_position_window`, 1 ..= 10000000; default [`DEFAULT_IN_POSITION_WINDOW`] = 1 µm).
+    pub in_position_window: u32,
     /// The axis parameter list (P-AXIS-*).
     pub params: ParamSet,
 }
@@ -79,6 +91,10 @@ pub struct MachineConfig {
     pub source: String,
     /// Interpolation cycle in µs.
     pub cycle_time_us: u32,
+    /// How long an exact stop may wait for the axes to come inside their in-position windows,
+    /// ms (project key `in_position_timeout_ms`, 1 ..= 600000; default
+    /// [`DEFAULT_IN_POSITION_TIMEOUT_MS`]).
+    pub in_position_timeout_ms: u32,
     /// Channel parameter list (P-CHAN-*).
     pub channel: ParamSet,
     /// Manual-mode parameter list (P-MANU-*).
@@ -104,6 +120,7 @@ impl MachineConfig {
         let mut cfg = MachineConfig {
             source: file.to_string(),
             cycle_time_us: DEFAULT_CYCLE_TIME_US,
+            in_position_timeout_ms: DEFAULT_IN_POSITION_TIMEOUT_MS,
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes: Vec::new(),
@@ -199,6 +216,8 @@ impl MachineConfig {
                     drive: DEFAULT_DRIVE.to_string(),
                     referenced: true,
                     node: None,
+                    dead_time_cycles: None,
+                    in_position_window: DEFAULT_IN_POSITION_WINDOW,
                     params,
                 }
             })
@@ -206,6 +225,7 @@ impl MachineConfig {
         MachineConfig {
             source: "<default>".to_string(),
             cycle_time_us: DEFAULT_CYCLE_TIME_US,
+            in_position_timeout_ms: DEFAULT_IN_POSITION_TIMEOUT_MS,
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes,
@@ -253,6 +273,10 @@ impl MachineConfig {
         }
         if key == "cycle_time_us" {
             self.cycle_time_us = cycle_time(value, &origin)?;
+            return Ok(());
+        }
+        if key == "in_position_timeout_ms" {
+            self.in_position_timeout_ms = project_int(value, key, 1, 600_000, "ms", &origin)?;
             return Ok(());
         }
         if let Some(def) = find(key) {
@@ -468,8 +492,17 @@ impl MachineConfig {
                     }
                 };
                 self.cycle_time_us = cycle_time(&raw, &origin)?;
+            } else if leaf.key == "in_position_timeout_ms" {
+                let raw = int_text(leaf);
+                self.in_position_timeout_ms =
+                    project_int(&raw, &leaf.key, 1, 600_000, "ms", &ctx.at(leaf.line))?;
             } else {
-                set_leaf(&mut self.channel, leaf, ctx, &["cycle_time_us", "list"])?;
+                set_leaf(
+                    &mut self.channel,
+                    leaf,
+                    ctx,
+                    &["cycle_time_us", "in_position_timeout_ms", "list"],
+                )?;
             }
         }
         self.channel.check_cross(&ctx.at(0))
@@ -491,6 +524,8 @@ impl MachineConfig {
         let mut drive = DEFAULT_DRIVE.to_string();
         let mut referenced = true;
         let mut node = None;
+        let mut dead_time_cycles = None;
+        let mut in_position_window = DEFAULT_IN_POSITION_WINDOW;
         let mut params = ParamSet::new(Scope::Axis);
         for leaf in leaves.iter().filter(|l| l.key == "list") {
             apply_list_leaf(&mut params, leaf, ctx)?;
@@ -544,12 +579,13 @@ impl MachineConfig {
                     };
                     node = Some(node_id(&text, &origin)?);
                 }
-                _ => set_leaf(
-                    &mut params,
-                    leaf,
-                    ctx,
-                    &["name", "drive", "referenced", "node", "list"],
-                )?,
+                "dead_time_cycles" => {
+                    dead_time_cycles = Some(dead_time(&int_text(leaf), &origin)?);
+                }
+                "in_position_window" => {
+                    in_position_window = position_window(&int_text(leaf), &origin)?;
+                }
+                _ => set_leaf(&mut params, leaf, ctx, AXIS_PROJECT_KEYS)?,
             }
         }
         let Some((name, line)) = name else {
@@ -566,6 +602,8 @@ impl MachineConfig {
             drive,
             referenced,
             node,
+            dead_time_cycles,
+            in_position_window,
             params,
         });
         Ok(())
@@ -596,6 +634,14 @@ impl AxisConfig {
         match key {
             "node" => {
                 self.node = Some(node_id(strip_quotes(value), origin)?);
+                Ok(())
+            }
+            "dead_time_cycles" => {
+                self.dead_time_cycles = Some(dead_time(value, origin)?);
+                Ok(())
+            }
+            "in_position_window" => {
+                self.in_position_window = position_window(value, origin)?;
                 Ok(())
             }
             "name" => Err(ParamError::Config {
@@ -819,6 +865,74 @@ fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
         format!("unknown table [{name}]; {allowed}")
     };
     ParamError::Config { origin, message }
+}
+
+/// Project keys of an `[[axis]]` table (not parameters).
+const AXIS_PROJECT_KEYS: &[&str] = &[
+    "name",
+    "drive",
+    "referenced",
+    "node",
+    "list",
+    "dead_time_cycles",
+    "in_position_window",
+];
+
+/// The text of an integer leaf (empty for other types, which the range check then refuses).
+fn int_text(leaf: &Leaf<'_>) -> String {
+    match leaf.value {
+        Value::Integer(i) => i.value().to_string(),
+        _ => String::new(),
+    }
+}
+
+/// An integer project key in `lo ..= hi`; the error names the key, the value and the range.
+fn project_int(
+    raw: &str,
+    key: &str,
+    lo: u32,
+    hi: u32,
+    unit: &str,
+    origin: &Origin,
+) -> Result<u32, ParamError> {
+    match parse_int(strip_quotes(raw)) {
+        Some(v) if (i128::from(lo)..=i128::from(hi)).contains(&v) => {
+            Ok(u32::try_from(v).unwrap_or(lo))
+        }
+        _ => Err(ParamError::Config {
+            origin: origin.clone(),
+            message: format!(
+                "{key} = {}: expected an integer {lo} ..= {hi} ({unit})",
+                if raw.is_empty() {
+                    "(not an integer)"
+                } else {
+                    raw
+                }
+            ),
+        }),
+    }
+}
+
+fn dead_time(raw: &str, origin: &Origin) -> Result<u32, ParamError> {
+    project_int(
+        raw,
+        "dead_time_cycles",
+        1,
+        MAX_DEAD_TIME_CYCLES,
+        "cycles from sending a set-point to reading the position it produced",
+        origin,
+    )
+}
+
+fn position_window(raw: &str, origin: &Origin) -> Result<u32, ParamError> {
+    project_int(
+        raw,
+        "in_position_window",
+        1,
+        10_000_000,
+        "0.1 µm / 0.0001°",
+        origin,
+    )
 }
 
 fn cycle_time_expectation() -> String {

@@ -12,11 +12,12 @@
 //! [`EmulatedNode::from_eds`] builds the object dictionary from an EDS / DCF instead; its doc
 //! lists the rules.
 //!
-//! Cycle: RPDOs received while operational are stored; at SYNC the segment steps every
-//! operational node's model once with those outputs (one [`World::step`], the same step
-//! [`SimLink`](crate::link::sim::SimLink) makes) and then every node sends its TPDOs. So a master
-//! that sends its RPDOs, then SYNC, then reads the TPDOs sees the state at the end of the same
-//! cycle, as over `--link sim`.
+//! Cycle: RPDOs received while operational are stored; at SYNC every node first sends its TPDOs
+//! (the values its drive sampled at the previous SYNC), then the segment steps every operational
+//! node's model once with the stored outputs (one [`World::step`], the same step
+//! [`SimLink`](crate::link::sim::SimLink) makes). So a master that sends its RPDOs, then SYNC,
+//! then reads the TPDOs sees the actual values one cycle after they were sampled, as over
+//! `--link sim` and EtherCAT.
 
 use crate::bus::can::CanFrame;
 use std::collections::BTreeMap;
@@ -654,25 +655,26 @@ impl CanopenSegment {
         out
     }
 
-    /// SYNC: step every operational node's model once, then queue the TPDOs.
+    /// SYNC: every operational node sends its TPDOs with what its drive sampled at the
+    /// previous SYNC, then every model steps once with the RPDOs received before this SYNC
+    /// (CiA 301 synchronous PDOs: received data take effect at the next SYNC, transmitted data
+    /// are sampled at the SYNC). A master that sends its RPDOs, then SYNC, then reads the TPDOs
+    /// thus sees the actual values one cycle after they were sampled, as on a real bus.
     fn sync(&mut self, now: Nanos) {
+        for n in &mut self.nodes {
+            n.syncs += u64::from(n.state == NmtState::Operational);
+            n.send_tpdos();
+        }
         let mut ports: Vec<Port<'_>> = self
             .nodes
             .iter_mut()
-            .map(|n| {
-                n.syncs += u64::from(n.state == NmtState::Operational);
-                Port {
-                    model: n.od.model_mut(),
-                    outputs: &n.outputs,
-                    inputs: &mut n.inputs,
-                }
+            .map(|n| Port {
+                model: n.od.model_mut(),
+                outputs: &n.outputs,
+                inputs: &mut n.inputs,
             })
             .collect();
         self.world.step(now, self.cycle, &mut ports);
-        drop(ports);
-        for n in &mut self.nodes {
-            n.send_tpdos();
-        }
     }
 }
 

@@ -35,6 +35,10 @@ mod step;
 /// ends (P-CHAN-00266 = 1).
 const SETTLE_LAG: f64 = 1e-4;
 
+/// A contact closer to the programmed target than this (mm) counts as at the target (MERF 0):
+/// far below the 0.1 µm resolution of the drives' positions.
+const CONTACT_AT_TARGET: f64 = 1e-6;
+
 /// Cycles a measuring block may wait for its sources to confirm the arming (1 s at 1 ms).
 pub const ARMING_TIMEOUT_CYCLES: u32 = 1000;
 
@@ -86,6 +90,8 @@ pub(super) struct MeasAxis {
     /// The PLC's external-latch handshake gates this axis (PLC_EXT_LATCH_CONTROL,
     /// EXT_PROBE_WITH_DRIVE).
     handshake: bool,
+    /// The handshake let this block go (ENABLE acknowledged).
+    gate_open: bool,
     /// Position of the axis at the start of the block (fixed-stop start distance).
     start: f64,
     /// `CNC_DEFINED`: the 0x60D0 write that must finish before the latch is armed.
@@ -106,6 +112,10 @@ pub(super) struct MeasRun {
     brake: Vec<f64>,
     /// Path position where the signal became complete.
     event_s: Option<f64>,
+    /// Start of the measuring line and its unit direction (per channel axis): where a latched
+    /// position lies on the path.
+    origin: Vec<f64>,
+    dir: Vec<f64>,
     /// Fixed-stop detection (type 7) over the run's axes, in run-axis order.
     fixed: Option<FixedStopDetector>,
     /// Actual positions of the previous cycle while waiting for standstill at the end of an
@@ -132,6 +142,40 @@ impl MeasRun {
     /// Measurement type.
     pub(super) fn mtype(&self) -> MeasType {
         self.mtype
+    }
+
+    /// Path position (distance from the start along the measuring line) of the contact the
+    /// latched positions describe: the least-squares projection of the latched axes that move
+    /// along the line; `None` when no moving axis latched.
+    fn contact_s(&self) -> Option<f64> {
+        let (mut num, mut den) = (0.0, 0.0);
+        for a in &self.axes {
+            let (Some((p, _)), Some(&d), Some(&o)) =
+                (a.latched, self.dir.get(a.axis), self.origin.get(a.axis))
+            else {
+                continue;
+            };
+            if d.abs() > 1e-12 {
+                num += (p - o) * d;
+                den += d * d;
+            }
+        }
+        (den > 0.0).then(|| num / den)
+    }
+
+    /// V.A.MERF per axis: the contact lies on the path before the programmed target (seed 004
+    /// §8: "received before the target position is reached"), judged from where the latched
+    /// positions are, not from where the command was when the latch arrived (the command runs
+    /// the link's dead time ahead of the axis).
+    fn decide_merf(&mut self) {
+        let s = self.contact_s();
+        let target = self.target_len;
+        for a in &mut self.axes {
+            a.before_target = match (a.latched, s) {
+                (Some(_), Some(s)) => s < target - CONTACT_AT_TARGET,
+                _ => false,
+            };
+        }
     }
 
     /// Axis `i` takes part in this run.
@@ -206,12 +250,14 @@ impl Channel {
         })
     }
 
-    /// Axis `i` is in a running measurement to a fixed stop (type 7).
+    /// Axis `i` is in a running measurement to a fixed stop (type 7), or in the move back to
+    /// its latched position that ends one.
     pub(super) fn fixed_stop_run_on(&self, i: usize) -> bool {
         let run_has = |m: &super::Motion| {
             m.meas
                 .as_ref()
                 .is_some_and(|r| r.mtype == MeasType::Type7 && r.has_axis(i))
+                || (m.fixed_stop_return && m.moved.get(i).copied().unwrap_or(false))
         };
         let path = matches!(&self.mode, super::Mode::Moving(m) if run_has(m));
         path || self
@@ -258,8 +304,6 @@ pub(super) enum MeasStep {
     Go,
     /// The probing signal is complete: brake along the path.
     Brake,
-    /// Fixed stop detected (type 7): set the axes to these positions and end the block.
-    Settle(Vec<(usize, f64)>),
     /// Abort the block with this error.
     Fail(CncMessage),
 }
@@ -332,6 +376,34 @@ impl Channel {
     /// The PLC interface of axis `i`, mutable.
     pub fn plc_mut(&mut self, i: usize) -> Option<&mut crate::core::measure::plc::AxisPlc> {
         self.plc.get_mut(i)
+    }
+
+    /// The PLC interface of axis `i` as it was when the actual position read this cycle was
+    /// sampled, and that time: the input images carry the drives' actual values
+    /// `dead time − 1` cycles after they were sampled (one on every link, see
+    /// [`crate::axis::Axis::lag`]), while the PLC sees its inputs at once. The PLC-family
+    /// signal sources pair the signal with the position of the same instant — a PLC-sampled
+    /// value lies behind the crossing by at most v·T, a DC timestamp is back-calculated on the
+    /// samples' own time base — at the cost of reacting one cycle later.
+    pub(in crate::channel) fn plc_view(
+        &self,
+        i: usize,
+    ) -> (Nanos, &crate::core::measure::plc::AxisPlc) {
+        let delay = self.axes[i].dead_time_cycles().saturating_sub(1) as usize;
+        let seen = &self.plc_seen[i];
+        match seen.get(delay.min(seen.len().saturating_sub(1))) {
+            Some((t, plc)) => (*t, plc),
+            None => (self.now, &self.plc[i]),
+        }
+    }
+
+    /// Per cycle, before the sources are evaluated: remember what the PLC interface showed.
+    pub(super) fn record_plc_view(&mut self, now: Nanos) {
+        for (i, seen) in self.plc_seen.iter_mut().enumerate() {
+            let keep = self.axes[i].dead_time_cycles().max(1) as usize;
+            seen.push_front((now, self.plc[i].clone()));
+            seen.truncate(keep);
+        }
     }
 
     /// Per cycle: let the external-latch clients see the PLC's acknowledgements.

@@ -142,6 +142,7 @@ impl Channel {
                 before_target: false,
                 eval,
                 handshake,
+                gate_open: false,
                 start: start[i],
                 source_sdo: None,
             });
@@ -194,6 +195,19 @@ impl Channel {
             limited_at_sls: false,
             brake,
             event_s: None,
+            origin: start.to_vec(),
+            dir: {
+                let len = segment.length();
+                (0..n)
+                    .map(|i| {
+                        if len > 0.0 {
+                            (end[i] - start[i]) / len
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            },
             fixed,
             armed_once: false,
             settle_prev: None,

@@ -19,16 +19,19 @@ impl Channel {
                     run.armed_once = true;
                     for m in &mut run.axes {
                         if let Some(e) = m.eval.as_mut() {
-                            e.arm(now, &self.plc[m.axis]);
+                            let (t, plc) = self.plc_view(m.axis);
+                            e.arm(t, plc);
                             self.plc[m.axis].measuring_r = true;
                         }
                     }
                 }
-                for m in &run.axes {
-                    if m.handshake {
+                for m in &mut run.axes {
+                    // Once the PLC has acknowledged the block's ENABLE the gate stays open (the
+                    // drive latch may still be confirming its arming).
+                    if m.handshake && !m.gate_open {
                         if let Some(c) = self.ext_latch[m.axis].as_mut() {
                             match c.start_measuring_block(&mut self.plc[m.axis].ext_latch, now) {
-                                BlockGate::Go => {}
+                                BlockGate::Go => m.gate_open = true,
                                 BlockGate::Wait => all = false,
                                 BlockGate::Failed(task) => {
                                     return MeasStep::Fail(CncMessage::error(
@@ -125,7 +128,8 @@ impl Channel {
                         self.axes[axis].take_latch()
                     } else if let Some(e) = run.axes[k].eval.as_mut() {
                         let actual = self.axes[axis].actual();
-                        match e.update(now, actual, &self.plc[axis]) {
+                        let (t, plc) = self.plc_view(axis);
+                        match e.update(t, actual, plc) {
                             Ok(ev) => ev.map(|ev| ev.position),
                             Err(err) => {
                                 let name = self.axes[axis].name().to_string();
@@ -147,20 +151,18 @@ impl Channel {
                             .and_then(|d| d.update(now, k, travelled, a.lag(), a.actual()));
                         if detected.is_some() {
                             // The measuring point is latched for each axis involved (seed 004
-                            // §7.3): every axis of the run takes its actual position, and all move
-                            // there at once ("reduce interpolation to measured value").
-                            let mut settle = Vec::new();
+                            // §7.3): every axis of the run takes its actual position; the motion
+                            // brakes, and at its end all axes move there ("reduce interpolation
+                            // to measured value", `finish_measurement`).
                             for m in &mut run.axes {
                                 let p = self.axes[m.axis].actual();
                                 if let Some(log) = self.latch_log.as_mut() {
                                     log.push((now, m.axis, p));
                                 }
                                 m.latched = Some((p, now));
-                                m.before_target = s < run.target_len - 1e-9;
-                                settle.push((m.axis, p));
                             }
                             run.event_s = Some(s);
-                            return MeasStep::Settle(settle);
+                            return MeasStep::Brake;
                         }
                         None
                     } else {
@@ -170,7 +172,6 @@ impl Channel {
                         let m = &mut run.axes[k];
                         if m.latched.is_none() {
                             m.latched = Some((pos, now));
-                            m.before_target = s < run.target_len - 1e-9;
                             if let Some(log) = self.latch_log.as_mut() {
                                 log.push((now, axis, pos));
                             }
@@ -241,12 +242,17 @@ impl Channel {
                 return Err(e);
             }
         }
-        let settle: Vec<(usize, f64)> =
-            if run.mtype == MeasType::Type7 && !complete && self.cfg.meas.fixed_stop_no_error {
-                run.lagging_axes(&self.axes)
-            } else {
-                Vec::new()
-            };
+        run.decide_merf();
+        let settle: Vec<(usize, f64)> = match run.mtype {
+            // Detected: every axis of the run goes to its latched position (seed 004 §7.3).
+            MeasType::Type7 if complete => run
+                .axes
+                .iter()
+                .filter_map(|a| a.latched.map(|(p, _)| (a.axis, p)))
+                .collect(),
+            MeasType::Type7 if self.cfg.meas.fixed_stop_no_error => run.lagging_axes(&self.axes),
+            _ => Vec::new(),
+        };
         let mut latched = vec![None; n];
         let mut merf = vec![false; n];
         let mut involved = vec![false; n];

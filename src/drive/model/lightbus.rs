@@ -35,6 +35,7 @@ pub const ERROR_LAG: u16 = 0x0003;
 const DEFAULT_TORQUE_LIMIT: u16 = 3000;
 
 pub use super::axis::{clean_dt, AxisPlant};
+use super::axis::{Demand, ServoParams};
 
 pub use super::ds402::motion::round_i32;
 
@@ -42,9 +43,8 @@ pub use super::ds402::motion::round_i32;
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightbusModel {
     plant: AxisPlant,
-    kv: f64,
-    max_velocity_inc: f64,
-    torque_per_inc: f64,
+    /// Torque actual value, ‰ of rated.
+    torque: f64,
     in2mode: i64,
     torque_limit: u16,
     lag_window: u32,
@@ -74,20 +74,9 @@ impl LightbusModel {
     pub fn new(def: &DriveDefinition) -> Self {
         let m = &def.model;
         let cfg = LightbusConfig::from_definition(def).unwrap_or_default();
-        let pos = |v: f64, d: f64| if v.is_finite() && v > 0.0 { v } else { d };
         LightbusModel {
-            plant: AxisPlant::default(),
-            kv: pos(m.kv, 40.0),
-            max_velocity_inc: m
-                .max_velocity
-                .map(|v| (v * def.scaling.increments_per_unit).abs())
-                .filter(|v| v.is_finite() && *v > 0.0)
-                .unwrap_or(f64::INFINITY),
-            torque_per_inc: if m.torque_per_increment.is_finite() {
-                m.torque_per_increment.max(0.0)
-            } else {
-                0.0
-            },
+            plant: AxisPlant::new(ServoParams::from_definition(def)),
+            torque: 0.0,
             in2mode: cfg.in2mode,
             torque_limit: DEFAULT_TORQUE_LIMIT,
             lag_window: m.following_error_window,
@@ -180,20 +169,17 @@ impl super::DriveModel for LightbusModel {
                 self.plant.set_actual(a);
             }
             let limit = f64::from(self.torque_limit);
-            let torque_speed = if self.torque_per_inc > 0.0 {
-                self.kv * limit / self.torque_per_inc
-            } else {
-                f64::INFINITY
-            };
-            let v = self.max_velocity_inc.min(torque_speed);
-            self.plant
-                .follow(now, dt, f64::from(self.cmd.position), self.kv, v, v);
-            let demand = (self.plant.target() - self.plant.position) * self.torque_per_inc;
-            if demand.abs() > limit {
-                self.plant.limited = true;
-            }
+            let c = self.plant.servo(
+                now,
+                dt,
+                Demand::Position(f64::from(self.cmd.position)),
+                limit,
+                limit,
+            );
+            self.torque = c.torque;
         } else {
             self.plant.hold(now, dt);
+            self.torque = 0.0;
         }
         // Lag monitoring.
         if self.enabled && self.lag_window != u32::MAX {

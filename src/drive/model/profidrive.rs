@@ -43,8 +43,7 @@
 //!   position (bit 13), else 0.
 
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::model::axis::AxisPlant;
-use crate::drive::model::ds402::motion::{self, Cycle, Wall, SUBSAMPLES};
+use crate::drive::model::axis::{AxisPlant, Demand, ServoParams};
 use crate::drive::model::{abort, DriveModel};
 use crate::drive::profidrive::{
     g1_stw, g1_zsw, n4_to_speed, speed_to_n4, stw1, zsw1, ProfidriveConfig, Telegram, Word,
@@ -53,9 +52,6 @@ use crate::drive::profidrive::{
 use crate::drive::{DriveError, PowerState};
 use crate::units::Nanos;
 
-/// Gain of the emulated speed loop in 1/s (assumption; large against the position loop so the
-/// axis follows the speed set-point within a fraction of a cycle).
-pub const SPEED_LOOP_GAIN: f64 = 5000.0;
 /// Fault number of a following error (SINAMICS F07452 style, assumption).
 pub const FAULT_FOLLOWING: u16 = 7452;
 /// Encoder error code "command not supported" in G1_XIST2 (HEIDENHAIN code 0x0F01, notes
@@ -79,8 +75,6 @@ const NUM_INPUTS: usize = 4;
 pub struct ProfidriveModel {
     tg: Telegram,
     reference_speed: f64,
-    torque_per_inc: f64,
-    max_velocity_inc: Option<f64>,
     enable_delay_cycles: u32,
     fe_timeout_ms: u16,
 
@@ -104,6 +98,14 @@ pub struct ProfidriveModel {
     torque: f64,
     limited: bool,
     fe_over_ns: u64,
+    /// Actual position (incl. disturbance) at the start of the previous cycle: what the master
+    /// saw when it computed this cycle's XERR.
+    sample_prev: f64,
+    /// NSOLL_B of the previous cycle, increments/s.
+    nsoll_prev: f64,
+    /// The speed set-point integrated (speed control): the position the axis should be at, for
+    /// the following error monitoring.
+    speed_ref: f64,
 
     inputs: [bool; NUM_INPUTS],
     active: u8,
@@ -127,15 +129,6 @@ impl ProfidriveModel {
         Ok(ProfidriveModel {
             tg: cfg.telegram,
             reference_speed: cfg.reference_speed,
-            torque_per_inc: if m.torque_per_increment.is_finite() {
-                m.torque_per_increment.max(0.0)
-            } else {
-                0.0
-            },
-            max_velocity_inc: m
-                .max_velocity
-                .map(|v| (v * def.scaling.increments_per_unit).abs())
-                .filter(|v| v.is_finite() && *v > 0.0),
             enable_delay_cycles: m.enable_delay_cycles,
             fe_timeout_ms: m.following_error_timeout_ms,
             state: PowerState::NotReadyToSwitchOn,
@@ -149,11 +142,14 @@ impl ProfidriveModel {
             g1_stw: 0,
             xerr: 0,
             kpc: 0,
-            plant: AxisPlant::default(),
+            plant: AxisPlant::new(ServoParams::from_definition(def)),
             velocity: 0.0,
             torque: 0.0,
             limited: false,
             fe_over_ns: 0,
+            sample_prev: 0.0,
+            nsoll_prev: 0.0,
+            speed_ref: 0.0,
             inputs: [false; NUM_INPUTS],
             active: 0,
             available: 0,
@@ -336,95 +332,54 @@ impl ProfidriveModel {
         }
     }
 
-    /// Largest speed a torque limit allows with loop gain `kv` (the torque demand is the lag ×
-    /// `torque_per_increment`).
-    fn torque_speed(&self, kv: f64, limit: f64) -> f64 {
-        if self.torque_per_inc > 0.0 {
-            kv * limit / self.torque_per_inc
-        } else {
-            f64::INFINITY
-        }
-    }
-
     fn move_axis(&mut self, now: Nanos, dt: f64) {
-        self.plant.trajectory.clear();
-        let dt_ns = (dt * 1e9).round() as u64;
-        let start = now.0.saturating_sub(dt_ns);
-        let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
-        let time = |k: usize| {
-            let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
-            Nanos(now.0.saturating_sub(back as u64).max(start))
-        };
-        let x0 = self.plant.position;
-        let d = self.plant.disturbance;
-        self.plant.trajectory.push((time(0), x0 + d));
-        self.limited = false;
+        // The actual value the master's XERR refers to: the one sampled at the start of the
+        // previous cycle (delivered one exchange later, as every link does; PROFIdrive
+        // isochronous mode: Ti / To, assumption).
+        let sample = self.sample_prev;
+        self.sample_prev = self.plant.actual();
         if self.state != PowerState::OperationEnabled || dt <= 0.0 {
+            self.plant.hold(now, dt);
             self.velocity = 0.0;
-            self.plant.prev_target = self.plant.position;
             self.torque = 0.0;
-            for k in 1..=n {
-                self.plant.trajectory.push((time(k), x0 + d));
-            }
+            self.limited = false;
+            self.nsoll_prev = 0.0;
+            self.speed_ref = self.plant.position;
             return;
         }
-        let mut speed = n4_to_speed(self.nsoll, self.reference_speed);
-        if !speed.is_finite() {
-            speed = 0.0;
-        }
-        let vmax = self.max_velocity_inc.unwrap_or(f64::INFINITY);
+        let speed = n4_to_speed(self.nsoll, self.reference_speed);
+        let speed = if speed.is_finite() { speed } else { 0.0 };
         let limit = self.torque_limit();
         let dsc_kv = f64::from(self.kpc) * 1e-3;
-        let cycle = if self.tg.dsc() && dsc_kv > 0.0 {
-            // DSC: the drive closes the position loop itself on the set-point
-            // x0 + XERR + NSOLL_B·t, a ramp from the previous target to the new one.
-            let r0 = x0 + f64::from(self.xerr);
-            Cycle {
-                x0,
+        let demand = if self.tg.dsc() && dsc_kv > 0.0 {
+            // DSC: XERR = the master's set-point at the time of `sample` − `sample`; the
+            // set-point ramp of this cycle starts one NSOLL_B step after that set-point.
+            let r0 = sample - self.plant.disturbance + f64::from(self.xerr) + self.nsoll_prev * dt;
+            Demand::Ramp {
                 r0,
                 r1: r0 + speed * dt,
-                dt,
+                v_ff: speed,
                 kv: dsc_kv,
-                v_pos: vmax.min(self.torque_speed(dsc_kv, limit)),
-                v_neg: vmax.min(self.torque_speed(dsc_kv, limit)),
             }
         } else {
-            speed = speed.clamp(-vmax, vmax);
-            Cycle {
-                x0,
-                r0: self.plant.prev_target,
-                r1: self.plant.prev_target + speed * dt,
-                dt,
-                kv: SPEED_LOOP_GAIN,
-                v_pos: vmax.min(self.torque_speed(SPEED_LOOP_GAIN, limit)),
-                v_neg: vmax.min(self.torque_speed(SPEED_LOOP_GAIN, limit)),
-            }
+            Demand::Speed(speed)
         };
-        let mut wall = self.plant.wall.map(|w| Wall {
-            at: w.at - d,
-            side: w.side,
-        });
-        let mut xs = [0.0; SUBSAMPLES];
-        let outcome = motion::integrate(&cycle, wall.as_mut(), &mut xs);
-        if let (Some(w), Some(moved)) = (self.plant.wall.as_mut(), wall) {
-            w.side = moved.side;
+        let v_max = self.plant.servo_params().v_max;
+        self.speed_ref += speed.clamp(-v_max, v_max) * dt;
+        self.nsoll_prev = speed;
+        let c = self.plant.servo(now, dt, demand, limit, limit);
+        self.velocity = self.plant.velocity();
+        self.torque = c.torque;
+        self.limited = c.limited;
+        if c.limited && matches!(demand, Demand::Speed(_)) {
+            // Anti wind-up: the reference does not run away from an axis held at a limit by
+            // more than the lag that limit allows.
+            let lag = self.speed_ref - self.plant.position;
+            let cap = f64::from(self.lag_window.min(u32::MAX - 1)).max(1.0) * 2.0;
+            if lag.abs() > cap {
+                self.speed_ref = self.plant.position + cap.copysign(lag);
+            }
         }
-        for (k, x) in xs.iter().enumerate() {
-            self.plant.trajectory.push((time(k + 1), x + d));
-        }
-        let x1 = xs[SUBSAMPLES - 1];
-        self.velocity = (x1 - x0) / dt;
-        self.plant.position = x1;
-        let mut r1 = cycle.r1;
-        let demand = (r1 - x1) * self.torque_per_inc;
-        let clipped = demand.clamp(-limit, limit);
-        if self.torque_per_inc > 0.0 && clipped != demand {
-            // Anti wind-up: the speed controller's integral stays at the torque limit.
-            r1 = x1 + clipped / self.torque_per_inc;
-        }
-        self.plant.prev_target = if r1.is_finite() { r1 } else { x1 };
-        self.torque = if clipped.is_finite() { clipped } else { 0.0 };
-        self.limited = outcome.limited || clipped != demand;
     }
 
     fn monitor(&mut self, dt: f64) {
@@ -435,7 +390,7 @@ impl ProfidriveModel {
         let dev = if self.tg.dsc() {
             f64::from(self.xerr).abs()
         } else {
-            (self.plant.prev_target - self.plant.position).abs()
+            (self.speed_ref - self.plant.position).abs()
         };
         if dev > f64::from(self.lag_window) {
             self.fe_over_ns = self.fe_over_ns.saturating_add((dt * 1e9) as u64);

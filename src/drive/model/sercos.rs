@@ -36,7 +36,8 @@
 
 use super::abort;
 use super::axis::AxisPlant;
-use super::ds402::motion::{self, round_i32, Cycle, Wall, SUBSAMPLES};
+use super::axis::{Demand, ServoParams};
+use super::ds402::motion::round_i32;
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::sercos::{self, idn, rt_mask, Telegram, CW_DRIVE_ON, CW_ENABLE, CW_RUN};
 use crate::drive::{DriveError, PowerState};
@@ -53,9 +54,6 @@ const WINDOW_MAX: u32 = 0x7FFF_FFFF;
 #[derive(Debug, Clone, PartialEq)]
 pub struct SercosModel {
     telegram: Telegram,
-    kv: f64,
-    max_velocity_inc: Option<f64>,
-    torque_per_inc: f64,
     enable_delay_cycles: u32,
 
     /// Status word bits 15/14.
@@ -96,19 +94,8 @@ impl SercosModel {
     pub fn new(def: &DriveDefinition) -> Result<Self, DriveError> {
         let cfg = sercos::config(def)?;
         let m = &def.model;
-        let positive_or = |v: f64, d: f64| if v.is_finite() && v > 0.0 { v } else { d };
         let mut model = SercosModel {
             telegram: cfg.telegram,
-            kv: positive_or(m.kv, 40.0),
-            max_velocity_inc: m
-                .max_velocity
-                .map(|v| (v * def.scaling.increments_per_unit).abs())
-                .filter(|v| v.is_finite() && *v > 0.0),
-            torque_per_inc: if m.torque_per_increment.is_finite() {
-                m.torque_per_increment.max(0.0)
-            } else {
-                0.0
-            },
             enable_delay_cycles: m.enable_delay_cycles,
             ready: 0,
             error: false,
@@ -118,7 +105,7 @@ impl SercosModel {
             control: 0,
             prev_drive_on: false,
             target: 0,
-            plant: AxisPlant::default(),
+            plant: AxisPlant::new(ServoParams::from_definition(def)),
             velocity: 0.0,
             torque: 0.0,
             torque_limit: 1000,
@@ -186,7 +173,6 @@ impl SercosModel {
         } else {
             0.0
         };
-        let dt_ns = (dt * 1e9).round() as u64;
         if rx.len() < self.telegram.mdt.len() {
             self.rx_length_errors += 1;
         } else {
@@ -204,7 +190,7 @@ impl SercosModel {
         }
         self.power();
         self.apply_probe_enables();
-        self.move_axis(now, dt, dt_ns);
+        self.move_axis(now, dt);
         self.monitor();
     }
 
@@ -270,64 +256,23 @@ impl SercosModel {
         }
     }
 
-    fn move_axis(&mut self, now: Nanos, dt: f64, dt_ns: u64) {
-        self.plant.trajectory.clear();
-        let start = now.0.saturating_sub(dt_ns);
-        let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
-        let time = |k: usize| {
-            let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
-            Nanos(now.0.saturating_sub(back as u64).max(start))
-        };
-        let x0 = self.plant.position;
-        let d = self.plant.disturbance;
-        self.plant.trajectory.push((time(0), x0 + d));
+    fn move_axis(&mut self, now: Nanos, dt: f64) {
         if !self.following() || dt <= 0.0 {
+            self.plant.hold(now, dt);
             self.velocity = 0.0;
-            self.plant.prev_target = self.plant.position;
             self.torque = 0.0;
-            for k in 1..=n {
-                self.plant.trajectory.push((time(k), x0 + d));
-            }
             return;
         }
         let limit = f64::from(self.torque_limit);
-        let torque_speed = if self.torque_per_inc > 0.0 {
-            self.kv * limit / self.torque_per_inc
-        } else {
-            f64::INFINITY
-        };
-        let vmax = self
-            .max_velocity_inc
-            .unwrap_or(f64::INFINITY)
-            .min(torque_speed);
-        let cycle = Cycle {
-            x0,
-            r0: self.plant.prev_target,
-            r1: f64::from(self.target),
+        let c = self.plant.servo(
+            now,
             dt,
-            kv: self.kv,
-            v_pos: vmax,
-            v_neg: vmax,
-        };
-        let mut wall = self.plant.wall.map(|w| Wall {
-            at: w.at - d,
-            side: w.side,
-        });
-        let mut xs = [0.0; SUBSAMPLES];
-        motion::integrate(&cycle, wall.as_mut(), &mut xs);
-        if let (Some(w), Some(moved)) = (self.plant.wall.as_mut(), wall) {
-            w.side = moved.side;
-        }
-        for (k, x) in xs.iter().enumerate() {
-            self.plant.trajectory.push((time(k + 1), x + d));
-        }
-        let x1 = xs[SUBSAMPLES - 1];
-        self.velocity = (x1 - x0) / dt;
-        self.plant.position = x1;
-        self.plant.prev_target = cycle.r1;
-        let demand = (cycle.r1 - x1) * self.torque_per_inc;
-        let clipped = demand.clamp(-limit, limit);
-        self.torque = if clipped.is_finite() { clipped } else { 0.0 };
+            Demand::Position(f64::from(self.target)),
+            limit,
+            limit,
+        );
+        self.velocity = self.plant.velocity();
+        self.torque = c.torque;
     }
 
     fn monitor(&mut self) {

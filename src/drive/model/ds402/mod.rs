@@ -83,9 +83,9 @@ mod power;
 mod tests;
 pub mod touch_probe;
 
-use self::motion::{round_i32, Cycle, Wall, SUBSAMPLES};
+use self::motion::round_i32;
 use self::touch_probe::{Signal, TouchProbes, NUM_INPUTS};
-use super::axis::AxisPlant;
+use super::axis::{AxisPlant, Demand, ServoParams};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::PdoLayout;
 use crate::drive::PowerState;
@@ -113,14 +113,9 @@ const MAX_ZERO_PULSES_PER_STEP: usize = 1024;
 pub struct Ds402Model {
     rx: PdoLayout,
     tx: PdoLayout,
-    kv: f64,
-    /// Velocity limit in increments/s.
-    max_velocity_inc: Option<f64>,
     enable_delay_cycles: u32,
     /// Zero pulse period in increments.
     zero_pulse_period: f64,
-    /// Torque demand per increment of lag, ‰.
-    torque_per_inc: f64,
 
     state: PowerState,
     controlword: u16,
@@ -166,10 +161,6 @@ impl Ds402Model {
     /// `[probe]`).
     pub fn new(def: &DriveDefinition) -> Self {
         let m = &def.model;
-        let max_velocity_inc = m
-            .max_velocity
-            .map(|v| (v * def.scaling.increments_per_unit).abs())
-            .filter(|v| v.is_finite() && *v > 0.0);
         let positive_or = |v: f64, default: f64| {
             if v.is_finite() && v > 0.0 {
                 v
@@ -180,22 +171,15 @@ impl Ds402Model {
         Ds402Model {
             rx: def.rxpdo.clone(),
             tx: def.txpdo.clone(),
-            kv: positive_or(m.kv, 40.0),
-            max_velocity_inc,
             enable_delay_cycles: m.enable_delay_cycles,
             zero_pulse_period: positive_or(m.zero_pulse_period, 10_000.0),
-            torque_per_inc: if m.torque_per_increment.is_finite() {
-                m.torque_per_increment.max(0.0)
-            } else {
-                0.0
-            },
             state: PowerState::NotReadyToSwitchOn,
             controlword: 0,
             prev_bit7: false,
             enable_count: 0,
             mode: 0,
             target: 0,
-            plant: AxisPlant::default(),
+            plant: AxisPlant::new(ServoParams::from_definition(def)),
             velocity: 0.0,
             limited: false,
             torque: 0.0,
@@ -258,7 +242,7 @@ impl Ds402Model {
             self.enter_fault(code);
         }
         self.apply_controlword();
-        self.move_axis(now, dt, dt_ns);
+        self.move_axis(now, dt);
         self.zero_pulses();
         self.monitor_following_error(dt_ns);
     }
@@ -358,69 +342,27 @@ impl Ds402Model {
         )
     }
 
-    /// Advance the loop over the cycle `[now − dt, now]` and record the trajectory.
-    fn move_axis(&mut self, now: Nanos, dt: f64, dt_ns: u64) {
-        self.plant.trajectory.clear();
-        let start = now.0.saturating_sub(dt_ns);
-        let n = if dt > 0.0 { SUBSAMPLES } else { 0 };
-        let time = |k: usize| {
-            let back = u128::from(dt_ns) * (n - k) as u128 / n.max(1) as u128;
-            Nanos(now.0.saturating_sub(back as u64).max(start))
-        };
-        let x0 = self.plant.position;
-        let d = self.plant.disturbance;
-        self.plant.trajectory.push((time(0), x0 + d));
-        self.limited = false;
+    /// Advance the servo over the cycle `[now − dt, now]` and record the trajectory.
+    fn move_axis(&mut self, now: Nanos, dt: f64) {
         if !self.following() || dt <= 0.0 {
             // Brake: hold the position.
+            self.plant.hold(now, dt);
             self.velocity = 0.0;
-            self.plant.prev_target = self.plant.position;
             self.torque = 0.0;
-            for k in 1..=n {
-                self.plant.trajectory.push((time(k), x0 + d));
-            }
+            self.limited = false;
             return;
         }
         let (t_pos, t_neg) = self.torque_limits();
-        let torque_speed = |limit: f64| {
-            if self.torque_per_inc > 0.0 {
-                self.kv * limit / self.torque_per_inc
-            } else {
-                f64::INFINITY
-            }
-        };
-        let vmax = self.max_velocity_inc.unwrap_or(f64::INFINITY);
-        let cycle = Cycle {
-            x0,
-            r0: self.plant.prev_target,
-            r1: f64::from(self.target),
+        let c = self.plant.servo(
+            now,
             dt,
-            kv: self.kv,
-            v_pos: vmax.min(torque_speed(t_pos)),
-            v_neg: vmax.min(torque_speed(t_neg)),
-        };
-        // The wall is kept in actual coordinates; the loop runs without the disturbance.
-        let mut wall = self.plant.wall.map(|w| Wall {
-            at: w.at - d,
-            side: w.side,
-        });
-        let mut xs = [0.0; SUBSAMPLES];
-        let outcome = motion::integrate(&cycle, wall.as_mut(), &mut xs);
-        if let (Some(w), Some(moved)) = (self.plant.wall.as_mut(), wall) {
-            w.side = moved.side;
-        }
-        for (k, x) in xs.iter().enumerate() {
-            self.plant.trajectory.push((time(k + 1), x + d));
-        }
-        let x1 = xs[SUBSAMPLES - 1];
-        self.velocity = (x1 - x0) / dt;
-        self.plant.position = x1;
-        self.plant.prev_target = cycle.r1;
-        // Torque demand from the loop's lag, clipped to the limit of its sign.
-        let demand = (cycle.r1 - x1) * self.torque_per_inc;
-        let clipped = demand.clamp(-t_neg, t_pos);
-        self.torque = if clipped.is_finite() { clipped } else { 0.0 };
-        self.limited = outcome.limited || clipped != demand;
+            Demand::Position(f64::from(self.target)),
+            t_pos,
+            t_neg,
+        );
+        self.velocity = self.plant.velocity();
+        self.torque = c.torque;
+        self.limited = c.limited;
     }
 
     /// Encoder zero pulses crossed in the last trajectory: a positive and a negative edge at

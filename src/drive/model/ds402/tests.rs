@@ -1,6 +1,7 @@
 //! Unit tests of the CiA 402 drive model (module-private parts; the end-to-end behaviour is
 //! tested through the adapter in `tests/ds402.rs` and `tests/touch_probe.rs`).
 
+use super::motion::SUBSAMPLES;
 use super::power::{decode_command, Command};
 use super::*;
 use crate::drive::catalogue;
@@ -10,12 +11,22 @@ fn model() -> Ds402Model {
     Ds402Model::new(&catalogue::builtin("cia402-generic").unwrap())
 }
 
-/// A model in OPERATION ENABLED / CSP without going through the bus.
+/// A model in OPERATION ENABLED / CSP without going through the bus, with the first-order loop
+/// without feed-forward (`[model] feed_forward = false`), whose solution is known in closed form.
 fn following() -> Ds402Model {
-    let mut m = model();
+    let mut def = catalogue::builtin("cia402-generic").unwrap();
+    def.model.feed_forward = false;
+    let mut m = Ds402Model::new(&def);
     m.state = PowerState::OperationEnabled;
     m.mode = MODE_CSP;
     m
+}
+
+/// Drop the speed limit.
+fn no_speed_limit(m: &mut Ds402Model) {
+    let mut p = *m.plant.servo_params();
+    p.v_max = f64::INFINITY;
+    m.plant.set_servo_params(p);
 }
 
 #[test]
@@ -69,10 +80,10 @@ fn first_step_leaves_not_ready() {
 #[test]
 fn constant_set_point_is_the_step_formula() {
     let mut m = following();
-    m.max_velocity_inc = None;
+    no_speed_limit(&mut m);
     m.target = 1000;
     m.plant.prev_target = 1000.0;
-    m.move_axis(Nanos(1_000_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(1_000_000), 0.001);
     let expect = 1000.0 * (1.0 - (-40.0f64 * 0.001).exp());
     assert!(
         (m.plant.position - expect).abs() < 1e-9,
@@ -84,11 +95,11 @@ fn constant_set_point_is_the_step_formula() {
 #[test]
 fn trajectory_times_and_interpolation() {
     let mut m = following();
-    m.max_velocity_inc = None;
+    no_speed_limit(&mut m);
     m.set_disturbance(0.5);
     m.target = 1600;
     m.plant.prev_target = 0.0;
-    m.move_axis(Nanos(5_000_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(5_000_000), 0.001);
     let traj = m.trajectory().to_vec();
     assert_eq!(traj.len(), SUBSAMPLES + 1);
     assert_eq!(traj[0], (Nanos(4_000_000), 0.5));
@@ -100,11 +111,11 @@ fn trajectory_times_and_interpolation() {
     assert_eq!(m.position_at(Nanos(3_999_999)), None);
     assert_eq!(m.position_at(Nanos(5_000_001)), None);
     // Zero-length step: one point.
-    m.move_axis(Nanos(7), 0.0, 0);
+    m.move_axis(Nanos(7), 0.0);
     assert_eq!(m.trajectory(), &[(Nanos(7), m.actual())]);
     assert_eq!(m.position_at(Nanos(7)), Some(m.actual()));
     // Start of time: the cycle start is clamped to 0.
-    m.move_axis(Nanos(300_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(300_000), 0.001);
     assert_eq!(m.trajectory()[0].0, Nanos::ZERO);
     assert!(m.trajectory().windows(2).all(|w| w[0].0 <= w[1].0));
 }
@@ -112,10 +123,10 @@ fn trajectory_times_and_interpolation() {
 #[test]
 fn input_edge_latches_interpolated_position() {
     let mut m = following();
-    m.max_velocity_inc = None;
+    no_speed_limit(&mut m);
     m.write_object(0x60B8, 0, 0x0031).unwrap(); // TP1 first event, both edges
     m.target = 1600;
-    m.move_axis(Nanos(1_000_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(1_000_000), 0.001);
     let at = Nanos(400_000);
     let expect = m.position_at(at).unwrap();
     m.input_edge(1, true, at);
@@ -135,11 +146,11 @@ fn input_edge_latches_interpolated_position() {
 #[test]
 fn zero_pulses_latch_exact_multiples() {
     let mut m = following();
-    m.max_velocity_inc = None;
+    no_speed_limit(&mut m);
     m.set_actual(9_990.0);
     m.write_object(0x60B8, 0, 0x0017).unwrap(); // TP1 continuous, zero pulse, positive edge
     m.target = 30_010;
-    m.move_axis(Nanos(1_000_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(1_000_000), 0.001);
     m.zero_pulses();
     // Crosses 10000 only (lag): one pulse at exactly 10000.
     let end = m.actual();
@@ -157,7 +168,7 @@ fn torque_limit_and_wall() {
     assert_eq!(m.fixed_stop(), Some(100.0));
     m.target = 50_000;
     m.plant.prev_target = 50_000.0;
-    m.move_axis(Nanos(1_000_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(1_000_000), 0.001);
     assert_eq!(m.actual(), 100.0);
     // Demand 0.004 * 49900 = 199.6 per mille, limit min(100, 50) = 50.
     assert_eq!(m.read_object(0x6077, 0), Ok(50));
@@ -167,7 +178,7 @@ fn torque_limit_and_wall() {
     m.target = -50_000;
     m.plant.prev_target = -50_000.0;
     m.set_fixed_stop(Some(0.0));
-    m.move_axis(Nanos(2_000_000), 0.001, 1_000_000);
+    m.move_axis(Nanos(2_000_000), 0.001);
     assert_eq!(m.actual(), 0.0);
     assert_eq!(m.read_object(0x6077, 0), Ok(-100));
 }
