@@ -105,8 +105,16 @@ fn continuous_jog_stops_at_the_workspace_boundary_with_and_without_warning() {
             xs.iter().all(|&v| v <= -50.0 + 0.001),
             "passed the boundary"
         );
-        // The velocity ramps down before the limit (not an abrupt stop).
-        assert!(xs.len() > 10 && xs[xs.len() - 2] < stop);
+        // The velocity ramps down before the limit (not an abrupt stop): the last set-point
+        // before the one at the stop is short of it by less than the jog's 40 mm/s × 1 ms (the
+        // set-points then stand while the axis settles in position).
+        let mut moving = xs.clone();
+        moving.dedup();
+        let before = moving[moving.len() - 2];
+        assert!(
+            moving.len() > 10 && before < stop && stop - before < 0.04,
+            "{before} {stop}"
+        );
         let msgs = m.channel_mut().take_messages();
         assert!(msgs.iter().all(|x| !x.is_error()), "{msgs:?}");
         let w: Vec<_> = msgs.iter().filter(|x| x.id == 900318).collect();

@@ -291,6 +291,12 @@ impl Axis {
         self.adapter.probe_state()
     }
 
+    /// The drive reported its latch event; the value is still being read
+    /// ([`DriveAdapter::probe_triggered`]).
+    pub fn probe_triggered(&self) -> bool {
+        self.adapter.probe_triggered()
+    }
+
     /// The next fresh latched position (mm / °) decoded this cycle.
     pub fn take_latch(&mut self) -> Option<f64> {
         self.adapter

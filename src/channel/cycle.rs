@@ -137,6 +137,7 @@ impl Channel {
         self.next.clear();
         self.next.extend(self.axes.iter().map(Axis::command));
         let mut finished: Option<ChannelState> = None;
+        let resting = self.axes_resting();
         if matches!(self.mode, Mode::Moving(_)) {
             if let Mode::Moving(m) = std::mem::replace(&mut self.mode, Mode::Idle) {
                 match self.step_motion(m, now, dt, None) {
@@ -185,7 +186,21 @@ impl Channel {
             Mode::Moving(_) => {}
             Mode::Manual(state) => {
                 let mut events = Vec::new();
+                let was_jogging = state.jogging();
                 state.step(dt, &mut self.next, &mut events);
+                // After a jog the axes come to rest in position before the channel is idle
+                // again (what `jog` prints are settled positions); bounded by the
+                // in-position timeout.
+                if was_jogging && !state.jogging() {
+                    state.settling = 1;
+                } else if state.settling > 0 {
+                    state.settling =
+                        if resting || state.settling > self.cfg.in_position_timeout_cycles {
+                            0
+                        } else {
+                            state.settling + 1
+                        };
+                }
                 for e in events {
                     if let manual::Event::AreaStopped(..) = e {
                         // PLC datum `area_mon_violation_detected_r` (seed 000 §6.3): set in the
@@ -217,11 +232,6 @@ impl Channel {
                     // `--json` and the messages report are settled positions). Bounded by the
                     // in-position timeout, without an error of its own: a drive that faulted
                     // does not follow.
-                    let resting = self.axes.iter().zip(&self.next).zip(&self.cfg.axes).all(
-                        |((a, &cmd), c)| {
-                            !a.is_operational() || (cmd - a.actual()).abs() <= c.in_position
-                        },
-                    );
                     *settle += 1;
                     if resting || *settle > self.cfg.in_position_timeout_cycles {
                         finished = Some(*then);
@@ -236,10 +246,18 @@ impl Channel {
                 if let Some(side) = self.sls.check_stop_distance(i, self.next[i], v) {
                     let m = self.sls.stop_distance_message(i, side);
                     self.push(m);
-                    // Brake from the current state, which could still stop in time.
+                    // Brake from the current state, which could still stop in time: this cycle's
+                    // set-points are the first braking step.
                     self.begin_stop(ChannelState::Aborted);
                     self.next.clear();
                     self.next.extend(self.axes.iter().map(Axis::command));
+                    if let Mode::Stopping { brakes, k, .. } = &mut self.mode {
+                        *k = 1;
+                        for (n, b) in self.next.iter_mut().zip(brakes.iter()) {
+                            let (s, _) = b.braking.sample(dt);
+                            *n = b.start + b.sign * s;
+                        }
+                    }
                     break;
                 }
             }
@@ -378,6 +396,22 @@ impl Channel {
                 InPosition::Reached => {}
             }
         }
+        // A drive that reported its event reads the value over the following cycles
+        // (PROFIdrive): wait for it, within the in-position timeout.
+        if m.meas.as_ref().is_some_and(|r| r.values_pending()) {
+            if m.settle <= self.cfg.in_position_timeout_cycles {
+                m.settle += 1;
+                return MotionStep::Running(m);
+            }
+            if let Some(run) = m.meas.take() {
+                self.disarm_sources(&run);
+            }
+            self.push(CncMessage::error(
+                ids::MEAS_LATCH,
+                "a drive reported its probe event but the latched value did not arrive",
+            ));
+            return MotionStep::FailAtRest;
+        }
         if let Some(run) = m.meas.take() {
             let reached = m.braking.is_none();
             match self.finish_measurement(*run, reached) {
@@ -407,6 +441,16 @@ impl Channel {
             }
             InPosition::Reached => MotionStep::Done,
         }
+    }
+
+    /// Every axis whose drive follows stands within its in-position window of its last
+    /// set-point (a drive that does not follow — faulted, disabled — cannot settle and is not
+    /// waited for).
+    fn axes_resting(&self) -> bool {
+        self.axes
+            .iter()
+            .zip(&self.cfg.axes)
+            .all(|(a, c)| !a.is_operational() || (a.command() - a.actual()).abs() <= c.in_position)
     }
 
     /// The exact stop at the end of motion `m`: every axis it moves (only `only` for an

@@ -92,10 +92,18 @@ struct Jog {
 pub struct ManualState {
     start: Vec<f64>,
     jogs: Vec<Option<Jog>>,
+    /// Cycles the axes have been settling since the last jog ended (0: not settling).
+    pub(super) settling: u32,
 }
 
 impl ManualState {
+    /// A jog runs, or the axes are still coming to rest after one.
     pub(super) fn is_moving(&self) -> bool {
+        self.jogging() || self.settling > 0
+    }
+
+    /// A jog runs.
+    pub(super) fn jogging(&self) -> bool {
         self.jogs.iter().any(Option::is_some)
     }
 
@@ -185,6 +193,7 @@ impl Channel {
         self.mode = Mode::Manual(ManualState {
             start: self.command_positions(),
             jogs: vec![None; self.axes.len()],
+            settling: 0,
         });
         true
     }
@@ -192,7 +201,7 @@ impl Channel {
     /// Leave manual mode; only when no axis is jogging.
     pub fn leave_manual(&mut self) -> bool {
         match &self.mode {
-            Mode::Manual(m) if !m.is_moving() => {
+            Mode::Manual(m) if !m.jogging() => {
                 self.mode = Mode::Idle;
                 true
             }

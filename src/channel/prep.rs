@@ -356,11 +356,28 @@ impl Channel {
             v = v.min(c.v_max / f);
             a_acc = a_acc.min(acc / f);
             a_dec = a_dec.min(dec / f);
-            if matches!(mtype, MeasType::Type2 | MeasType::Type4) && c.meas.enabled {
-                // Axis velocity u with dead time T (2 cycles: latch seen, braking starts) and the
-                // braking deceleration a: u·T + u²/(2a) ≤ stroke.
+            if matches!(mtype, MeasType::Type2 | MeasType::Type4)
+                && c.meas.enabled
+                && c.meas.stroke > 0.0
+            {
+                // Axis velocity u, braking deceleration a and the time t the axis goes on at u
+                // after the contact: u·t + u²/(2a) ≤ stroke (seed 004 P-AXIS-00086, with the
+                // "distance components in the buffer" of its remark included). t = the link's
+                // dead time (an edge just after a SYNC0 is latched in the cycle that follows,
+                // reported one exchange later, and the first braking set-point is reached one
+                // cycle after it is sent) + the drive's own lag at constant speed (1/kv without
+                // feed-forward) + for a PLC-sampled signal the PLC's cycle beyond the NC cycle.
                 let a = self.measurement_brake_decel_pub(i).max(1e-9);
-                let t = 2.0 * dt;
+                let plc_extra = if c.meas.signal.uses_drive_latch() {
+                    0.0
+                } else {
+                    self.cfg
+                        .meas
+                        .plc_cycle
+                        .map_or(0.0, |p| (p.as_secs_f64() - dt).max(0.0))
+                };
+                let t =
+                    f64::from(self.axes[i].dead_time_cycles()) * dt + c.servo_lag_time + plc_extra;
                 let h = c.meas.stroke;
                 let u = a * (-t + (t * t + 2.0 * h / a).sqrt());
                 v_stroke = v_stroke.min(u / f);

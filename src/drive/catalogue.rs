@@ -388,6 +388,10 @@ const BUILTINS: &[(&str, &str)] = &[
         include_str!("../../drives/cia402-generic.toml"),
     ),
     (
+        "cia402-no-feedforward",
+        include_str!("../../drives/cia402-no-feedforward.toml"),
+    ),
+    (
         "cia402-drive-defined",
         include_str!("../../drives/cia402-drive-defined.toml"),
     ),

@@ -284,6 +284,14 @@ pub trait DriveAdapter: Send + fmt::Debug {
         None
     }
 
+    /// The drive reported that the armed latch unit has captured its event, whose value is
+    /// still being read (PROFIdrive: "value available" in G1_ZSW, the value follows in
+    /// G1_XIST2 after a read request). Lets the CNC brake at once. Default: never (the value
+    /// comes with the report).
+    fn probe_triggered(&self) -> bool {
+        false
+    }
+
     /// Write a cyclic drive function (`commu = "CYCLIC"` in the drive file, e.g. PROFIdrive
     /// MOMRED): `value` goes into the command telegram from the next cycle on. `index:sub`
     /// names the telegram signal in the family's numbering. Families without cyclic functions

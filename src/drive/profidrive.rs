@@ -915,6 +915,12 @@ impl DriveAdapter for ProfidriveAdapter {
         }
     }
 
+    fn probe_triggered(&self) -> bool {
+        self.arming
+            .as_ref()
+            .is_some_and(|a| matches!(a.phase, Phase::Reading))
+    }
+
     fn take_probe_event(&mut self) -> Option<ProbeEvent> {
         self.events.pop_front()
     }

@@ -85,6 +85,8 @@ pub(super) struct MeasAxis {
     latched: Option<(f64, Nanos)>,
     /// Latched before the programmed target was reached.
     before_target: bool,
+    /// The drive reported the event; its value may still be on the way.
+    triggered: bool,
     /// Evaluator of a PLC signal source.
     eval: Option<SourceEvaluator>,
     /// The PLC's external-latch handshake gates this axis (PLC_EXT_LATCH_CONTROL,
@@ -137,6 +139,21 @@ impl MeasRun {
             .filter(|a| a.required)
             .all(|a| a.latched.is_some())
             && self.axes.iter().any(|a| a.latched.is_some())
+    }
+
+    /// Every required axis latched or reported its event (its value may still be on the way):
+    /// the probing signal is complete for the motion.
+    fn signalled(&self) -> bool {
+        self.axes
+            .iter()
+            .filter(|a| a.required)
+            .all(|a| a.latched.is_some() || a.triggered)
+            && self.axes.iter().any(|a| a.latched.is_some() || a.triggered)
+    }
+
+    /// An axis reported its event but its value has not arrived yet.
+    pub(super) fn values_pending(&self) -> bool {
+        self.axes.iter().any(|a| a.triggered && a.latched.is_none())
     }
 
     /// Measurement type.

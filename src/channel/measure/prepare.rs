@@ -140,6 +140,7 @@ impl Channel {
                 input,
                 latched: None,
                 before_target: false,
+                triggered: false,
                 eval,
                 handshake,
                 gate_open: false,

@@ -111,7 +111,7 @@ impl Channel {
                 }
             }
             Phase::Measuring => {
-                let was_complete = run.complete();
+                let was_signalled = run.signalled();
                 for k in 0..run.axes.len() {
                     let (axis, signal) = (run.axes[k].axis, run.axes[k].signal);
                     let event = if signal.uses_drive_latch() {
@@ -124,6 +124,12 @@ impl Channel {
                                 )
                                 .on_axis(&name),
                             );
+                        }
+                        // The drive may report the event before its value (PROFIdrive: "value
+                        // available", read over G1_XIST2 in the following cycles): braking
+                        // starts with the report.
+                        if self.axes[axis].probe_triggered() {
+                            run.axes[k].triggered = true;
                         }
                         self.axes[axis].take_latch()
                     } else if let Some(e) = run.axes[k].eval.as_mut() {
@@ -178,7 +184,7 @@ impl Channel {
                         }
                     }
                 }
-                if !was_complete && run.complete() {
+                if !was_signalled && run.signalled() {
                     run.event_s = Some(s);
                     if run.mtype == MeasType::Type3 {
                         MeasStep::Go
