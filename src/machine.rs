@@ -631,11 +631,17 @@ impl Machine {
                         Step::End => ended = true,
                         Step::Abort => {
                             if self.channel.state() == ChannelState::Idle {
-                                // Defensive: an aborting block always stops the channel.
-                                self.channel.report(CncMessage::error(
-                                    ids::NC_EVALUATION,
-                                    "program aborted",
-                                ));
+                                // Defensive: an aborting block always stops the channel. Its
+                                // error, when queued already, is the only message (one cause,
+                                // one error).
+                                if self.channel.messages().iter().any(CncMessage::is_error) {
+                                    self.channel.abort_reported();
+                                } else {
+                                    self.channel.report(CncMessage::error(
+                                        ids::NC_EVALUATION,
+                                        "program aborted",
+                                    ));
+                                }
                             }
                         }
                     }

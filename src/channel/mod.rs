@@ -487,6 +487,14 @@ impl Channel {
         }
     }
 
+    /// Abort the program for an error that is already queued (one cause, one error): the
+    /// channel stops as after [`Channel::report`] of that error, without a message of its own.
+    pub fn abort_reported(&mut self) {
+        if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+            self.begin_stop(ChannelState::Aborted);
+        }
+    }
+
     /// A drive's emergency message (EMCY / CoE emergency): warning 900015 naming the axis and
     /// the code in words. Code 0x0000 ("error reset or no error") is not reported.
     pub fn drive_emergency(&mut self, axis: usize, code: u16, text: &str) {

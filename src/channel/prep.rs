@@ -30,6 +30,7 @@ impl Channel {
                 ids::NC_EVALUATION,
                 "motion target is not a finite position for every axis",
             ));
+            self.mode = Mode::Aborted;
             return Prepared::Rejected;
         }
         let start = self.command_positions();
@@ -90,7 +91,10 @@ impl Channel {
         let segment = match segment {
             Ok(s) => s,
             Err(e) => {
+                // The block is not executed and the program aborts here; the error is the one
+                // message for it (no further "program aborted").
                 self.push(CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()));
+                self.mode = Mode::Aborted;
                 return Prepared::Rejected;
             }
         };
