@@ -521,6 +521,24 @@ fn type_7_without_a_stop_is_an_error_unless_p_chan_00266() {
 }
 
 #[test]
+fn type_7_without_a_criterion_names_axis_and_parameters_in_words() {
+    // Defaults: P-AXIS-00774 = 0 (lag criterion off), P-AXIS-00778 < 0 → P-AXIS-00773 < 0
+    // (position window off): Z has no fixed-stop criterion (seed 004 §8.2.2).
+    let mut m = machine(&["P-CHAN-00057=7", "Z.kenngr.measure.signal=FIXED_STOP"]);
+    let r = run(&mut m, "N10 G100 Z50 F600\nN20 M30\n");
+    let e = aborted_with(&r, 900040, 10);
+    for w in ["axis Z", "P-AXIS-00774", "P-AXIS-00778"] {
+        assert!(e.text.contains(w), "{w:?} missing: {e}");
+    }
+    assert!(
+        !e.text.contains("NoCriterion") && !e.text.contains('{'),
+        "words, not debug output: {e}"
+    );
+    assert_eq!(e.axis.as_deref(), Some("Z"));
+    assert_eq!(command(&m, Z), 0.0, "nothing moved");
+}
+
+#[test]
 
 fn type_7_undetected_stop_goes_to_the_actual_position() {
     // §8.2.1 P-CHAN-00266: "If no error message is output when the fixed stop is not found, the

@@ -16,7 +16,7 @@
 //! signal active" column) for the non-linear slope parameter set our interpolator uses.
 
 use super::Channel;
-use crate::core::measure::fixed_stop::{FixedStopAxis, FixedStopDetector};
+use crate::core::measure::fixed_stop::{FixedStopAxis, FixedStopDetector, FixedStopError};
 use crate::core::measure::plc::{
     BlockGate, EvaluatorConfig, ExtLatchClient, ExtLatchConfig, SignalEvaluator, SourceEvaluator,
     TimestampConfig,

@@ -163,13 +163,11 @@ impl Channel {
                 let params = match (c.fixed_stop, monitored) {
                     (Some(p), _) => p,
                     (None, false) => crate::core::measure::fixed_stop::FixedStopParams::inactive(),
+                    // `from_params` refuses only a cycle time of 0.
                     (None, true) => {
-                        return Err(CncMessage::error(
-                            ids::MEAS_CONFIG,
-                            format!(
-                                "axis {name}: fixed-stop parameters invalid (P-AXIS-00774 … 00778)"
-                            ),
-                        ))
+                        return Err(FixedStopError::ZeroCycle
+                            .cnc_message(ids::MEAS_CONFIG, &[name])
+                            .on_axis(name))
                     }
                 };
                 if monitored {
@@ -178,10 +176,8 @@ impl Channel {
                 fa.push(FixedStopAxis { params, monitored });
             }
             Some(FixedStopDetector::new(&fa, target_len).map_err(|e| {
-                e.message(self.axes[axes[0].axis].name())
-                    .unwrap_or_else(|| {
-                        CncMessage::error(ids::MEAS_CONFIG, format!("fixed stop: {e:?}"))
-                    })
+                let names: Vec<&str> = axes.iter().map(|a| self.axes[a.axis].name()).collect();
+                e.cnc_message(ids::MEAS_CONFIG, &names)
             })?)
         } else {
             None
