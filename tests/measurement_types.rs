@@ -427,6 +427,76 @@ fn in_2_5d_only_the_moved_axes_must_latch() {
     assert!(e.text.contains('Y'), "{e}");
 }
 
+/// Run `src` cycle by cycle; `watch` sees the machine after every interpolation cycle. Returns
+/// the messages of the run.
+fn run_watched(m: &mut Machine, src: &str, mut watch: impl FnMut(&mut Machine)) -> Vec<CncMessage> {
+    let prog = parse(src).unwrap();
+    assert_eq!(m.settle(10_000), ChannelState::Idle);
+    let names = m
+        .channel()
+        .axes()
+        .iter()
+        .map(|a| a.name().to_string())
+        .collect();
+    let mut exec = Executor::new(prog, names);
+    exec.sync(m.channel());
+    let (mut msgs, mut out, mut cycles) = (Vec::new(), Vec::new(), 0u32);
+    loop {
+        msgs.extend(m.channel_mut().take_messages());
+        match m.channel().state() {
+            ChannelState::Aborted => break,
+            ChannelState::Idle => {
+                let step = exec.step(m.channel_mut(), &mut out);
+                for Event::Output(_) in out.drain(..) {}
+                if step == Step::End {
+                    break;
+                }
+            }
+            _ => {
+                cycles += 1;
+                assert!(cycles < 1_000_000);
+                m.step();
+                watch(m);
+            }
+        }
+    }
+    msgs.extend(m.channel_mut().take_messages());
+    msgs
+}
+
+#[test]
+fn only_the_programmed_axes_arm_their_probes() {
+    // Seed 004 §1: "The measuring function is initialised and activated for the axes programmed
+    // in the measurement block". X, Y and Z are measurement axes (P-AXIS-00118 = 1) with the
+    // probe looped to all three. `G100 X0 Z50` from X = 0 programs X (not moved) and Z; Y is not
+    // programmed: its drive's touch-probe function 0x60B8 never gets an enable bit (bit 0 probe
+    // 1, bit 8 probe 2, CiA 402) and its axis latch is never armed.
+    use fieldprobe::drive::ProbeState;
+    let mut m = machine(&[]);
+    m.add_probe("Z", 30.0).unwrap();
+    let mut enabled = [false; 3];
+    let mut armed = [false; 3];
+    let msgs = run_watched(&mut m, "N10 G100 X0 Z50 F1000\nN20 M30\n", |m| {
+        for a in [X, Y, Z] {
+            let function = m.link_mut().read_object(a, 0x60B8, 0).unwrap();
+            enabled[a] |= function & 0x0101 != 0;
+            armed[a] |= m.channel().axes()[a].probe_state() == ProbeState::Armed;
+        }
+    });
+    assert!(msgs.is_empty(), "{msgs:?}");
+    assert!(enabled[Z] && armed[Z], "the moved axis Z is armed");
+    assert!(
+        enabled[X] && armed[X],
+        "X is programmed (not moved): armed as well"
+    );
+    assert!(
+        !enabled[Y] && !armed[Y],
+        "Y is not programmed: never armed (0x60B8 enabled: {}, armed: {})",
+        enabled[Y],
+        armed[Y]
+    );
+}
+
 #[test]
 fn with_cs_all_three_main_axes_must_latch() {
     // #CS ON with an offset only; G100 X10 moves X alone, but Y and Z must latch as well (§4

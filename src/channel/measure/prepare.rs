@@ -62,11 +62,13 @@ impl Channel {
             }
             _ => {}
         }
-        // Which axes take part and which must latch (seed 004 §4).
+        // Which axes take part (seed 004 §1: "initialised and activated for the axes programmed
+        // in the measurement block") and which must latch (§4).
         let mut axes = Vec::new();
         for i in 0..n {
             let c = &self.cfg.axes[i].meas;
             let in_cs = req.cs_active && main.contains(&Some(i));
+            let programmed = req.programmed.get(i).copied().unwrap_or(false);
             // Gantry slaves move along but the master measures (seed 004 §7.3).
             let slave = self.is_coupled_slave(i);
             let required = (moved[i] || in_cs) && !slave;
@@ -81,9 +83,10 @@ impl Channel {
                 )
                 .on_axis(self.axes[i].name()));
             }
-            // An independent axis measures alone: the other axes' latches belong to their own
-            // runs.
-            if !c.enabled || (only_moved && !required) {
+            // Only programmed axes (and the #CS main axes) are armed: an axis the block does not
+            // name keeps its probe for other uses and its previous results. An independent axis
+            // measures alone: the other axes' latches belong to their own runs.
+            if !c.enabled || !(required || programmed) || (only_moved && !required) {
                 continue;
             }
             let ov = req.overrides.iter().rev().find(|o| o.axis == i);

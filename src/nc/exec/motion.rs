@@ -52,6 +52,7 @@ impl Executor {
                     mtype: self.modal.meas_type,
                     gcode: g,
                     cs_active: self.frames.cs().is_some(),
+                    programmed: programmed.clone(),
                     overrides: self.overrides.clone(),
                 };
                 (MotionKind::Linear, Some(m))
@@ -205,6 +206,7 @@ impl Executor {
             mtype: self.modal.meas_type,
             gcode: 100,
             cs_active: false,
+            programmed: (0..prog.len()).map(|k| k == i).collect(),
             overrides: self.overrides.clone(),
         });
         let start_pcs = self.prog.clone();
