@@ -190,7 +190,8 @@ pub struct Trace {
     pub actual: Vec<Vec<f64>>,
     /// Probe signal edges: (time s, rising).
     pub edges: Vec<(f64, bool)>,
-    /// Latched values: (time s, axis, position).
+    /// Latched values that became measurement results: (time s, axis, position). An axis that
+    /// was not in a measurement, or whose latch belongs to an incomplete probing signal, has none.
     pub latches: Vec<(f64, usize, f64)>,
 }
 

@@ -232,7 +232,8 @@ impl Channel {
         self.latch_log = on.then(Vec::new);
     }
 
-    /// Latched values recorded since the last call: (time, axis, ACS position).
+    /// Latched values recorded since the last call: (time of the latch, axis, ACS position).
+    /// Only latches that became measurement results are recorded, when the block publishes them.
     pub fn take_latch_log(&mut self) -> Vec<(Nanos, usize, f64)> {
         self.latch_log
             .as_mut()

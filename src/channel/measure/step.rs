@@ -152,9 +152,6 @@ impl Channel {
                             let mut settle = Vec::new();
                             for m in &mut run.axes {
                                 let p = self.axes[m.axis].actual();
-                                if let Some(log) = self.latch_log.as_mut() {
-                                    log.push((now, m.axis, p));
-                                }
                                 m.latched = Some((p, now));
                                 m.before_target = s < run.target_len - 1e-9;
                                 settle.push((m.axis, p));
@@ -171,9 +168,6 @@ impl Channel {
                         if m.latched.is_none() {
                             m.latched = Some((pos, now));
                             m.before_target = s < run.target_len - 1e-9;
-                            if let Some(log) = self.latch_log.as_mut() {
-                                log.push((now, axis, pos));
-                            }
                         }
                     }
                 }
@@ -253,9 +247,14 @@ impl Channel {
         if complete {
             for a in &run.axes {
                 involved[a.axis] = true;
-                if let Some((p, _)) = a.latched {
+                if let Some((p, t)) = a.latched {
                     latched[a.axis] = Some(p);
                     merf[a.axis] = a.before_target;
+                    // The trace marks the latches that became results: an axis whose latch
+                    // belongs to an incomplete signal did not measure.
+                    if let Some(log) = self.latch_log.as_mut() {
+                        log.push((t, a.axis, p));
+                    }
                 }
             }
         } else {
