@@ -545,11 +545,12 @@ fn with_cs_an_unmoved_main_axis_must_be_a_measurement_axis() {
 // Type 7: fixed stop
 // ---------------------------------------------------------------------------------------------
 
-/// Type 7 with fixed-stop detection on Z: lag above 1 mm (P-AXIS-00774 = 10000 × 0.1 µm) for
-/// 20 ms (P-AXIS-00775 = 20000 µs).
+/// Type 7 with fixed-stop detection on Z (P-AXIS-00516 FIXED_STOP, seed 004 §7.3): lag above
+/// 1 mm (P-AXIS-00774 = 10000 × 0.1 µm) for 20 ms (P-AXIS-00775 = 20000 µs).
 fn type_7(extra: &[&str]) -> Machine {
     let mut sets = vec![
         "P-CHAN-00057=7",
+        "Z.kenngr.measure.signal=FIXED_STOP",
         "Z.P-AXIS-00774=10000",
         "Z.P-AXIS-00775=20000",
     ];
@@ -588,6 +589,66 @@ fn type_7_without_a_stop_is_an_error_unless_p_chan_00266() {
     assert_eq!(r.measurements[Z].result, None);
     assert!(!r.measurements[Z].merf);
     assert_eq!(command(&m, Z), 50.0);
+}
+
+#[test]
+fn type_7_needs_fixed_stop_as_the_signal_source_of_the_moved_axes() {
+    // Seed 004 §7.3: for a measurement run to a fixed stop "the following entries must be
+    // assigned in the axis parameter lists: P-AXIS-00516 … kenngr.measure.signal FIXED_STOP".
+    // The default machine measures with DRIVE: the block is refused before anything moves, with
+    // a message naming the axis, the parameter, its value and the way out.
+    let sets = [
+        "P-CHAN-00057=7",
+        "Z.P-AXIS-00774=10000",
+        "Z.P-AXIS-00775=20000",
+    ];
+    let mut m = machine(&sets);
+    m.add_fixed_stop("Z", 150.0).unwrap();
+    let r = run(&mut m, "N10 G100 Z200 F600\nN20 M30\n");
+    let e = aborted_with(&r, 900040, 10);
+    for w in [
+        "axis Z",
+        "P-AXIS-00516",
+        "FIXED_STOP",
+        "with DRIVE",
+        "#MEAS [AXNR=3",
+    ] {
+        assert!(e.text.contains(w), "{w:?} missing: {e}");
+    }
+    assert_eq!(e.axis.as_deref(), Some("Z"));
+    assert_eq!(command(&m, Z), 0.0, "nothing moved");
+
+    // The program may select the source itself (#MEAS, §8.2.2 P-AXIS-00516). X is programmed
+    // but not moved: it is not watched for the stop, so its DRIVE source does not matter; it
+    // takes its actual position (0) when Z's stop is detected.
+    let mut m = machine(&sets);
+    m.add_fixed_stop("Z", 150.0).unwrap();
+    let r = run(
+        &mut m,
+        "N05 #MEAS [AXNR=3 SIGNAL=FIXED_STOP]\nN10 G100 X0 Z200 F600\nN20 M30\n",
+    );
+    completed(&r);
+    close(
+        "Z at the wall",
+        r.measurements[Z].result.unwrap().acs,
+        150.0,
+        LATCH_TOL,
+    );
+    close(
+        "X where it stood",
+        r.measurements[X].result.unwrap().acs,
+        0.0,
+        LATCH_TOL,
+    );
+
+    // A #MEAS override to another source is refused the same way and says where it came from.
+    let mut m = machine(&[&sets[..], &["Z.kenngr.measure.signal=FIXED_STOP"]].concat());
+    let r = run(
+        &mut m,
+        "N05 #MEAS [AXNR=3 SIGNAL=PLC]\nN10 G100 Z200 F600\nN20 M30\n",
+    );
+    let e = aborted_with(&r, 900040, 10);
+    assert!(e.text.contains("with PLC (#MEAS SIGNAL)"), "{e}");
 }
 
 #[test]
@@ -797,6 +858,7 @@ fn independent_axis_type_2_uses_p_axis_00215_and_needs_the_signal() {
 fn independent_axis_type_7_latches_the_wall() {
     let mut m = machine(&[
         "P-CHAN-00057=7",
+        "X.kenngr.measure.signal=FIXED_STOP",
         "X.P-AXIS-00774=10000",
         "X.P-AXIS-00775=20000",
     ]);

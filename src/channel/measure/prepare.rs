@@ -92,6 +92,31 @@ impl Channel {
             let ov = req.overrides.iter().rev().find(|o| o.axis == i);
             let mut signal = ov.and_then(|o| o.signal).unwrap_or(c.signal);
             if mtype == MeasType::Type7 {
+                // Seed 004 §7.3 "The following entries must be assigned in the axis parameter
+                // lists: P-AXIS-00516 … FIXED_STOP" (P-AXIS-00330: "All other measurement signal
+                // sources … must be deselected"): an axis watched for the stop that is set up
+                // for another source is refused before anything moves. The other axes of the
+                // run only take their actual position when the stop is detected.
+                if required && signal != SignalSource::FixedStop {
+                    let name = self.axes[i].name();
+                    return Err(CncMessage::error(
+                        ids::MEAS_CONFIG,
+                        format!(
+                            "measurement type 7 (moving to a fixed stop) needs P-AXIS-00516 \
+                             kenngr.measure.signal = FIXED_STOP on axis {name}, which measures \
+                             with {}{}; set FIXED_STOP in its axis parameters or select it with \
+                             #MEAS [AXNR={} SIGNAL=FIXED_STOP] (seed 004 §7.3)",
+                            signal.name(),
+                            if ov.and_then(|o| o.signal).is_some() {
+                                " (#MEAS SIGNAL)"
+                            } else {
+                                ""
+                            },
+                            i + 1
+                        ),
+                    )
+                    .on_axis(name));
+                }
                 signal = SignalSource::FixedStop;
             }
             let edge = ov.and_then(|o| o.edge).unwrap_or(c.edge);
