@@ -186,6 +186,47 @@ fn type_2_feed_is_p_axis_00215_not_f() {
 }
 
 #[test]
+fn type_2_needs_no_f_word() {
+    // Seed 004 §3: type 2 "Measurement feed is specified in the axis data list" (§8.2.2
+    // P-AXIS-00215 kenngr.vb_messen). A program without any F measures at P-AXIS-00215 =
+    // 20000 µm/s = 20 mm/s.
+    let prog = "N10 #MEAS MODE[2]\nN20 G100 Z50\nN30 M30\n";
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let (c, msgs) = traced_commands(&mut m, prog, Z);
+    assert!(msgs.is_empty(), "{msgs:?}");
+    close("type 2 feed", peak_velocity(&c), 20.0, 1e-6);
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(&mut m, prog);
+    completed(&r);
+    close(
+        "latched",
+        r.measurements[Z].result.unwrap().acs,
+        30.0,
+        LATCH_TOL,
+    );
+    // The measuring block does not make up an F for later blocks: a G01 still needs one.
+    let mut m = machine(&[]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(
+        &mut m,
+        "N10 #MEAS MODE[2]\nN20 G100 Z50\nN30 G01 Z0\nN40 M30\n",
+    );
+    aborted_with(&r, 900021, 30);
+    // Type 1 measures with F: without one, the G100 is refused (900021).
+    let mut m = machine(&[]);
+    let r = run(&mut m, "N10 G100 Z50\nN20 M30\n");
+    aborted_with(&r, 900021, 10);
+    // An independent axis under type 2 needs no FEED either.
+    let mut m = machine(&["P-CHAN-00057=2", "X.P-AXIS-00215=20000"]);
+    m.add_probe("X", 30.0).unwrap();
+    let (c, msgs) = traced_commands(&mut m, "N10 X[INDP_SYN G100 G90 POS100]\nN20 M30\n", X);
+    assert!(msgs.is_empty(), "{msgs:?}");
+    close("independent type 2 feed", peak_velocity(&c), 20.0, 1e-6);
+}
+
+#[test]
 fn type_2_without_signal_is_an_error() {
     let mut m = machine(&["P-CHAN-00057=2"]);
     let r = run(&mut m, "N10 G100 Z50 F1000\nN20 M30\n");
