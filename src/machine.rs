@@ -705,6 +705,13 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
         stroke: param_pos_to_mm(p.int("P-AXIS-00086")),
         feed_type2: param_vel_to_mm_s(p.int("P-AXIS-00215")),
         overtravel: param_pos_to_mm(p.int("P-AXIS-00467")),
+        // P-AXIS-00467 replaces P-AXIS-00114, which stays available for type 2 only (seed 004
+        // §8.2.2): the old value applies when the new parameter is not given.
+        overtravel_type2: param_pos_to_mm(if p.is_set("P-AXIS-00467") {
+            p.int("P-AXIS-00467")
+        } else {
+            p.int("P-AXIS-00114")
+        }),
         // P-AXIS-00053 a_feedh: 0 means P-AXIS-00004 (ISG axis parameter docs).
         a_feedhold: match p.int("P-AXIS-00053") {
             0 => a_rapid,

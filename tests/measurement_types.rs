@@ -227,6 +227,48 @@ fn type_2_needs_no_f_word() {
 }
 
 #[test]
+fn old_p_axis_00114_is_the_type_2_overtravel_unless_p_axis_00467_is_set() {
+    // Seed 004 §8.2.2, P-AXIS-00467 remarks: it "replaces the parameter P-AXIS-00114 … [which]
+    // continues to be available … [and] only has an influence on measurement travels with
+    // measurement type 2". P-AXIS-00114 = 20000 × 0.1 µm = 2 mm; probe at Z = 51.5, 1.5 mm past
+    // the target 50.
+    let probe_run = |sets: &[&str]| {
+        let mut m = machine(sets);
+        m.add_probe("Z", 51.5).unwrap();
+        let r = run(&mut m, "N10 G100 Z50 F1000\nN20 M30\n");
+        (r, command(&m, Z))
+    };
+    // Type 2: the old overtravel lets the run find the probe past the target (MERF 0: after it).
+    let (r, _) = probe_run(&["P-CHAN-00057=2", "Z.P-AXIS-00114=20000"]);
+    completed(&r);
+    close(
+        "latched in the overtravel",
+        r.measurements[Z].result.unwrap().acs,
+        51.5,
+        LATCH_TOL,
+    );
+    assert!(!r.measurements[Z].merf);
+    // Type 1: P-AXIS-00114 has no influence: the run ends at the target without a value.
+    let (r, z) = probe_run(&["Z.P-AXIS-00114=20000"]);
+    completed(&r);
+    assert_eq!(r.measurements[Z].result, None);
+    assert_eq!(z, 50.0);
+    // Type 2 with P-AXIS-00467 given (1 mm): the new parameter replaces the old one; the run
+    // ends at 51 without the signal (error 900041 of type 2).
+    let (r, z) = probe_run(&[
+        "P-CHAN-00057=2",
+        "Z.P-AXIS-00114=20000",
+        "Z.P-AXIS-00467=10000",
+    ]);
+    aborted_with(&r, 900041, 10);
+    close("end of the P-AXIS-00467 overtravel", z, 51.0, 1e-9);
+    // … also when it is given as 0.
+    let (r, z) = probe_run(&["P-CHAN-00057=2", "Z.P-AXIS-00114=20000", "Z.P-AXIS-00467=0"]);
+    aborted_with(&r, 900041, 10);
+    close("at the target", z, 50.0, 1e-9);
+}
+
+#[test]
 fn type_2_without_signal_is_an_error() {
     let mut m = machine(&["P-CHAN-00057=2"]);
     let r = run(&mut m, "N10 G100 Z50 F1000\nN20 M30\n");
