@@ -140,6 +140,45 @@ fn json_output_reports_limits_and_pcs_objects() {
 }
 
 #[test]
+fn set_order_does_not_matter() {
+    // The cross checks (seed 001 §4.3 P-AXIS-00177 < P-AXIS-00178) run after all --sets. On
+    // xy200 (X ±200 mm), [250, 300] needs both: the old code refused one order with exit 2. With
+    // the range moved, the axis at 0 lies below the negative limit: 70022 either way.
+    let neg = "X.P-AXIS-00177=2500000";
+    let pos = "X.P-AXIS-00178=3000000";
+    let run = |first: &str, second: &str| {
+        fieldprobe(&[
+            "run",
+            "examples/nc/hello.nc",
+            "--machine",
+            "examples/machines/xy200.toml",
+            "--set",
+            first,
+            "--set",
+            second,
+        ])
+    };
+    let (a, b) = (run(neg, pos), run(pos, neg));
+    assert_eq!(a.status.code(), Some(1), "{}", stderr(&a));
+    assert_eq!(
+        (b.status.code(), stderr(&b), stdout(&b)),
+        (a.status.code(), stderr(&a), stdout(&a))
+    );
+    assert!(stderr(&a).starts_with("error 70022: "), "{}", stderr(&a));
+    // A pair that breaks the rule after both: exit 2 naming both parameters, either order.
+    let bad = "X.P-AXIS-00178=2400000";
+    for (first, second) in [(neg, bad), (bad, neg)] {
+        let o = run(first, second);
+        assert_eq!(o.status.code(), Some(2));
+        let e = stderr(&o);
+        assert!(
+            e.contains("--set (axis X): P-AXIS-00177 kenngr.swe_neg = 2500000 must be < P-AXIS-00178 kenngr.swe_pos = 2400000"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
 fn bad_input_exits_2_naming_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.nc");
