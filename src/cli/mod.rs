@@ -19,6 +19,7 @@ mod check;
 mod esi;
 mod jog;
 mod params;
+mod plot;
 mod run;
 mod sim;
 mod trace;
