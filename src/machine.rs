@@ -190,7 +190,8 @@ pub struct Trace {
     pub actual: Vec<Vec<f64>>,
     /// Probe signal edges: (time s, rising).
     pub edges: Vec<(f64, bool)>,
-    /// Latched values: (time s, axis, position).
+    /// Latched values that became measurement results: (time s, axis, position). An axis that
+    /// was not in a measurement, or whose latch belongs to an incomplete probing signal, has none.
     pub latches: Vec<(f64, usize, f64)>,
 }
 
@@ -640,11 +641,17 @@ impl Machine {
                         Step::End => ended = true,
                         Step::Abort => {
                             if self.channel.state() == ChannelState::Idle {
-                                // Defensive: an aborting block always stops the channel.
-                                self.channel.report(CncMessage::error(
-                                    ids::NC_EVALUATION,
-                                    "program aborted",
-                                ));
+                                // Defensive: an aborting block always stops the channel. Its
+                                // error, when queued already, is the only message (one cause,
+                                // one error).
+                                if self.channel.messages().iter().any(CncMessage::is_error) {
+                                    self.channel.abort_reported();
+                                } else {
+                                    self.channel.report(CncMessage::error(
+                                        ids::NC_EVALUATION,
+                                        "program aborted",
+                                    ));
+                                }
                             }
                         }
                     }
@@ -707,6 +714,13 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
         stroke: param_pos_to_mm(p.int("P-AXIS-00086")),
         feed_type2: param_vel_to_mm_s(p.int("P-AXIS-00215")),
         overtravel: param_pos_to_mm(p.int("P-AXIS-00467")),
+        // P-AXIS-00467 replaces P-AXIS-00114, which stays available for type 2 only (seed 004
+        // §8.2.2): the old value applies when the new parameter is not given.
+        overtravel_type2: param_pos_to_mm(if p.is_set("P-AXIS-00467") {
+            p.int("P-AXIS-00467")
+        } else {
+            p.int("P-AXIS-00114")
+        }),
         // P-AXIS-00053 a_feedh: 0 means P-AXIS-00004 (ISG axis parameter docs).
         a_feedhold: match p.int("P-AXIS-00053") {
             0 => a_rapid,

@@ -72,6 +72,8 @@ fn run_on(
 fn seed_examples_print_the_same_over_canopen_emu_as_over_sim() {
     let cfg = MachineConfig::default_machine();
     let mut fs = MachineConfig::default_machine();
+    // Seed 004 §7.3: FIXED_STOP as Z's signal source and a detection criterion.
+    fs.apply_set("Z.kenngr.measure.signal=FIXED_STOP").unwrap();
     fs.apply_set("Z.P-AXIS-00774=10000").unwrap();
     fs.apply_set("Z.P-AXIS-00775=20000").unwrap();
     let cases: [(&str, &MachineConfig, Option<f64>, Option<f64>); 5] = [

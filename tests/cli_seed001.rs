@@ -140,6 +140,95 @@ fn json_output_reports_limits_and_pcs_objects() {
 }
 
 #[test]
+fn json_pcs_limits_include_a_rotating_cs() {
+    // Seed 001 §2.1: P-CHAN-00489 transforms the active ACS limits into the PCS, "Cartesian
+    // transformations (#CS)" included. xy200: X and Y ±200 mm; G99 Y150 makes Y's positive
+    // limit 150. #CS ON[10,0,0,0,0,90] (interpretation M2): ACS = (10, 0, 0) + R_z(90°)·PCS,
+    // R_z(90°)·(x, y) = (−y, x), so ACS X = 10 − PCS Y and ACS Y = PCS X. `G00 X5 Y5` ends at
+    // PCS (5, 5) = ACS (5, 5).
+    // PCS X runs along ACS Y: PCS X = ACS Y ∈ [−200, 150].
+    // PCS Y runs along −ACS X: PCS Y = 10 − ACS X ∈ [10 − 200, 10 + 200] = [−190, 210].
+    // Distances from PCS 5: X 150 − 5 = 145, 5 − (−200) = 205; Y 210 − 5 = 205, 5 − (−190) = 195.
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("cs.nc");
+    std::fs::write(&p, "G99 Y150\n#CS ON[10,0,0,0,0,90]\nG00 X5 Y5\n").unwrap();
+    let o = fieldprobe(&[
+        "run",
+        p.to_str().unwrap(),
+        "--machine",
+        "examples/machines/xy200.toml",
+        "--json",
+        "--set",
+        "P-CHAN-00489=1",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let close = |axis: usize, key: &str, expected: f64| {
+        let got = v["axes"][axis]["pcs_limits"][key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("axis {axis} {key}: {}", v["axes"][axis]));
+        assert!(
+            (got - expected).abs() < 1e-9,
+            "axis {axis} {key}: {got}, expected {expected}"
+        );
+    };
+    // ACS command positions as worked out above.
+    for axis in [0, 1] {
+        let c = v["axes"][axis]["command"].as_f64().unwrap();
+        assert!((c - 5.0).abs() < 1e-9, "ACS command {c}");
+    }
+    close(0, "negative", -200.0);
+    close(0, "positive", 150.0);
+    close(0, "distance_negative", 205.0);
+    close(0, "distance_positive", 145.0);
+    close(1, "negative", -190.0);
+    close(1, "positive", 210.0);
+    close(1, "distance_negative", 195.0);
+    close(1, "distance_positive", 205.0);
+    // The monitoring itself stays in the ACS (§2.1 notice).
+    assert_eq!(v["axes"][1]["sls_positive"], 150.0);
+}
+
+#[test]
+fn set_order_does_not_matter() {
+    // The cross checks (seed 001 §4.3 P-AXIS-00177 < P-AXIS-00178) run after all --sets. On
+    // xy200 (X ±200 mm), [250, 300] needs both: the old code refused one order with exit 2. With
+    // the range moved, the axis at 0 lies below the negative limit: 70022 either way.
+    let neg = "X.P-AXIS-00177=2500000";
+    let pos = "X.P-AXIS-00178=3000000";
+    let run = |first: &str, second: &str| {
+        fieldprobe(&[
+            "run",
+            "examples/nc/hello.nc",
+            "--machine",
+            "examples/machines/xy200.toml",
+            "--set",
+            first,
+            "--set",
+            second,
+        ])
+    };
+    let (a, b) = (run(neg, pos), run(pos, neg));
+    assert_eq!(a.status.code(), Some(1), "{}", stderr(&a));
+    assert_eq!(
+        (b.status.code(), stderr(&b), stdout(&b)),
+        (a.status.code(), stderr(&a), stdout(&a))
+    );
+    assert!(stderr(&a).starts_with("error 70022: "), "{}", stderr(&a));
+    // A pair that breaks the rule after both: exit 2 naming both parameters, either order.
+    let bad = "X.P-AXIS-00178=2400000";
+    for (first, second) in [(neg, bad), (bad, neg)] {
+        let o = run(first, second);
+        assert_eq!(o.status.code(), Some(2));
+        let e = stderr(&o);
+        assert!(
+            e.contains("--set (axis X): P-AXIS-00177 kenngr.swe_neg = 2500000 must be < P-AXIS-00178 kenngr.swe_pos = 2400000"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
 fn bad_input_exits_2_naming_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.nc");

@@ -144,7 +144,8 @@ fn the_canopen_fixed_stop_example_latches_the_wall_on_every_family_with_a_torque
             continue;
         }
         let prog = program("meas_fixed_stop_canopen");
-        // Fixed-stop detection needs a criterion (the parameters default to "off").
+        // Seed 004 §7.3: Z measures with FIXED_STOP, and detection needs a criterion (the
+        // parameters default to "off").
         let prog = format!(
             "%fs\n{}",
             prog.lines().skip(1).collect::<Vec<_>>().join("\n")
@@ -152,6 +153,7 @@ fn the_canopen_fixed_stop_example_latches_the_wall_on_every_family_with_a_torque
         let mut cfg = MachineConfig::parse(
             &format!(
                 "[[axis]]\nname = \"X\"\n[[axis]]\nname = \"Y\"\n[[axis]]\nname = \"Z\"\ndrive = \"{drive}\"\nkenngr.messachse = 1\n\
+                 kenngr.measure.signal = \"FIXED_STOP\"\n\
                  kenngr.measure.fixed_stop_detect.pos_lag_limit = 10000\nkenngr.measure.fixed_stop_detect.min_time = 20000\n{}",
                 if drive == "cia402-drive-defined" { "\"P-AXIS-00702\" = \"DRIVE_DEFINED\"\n" } else { "" }
             ),

@@ -122,7 +122,7 @@ fn cases(drive: &str) -> Vec<(String, MachineConfig, Plant, String)> {
     let mut fs = xyz(
         drive,
         false,
-        "kenngr.measure.fixed_stop_detect.pos_lag_limit = 10000\nkenngr.measure.fixed_stop_detect.min_time = 20000\n",
+        "kenngr.measure.signal = \"FIXED_STOP\"\nkenngr.measure.fixed_stop_detect.pos_lag_limit = 10000\nkenngr.measure.fixed_stop_detect.min_time = 20000\n",
     );
     fs.apply_set("P-CHAN-00057=1").unwrap();
     v.push((

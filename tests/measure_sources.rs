@@ -1539,6 +1539,62 @@ fn gantry_slaves_are_not_monitored() {
 }
 
 #[test]
+fn every_fixed_stop_error_reads_in_words_naming_axis_and_parameter() {
+    // The detector's axes in list order: X2 (index 0), Z (index 1).
+    let names = ["X2", "Z"];
+    let cases = [
+        (
+            FixedStopError::NoCriterion { axis: 1 },
+            900040,
+            &["axis Z", "P-AXIS-00774", "P-AXIS-00778"][..],
+        ),
+        (
+            FixedStopError::PerMilleTooLarge {
+                axis: 1,
+                value: 1500,
+            },
+            51026,
+            &["axis Z", "1500", "P-AXIS-00777"][..],
+        ),
+        (
+            FixedStopError::NoMonitoredAxis,
+            900040,
+            &["X2, Z", "monitored"][..],
+        ),
+        (
+            FixedStopError::InvalidBlockLength(-1.0),
+            900040,
+            &["block length -1"][..],
+        ),
+        (
+            FixedStopError::ZeroCycle,
+            900040,
+            &["cycle time is 0", "P-AXIS-00775", "P-AXIS-00332"][..],
+        ),
+    ];
+    for (e, id, words) in cases {
+        let m = e.cnc_message(900040, &names);
+        assert_eq!((m.id, m.severity), (id, Severity::Error), "{e:?}");
+        for w in words {
+            assert!(m.text.contains(w), "{w:?} missing in {:?}", m.text);
+        }
+        // No Rust debug output: no variant names, no braces.
+        let debug = format!("{e:?}");
+        let variant = debug.split([' ', '(', '{']).next().unwrap();
+        assert!(!m.text.contains(variant), "{:?}", m.text);
+        assert!(
+            !m.text.contains('{') && !m.text.contains('}'),
+            "{:?}",
+            m.text
+        );
+        // The Display text of the error reads in words, too.
+        assert!(!e.to_string().contains(variant), "{e}");
+    }
+    let m = FixedStopError::NoCriterion { axis: 1 }.cnc_message(900040, &names);
+    assert_eq!(m.axis.as_deref(), Some("Z"));
+}
+
+#[test]
 fn scripted_plc_clamps_its_period_and_bounds_far_jumps() {
     let mut plc = ScriptedPlc::new(SimPlcConfig::new(Nanos(0)));
     assert_eq!(plc.config().period, Nanos(1_000));

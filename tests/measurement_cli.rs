@@ -417,6 +417,8 @@ fn fixed_stop_canopen_example() {
             "--fixed-stop-at",
             "Z=150",
             "--set",
+            "Z.kenngr.measure.signal=FIXED_STOP",
+            "--set",
             "Z.P-AXIS-00774=10000",
             "--set",
             "Z.P-AXIS-00775=20000",

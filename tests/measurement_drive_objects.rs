@@ -112,6 +112,7 @@ fn phases(t: &Traced, k: usize) -> Vec<Objects> {
 #[test]
 fn canopen_fixed_stop_example_writes_torque_limit_and_monitoring_window() {
     let mut cfg = MachineConfig::default_machine();
+    cfg.apply_set("Z.kenngr.measure.signal=FIXED_STOP").unwrap();
     cfg.apply_set("Z.P-AXIS-00774=10000").unwrap();
     cfg.apply_set("Z.P-AXIS-00775=20000").unwrap();
     let mut m = Machine::new(&cfg).unwrap();

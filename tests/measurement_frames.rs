@@ -88,6 +88,7 @@ fn cnc_lag_monitoring_trips_but_not_for_a_fixed_stop_run() {
     // The same axis measuring to a fixed stop at the same feed: monitoring is off for it.
     for s in [
         "P-CHAN-00057=7",
+        "Z.kenngr.measure.signal=FIXED_STOP",
         "Z.P-AXIS-00774=100000",
         "Z.P-AXIS-00775=20000",
     ] {

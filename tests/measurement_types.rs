@@ -186,6 +186,89 @@ fn type_2_feed_is_p_axis_00215_not_f() {
 }
 
 #[test]
+fn type_2_needs_no_f_word() {
+    // Seed 004 §3: type 2 "Measurement feed is specified in the axis data list" (§8.2.2
+    // P-AXIS-00215 kenngr.vb_messen). A program without any F measures at P-AXIS-00215 =
+    // 20000 µm/s = 20 mm/s.
+    let prog = "N10 #MEAS MODE[2]\nN20 G100 Z50\nN30 M30\n";
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let (c, msgs) = traced_commands(&mut m, prog, Z);
+    assert!(msgs.is_empty(), "{msgs:?}");
+    close("type 2 feed", peak_velocity(&c), 20.0, 1e-6);
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(&mut m, prog);
+    completed(&r);
+    close(
+        "latched",
+        r.measurements[Z].result.unwrap().acs,
+        30.0,
+        LATCH_TOL,
+    );
+    // The measuring block does not make up an F for later blocks: a G01 still needs one.
+    let mut m = machine(&[]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(
+        &mut m,
+        "N10 #MEAS MODE[2]\nN20 G100 Z50\nN30 G01 Z0\nN40 M30\n",
+    );
+    aborted_with(&r, 900021, 30);
+    // Type 1 measures with F: without one, the G100 is refused (900021).
+    let mut m = machine(&[]);
+    let r = run(&mut m, "N10 G100 Z50\nN20 M30\n");
+    aborted_with(&r, 900021, 10);
+    // An independent axis under type 2 needs no FEED either.
+    let mut m = machine(&["P-CHAN-00057=2", "X.P-AXIS-00215=20000"]);
+    m.add_probe("X", 30.0).unwrap();
+    let (c, msgs) = traced_commands(&mut m, "N10 X[INDP_SYN G100 G90 POS100]\nN20 M30\n", X);
+    assert!(msgs.is_empty(), "{msgs:?}");
+    close("independent type 2 feed", peak_velocity(&c), 20.0, 1e-6);
+}
+
+#[test]
+fn old_p_axis_00114_is_the_type_2_overtravel_unless_p_axis_00467_is_set() {
+    // Seed 004 §8.2.2, P-AXIS-00467 remarks: it "replaces the parameter P-AXIS-00114 … [which]
+    // continues to be available … [and] only has an influence on measurement travels with
+    // measurement type 2". P-AXIS-00114 = 20000 × 0.1 µm = 2 mm; probe at Z = 51.5, 1.5 mm past
+    // the target 50.
+    let probe_run = |sets: &[&str]| {
+        let mut m = machine(sets);
+        m.add_probe("Z", 51.5).unwrap();
+        let r = run(&mut m, "N10 G100 Z50 F1000\nN20 M30\n");
+        (r, command(&m, Z))
+    };
+    // Type 2: the old overtravel lets the run find the probe past the target (MERF 0: after it).
+    let (r, _) = probe_run(&["P-CHAN-00057=2", "Z.P-AXIS-00114=20000"]);
+    completed(&r);
+    close(
+        "latched in the overtravel",
+        r.measurements[Z].result.unwrap().acs,
+        51.5,
+        LATCH_TOL,
+    );
+    assert!(!r.measurements[Z].merf);
+    // Type 1: P-AXIS-00114 has no influence: the run ends at the target without a value.
+    let (r, z) = probe_run(&["Z.P-AXIS-00114=20000"]);
+    completed(&r);
+    assert_eq!(r.measurements[Z].result, None);
+    assert_eq!(z, 50.0);
+    // Type 2 with P-AXIS-00467 given (1 mm): the new parameter replaces the old one; the run
+    // ends at 51 without the signal (error 900041 of type 2).
+    let (r, z) = probe_run(&[
+        "P-CHAN-00057=2",
+        "Z.P-AXIS-00114=20000",
+        "Z.P-AXIS-00467=10000",
+    ]);
+    aborted_with(&r, 900041, 10);
+    close("end of the P-AXIS-00467 overtravel", z, 51.0, 1e-9);
+    // … also when it is given as 0.
+    let (r, z) = probe_run(&["P-CHAN-00057=2", "Z.P-AXIS-00114=20000", "Z.P-AXIS-00467=0"]);
+    aborted_with(&r, 900041, 10);
+    close("at the target", z, 50.0, 1e-9);
+}
+
+#[test]
 fn type_2_without_signal_is_an_error() {
     let mut m = machine(&["P-CHAN-00057=2"]);
     let r = run(&mut m, "N10 G100 Z50 F1000\nN20 M30\n");
@@ -427,6 +510,76 @@ fn in_2_5d_only_the_moved_axes_must_latch() {
     assert!(e.text.contains('Y'), "{e}");
 }
 
+/// Run `src` cycle by cycle; `watch` sees the machine after every interpolation cycle. Returns
+/// the messages of the run.
+fn run_watched(m: &mut Machine, src: &str, mut watch: impl FnMut(&mut Machine)) -> Vec<CncMessage> {
+    let prog = parse(src).unwrap();
+    assert_eq!(m.settle(10_000), ChannelState::Idle);
+    let names = m
+        .channel()
+        .axes()
+        .iter()
+        .map(|a| a.name().to_string())
+        .collect();
+    let mut exec = Executor::new(prog, names);
+    exec.sync(m.channel());
+    let (mut msgs, mut out, mut cycles) = (Vec::new(), Vec::new(), 0u32);
+    loop {
+        msgs.extend(m.channel_mut().take_messages());
+        match m.channel().state() {
+            ChannelState::Aborted => break,
+            ChannelState::Idle => {
+                let step = exec.step(m.channel_mut(), &mut out);
+                for Event::Output(_) in out.drain(..) {}
+                if step == Step::End {
+                    break;
+                }
+            }
+            _ => {
+                cycles += 1;
+                assert!(cycles < 1_000_000);
+                m.step();
+                watch(m);
+            }
+        }
+    }
+    msgs.extend(m.channel_mut().take_messages());
+    msgs
+}
+
+#[test]
+fn only_the_programmed_axes_arm_their_probes() {
+    // Seed 004 §1: "The measuring function is initialised and activated for the axes programmed
+    // in the measurement block". X, Y and Z are measurement axes (P-AXIS-00118 = 1) with the
+    // probe looped to all three. `G100 X0 Z50` from X = 0 programs X (not moved) and Z; Y is not
+    // programmed: its drive's touch-probe function 0x60B8 never gets an enable bit (bit 0 probe
+    // 1, bit 8 probe 2, CiA 402) and its axis latch is never armed.
+    use fieldprobe::drive::ProbeState;
+    let mut m = machine(&[]);
+    m.add_probe("Z", 30.0).unwrap();
+    let mut enabled = [false; 3];
+    let mut armed = [false; 3];
+    let msgs = run_watched(&mut m, "N10 G100 X0 Z50 F1000\nN20 M30\n", |m| {
+        for a in [X, Y, Z] {
+            let function = m.link_mut().read_object(a, 0x60B8, 0).unwrap();
+            enabled[a] |= function & 0x0101 != 0;
+            armed[a] |= m.channel().axes()[a].probe_state() == ProbeState::Armed;
+        }
+    });
+    assert!(msgs.is_empty(), "{msgs:?}");
+    assert!(enabled[Z] && armed[Z], "the moved axis Z is armed");
+    assert!(
+        enabled[X] && armed[X],
+        "X is programmed (not moved): armed as well"
+    );
+    assert!(
+        !enabled[Y] && !armed[Y],
+        "Y is not programmed: never armed (0x60B8 enabled: {}, armed: {})",
+        enabled[Y],
+        armed[Y]
+    );
+}
+
 #[test]
 fn with_cs_all_three_main_axes_must_latch() {
     // #CS ON with an offset only; G100 X10 moves X alone, but Y and Z must latch as well (§4
@@ -475,11 +628,12 @@ fn with_cs_an_unmoved_main_axis_must_be_a_measurement_axis() {
 // Type 7: fixed stop
 // ---------------------------------------------------------------------------------------------
 
-/// Type 7 with fixed-stop detection on Z: lag above 1 mm (P-AXIS-00774 = 10000 × 0.1 µm) for
-/// 20 ms (P-AXIS-00775 = 20000 µs).
+/// Type 7 with fixed-stop detection on Z (P-AXIS-00516 FIXED_STOP, seed 004 §7.3): lag above
+/// 1 mm (P-AXIS-00774 = 10000 × 0.1 µm) for 20 ms (P-AXIS-00775 = 20000 µs).
 fn type_7(extra: &[&str]) -> Machine {
     let mut sets = vec![
         "P-CHAN-00057=7",
+        "Z.kenngr.measure.signal=FIXED_STOP",
         "Z.P-AXIS-00774=10000",
         "Z.P-AXIS-00775=20000",
     ];
@@ -518,6 +672,84 @@ fn type_7_without_a_stop_is_an_error_unless_p_chan_00266() {
     assert_eq!(r.measurements[Z].result, None);
     assert!(!r.measurements[Z].merf);
     assert_eq!(command(&m, Z), 50.0);
+}
+
+#[test]
+fn type_7_needs_fixed_stop_as_the_signal_source_of_the_moved_axes() {
+    // Seed 004 §7.3: for a measurement run to a fixed stop "the following entries must be
+    // assigned in the axis parameter lists: P-AXIS-00516 … kenngr.measure.signal FIXED_STOP".
+    // The default machine measures with DRIVE: the block is refused before anything moves, with
+    // a message naming the axis, the parameter, its value and the way out.
+    let sets = [
+        "P-CHAN-00057=7",
+        "Z.P-AXIS-00774=10000",
+        "Z.P-AXIS-00775=20000",
+    ];
+    let mut m = machine(&sets);
+    m.add_fixed_stop("Z", 150.0).unwrap();
+    let r = run(&mut m, "N10 G100 Z200 F600\nN20 M30\n");
+    let e = aborted_with(&r, 900040, 10);
+    for w in [
+        "axis Z",
+        "P-AXIS-00516",
+        "FIXED_STOP",
+        "with DRIVE",
+        "#MEAS [AXNR=3",
+    ] {
+        assert!(e.text.contains(w), "{w:?} missing: {e}");
+    }
+    assert_eq!(e.axis.as_deref(), Some("Z"));
+    assert_eq!(command(&m, Z), 0.0, "nothing moved");
+
+    // The program may select the source itself (#MEAS, §8.2.2 P-AXIS-00516). X is programmed
+    // but not moved: it is not watched for the stop, so its DRIVE source does not matter; it
+    // takes its actual position (0) when Z's stop is detected.
+    let mut m = machine(&sets);
+    m.add_fixed_stop("Z", 150.0).unwrap();
+    let r = run(
+        &mut m,
+        "N05 #MEAS [AXNR=3 SIGNAL=FIXED_STOP]\nN10 G100 X0 Z200 F600\nN20 M30\n",
+    );
+    completed(&r);
+    close(
+        "Z at the wall",
+        r.measurements[Z].result.unwrap().acs,
+        150.0,
+        LATCH_TOL,
+    );
+    close(
+        "X where it stood",
+        r.measurements[X].result.unwrap().acs,
+        0.0,
+        LATCH_TOL,
+    );
+
+    // A #MEAS override to another source is refused the same way and says where it came from.
+    let mut m = machine(&[&sets[..], &["Z.kenngr.measure.signal=FIXED_STOP"]].concat());
+    let r = run(
+        &mut m,
+        "N05 #MEAS [AXNR=3 SIGNAL=PLC]\nN10 G100 Z200 F600\nN20 M30\n",
+    );
+    let e = aborted_with(&r, 900040, 10);
+    assert!(e.text.contains("with PLC (#MEAS SIGNAL)"), "{e}");
+}
+
+#[test]
+fn type_7_without_a_criterion_names_axis_and_parameters_in_words() {
+    // Defaults: P-AXIS-00774 = 0 (lag criterion off), P-AXIS-00778 < 0 → P-AXIS-00773 < 0
+    // (position window off): Z has no fixed-stop criterion (seed 004 §8.2.2).
+    let mut m = machine(&["P-CHAN-00057=7", "Z.kenngr.measure.signal=FIXED_STOP"]);
+    let r = run(&mut m, "N10 G100 Z50 F600\nN20 M30\n");
+    let e = aborted_with(&r, 900040, 10);
+    for w in ["axis Z", "P-AXIS-00774", "P-AXIS-00778"] {
+        assert!(e.text.contains(w), "{w:?} missing: {e}");
+    }
+    assert!(
+        !e.text.contains("NoCriterion") && !e.text.contains('{'),
+        "words, not debug output: {e}"
+    );
+    assert_eq!(e.axis.as_deref(), Some("Z"));
+    assert_eq!(command(&m, Z), 0.0, "nothing moved");
 }
 
 #[test]
@@ -709,6 +941,7 @@ fn independent_axis_type_2_uses_p_axis_00215_and_needs_the_signal() {
 fn independent_axis_type_7_latches_the_wall() {
     let mut m = machine(&[
         "P-CHAN-00057=7",
+        "X.kenngr.measure.signal=FIXED_STOP",
         "X.P-AXIS-00774=10000",
         "X.P-AXIS-00775=20000",
     ]);

@@ -63,9 +63,9 @@ fn feed() -> impl Strategy<Value = f64> {
 
 fn block() -> impl Strategy<Value = Block> {
     prop_oneof![
-        targets().prop_map(Block::Rapid),
-        (targets(), feed()).prop_map(|(t, f)| Block::Linear(t, f)),
-        (
+        3 => targets().prop_map(Block::Rapid),
+        3 => (targets(), feed()).prop_map(|(t, f)| Block::Linear(t, f)),
+        4 => (
             prop::sample::select(vec![1u8, 2, 3, 4, 7]),
             targets(),
             feed()
@@ -76,7 +76,7 @@ fn block() -> impl Strategy<Value = Block> {
                 }
                 Block::Measure(m, t, f)
             }),
-        (
+        4 => (
             0usize..3,
             target(),
             feed(),
@@ -92,7 +92,7 @@ fn block() -> impl Strategy<Value = Block> {
                 indp_feed: fi,
                 measure,
             }),
-        (0usize..3).prop_map(Block::BeyondLimit),
+        1 => (0usize..3).prop_map(Block::BeyondLimit),
     ]
 }
 
@@ -117,6 +117,12 @@ fn program(blocks: &[Block]) -> String {
             Block::Linear(t, f) => line(&mut s, format!("G01 {} F{f}", words(t))),
             Block::Measure(m, t, f) => {
                 line(&mut s, format!("#MEAS MODE [{m}]"));
+                if *m == 7 {
+                    // Type 7 measures with the fixed-stop detection (P-AXIS-00516).
+                    for (a, _) in t {
+                        line(&mut s, format!("#MEAS [AXNR={} SIGNAL=FIXED_STOP]", a + 1));
+                    }
+                }
                 line(&mut s, format!("G100 {} F{f}", words(t)));
                 line(&mut s, "#MEAS MODE [1]".into());
             }
@@ -260,7 +266,15 @@ fn check(case: &Case, link: &str) -> Result<(), String> {
         }
         let text = program(blocks);
         let p = parse(&text).map_err(|e| format!("{e}\n{text}"))?;
-        m.run_program(&p, &mut |_| {});
+        let r = m.run_program(&p, &mut |_| {});
+        if std::env::var("PROP_DEBUG").is_ok() {
+            eprintln!(
+                "{link}: {:?} {:?} cycles {}",
+                r.status,
+                r.message_ids(),
+                r.cycles
+            );
+        }
         texts.push(text);
     }
     let t = m.trace().unwrap();
@@ -307,7 +321,7 @@ fn check(case: &Case, link: &str) -> Result<(), String> {
 
 proptest! {
     #![proptest_config(ProptestConfig {
-        cases: 24,
+        cases: 32,
         max_shrink_iters: 200,
         .. ProptestConfig::default()
     })]

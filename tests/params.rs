@@ -921,6 +921,47 @@ fn set_errors() {
     assert_eq!(m, MachineConfig::default_machine());
 }
 
+#[test]
+fn set_cross_checks_run_after_all_sets_in_any_order() {
+    // Seed 001 §4.3: P-AXIS-00177 < P-AXIS-00178. Moving X's range from the default ±10000 mm
+    // to [12000, 15000] mm needs both: either assignment alone leaves neg ≥ pos.
+    let neg = "X.P-AXIS-00177=120000000";
+    let pos = "X.P-AXIS-00178=150000000";
+    let mut a = MachineConfig::default_machine();
+    a.apply_sets(&[neg, pos]).unwrap();
+    let mut b = MachineConfig::default_machine();
+    b.apply_sets(&[pos, neg]).unwrap();
+    for m in [&a, &b] {
+        let x = &m.axis("X").unwrap().params;
+        assert_eq!(
+            (x.int(id::SWE_NEG), x.int(id::SWE_POS)),
+            (120_000_000, 150_000_000)
+        );
+    }
+    assert_eq!(a, b, "the same machine in either order");
+    // Seed 004 §8.2.2: 1 ≤ vb_messen ≤ P-AXIS-00212; raising both, in either order.
+    let vb = "Z.P-AXIS-00215=900000";
+    let vmax = "Z.P-AXIS-00212=1000000";
+    for sets in [[vb, vmax], [vmax, vb]] {
+        let mut m = MachineConfig::default_machine();
+        m.apply_sets(&sets).unwrap();
+        assert_eq!(m.axis("Z").unwrap().params.int(id::VB_MESSEN), 900_000);
+    }
+    // A result that breaks the rule is refused in either order with the same message, naming
+    // both parameters, and changes nothing.
+    let bad = "X.P-AXIS-00178=110000000";
+    let expected = "--set (axis X): P-AXIS-00177 kenngr.swe_neg = 120000000 must be < P-AXIS-00178 kenngr.swe_pos = 110000000";
+    for sets in [[neg, bad], [bad, neg]] {
+        let mut m = MachineConfig::default_machine();
+        assert_eq!(err_text(m.apply_sets(&sets)), expected, "{sets:?}");
+        assert_eq!(m, MachineConfig::default_machine(), "{sets:?}");
+    }
+    // An assignment outside its own data range is still refused where it stands.
+    let mut m = MachineConfig::default_machine();
+    assert!(err_text(m.apply_sets(&[neg, "X.P-AXIS-00179=-5", pos])).contains("P-AXIS-00179"));
+    assert_eq!(m, MachineConfig::default_machine());
+}
+
 // ---------------------------------------------------------------------------------------------
 // Generated documentation
 // ---------------------------------------------------------------------------------------------

@@ -59,9 +59,11 @@ proptest! {
         let mut m = Machine::new(&cfg).unwrap();
         m.max_cycles = 50_000;
         let r = m.run_program(&prog, &mut |_| {});
-        // Ended one way or the other; an aborted run carries an error.
+        // Ended one way or the other; an aborted run carries exactly one error: the block that
+        // aborts has one cause (an arc error is not followed by a "program aborted").
         if r.status == RunStatus::Aborted {
-            prop_assert!(r.messages().iter().any(|x| x.is_error()), "{src}\n{:?}", r.message_ids());
+            let errors = r.messages().iter().filter(|x| x.is_error()).count();
+            prop_assert_eq!(errors, 1, "{}\n{:?}", src, r.message_ids());
         }
         for a in m.channel().axes() {
             prop_assert!(a.command().is_finite() && a.actual().is_finite());

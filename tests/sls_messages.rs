@@ -316,6 +316,69 @@ fn pcs_limits_objects_with_p_chan_00489() {
 }
 
 #[test]
+fn pcs_limits_with_an_oblique_cs_follow_the_pcs_axis_to_the_first_acs_limit() {
+    // X, Y ±200 mm; G99 Y150. #CS ON[0,0,0,0,0,30] (M2: ACS = R_z(30°)·PCS) at PCS (0, 0): PCS X
+    // runs along (cos 30°, sin 30°) = (√3/2, 1/2) in the ACS. Going +: ACS X reaches 200 after
+    // 200/(√3/2) = 400/√3 ≈ 230.94, ACS Y reaches 150 after 150/(1/2) = 300: the limit is 400/√3.
+    // Going −: ACS X −200 after 400/√3, ACS Y −200 after 400: −400/√3.
+    // PCS Y runs along (−1/2, √3/2): + reaches ACS Y 150 after 150/(√3/2) = 300/√3 (ACS X −200
+    // only after 400); − reaches ACS Y −200 after 400/√3 (ACS X 200 after 400).
+    let (r, m) = run(
+        "N10 G99 Y150\nN20 #CS ON[0,0,0,0,0,30]\nN30 G01 X0 Y0 F1000\nN40 M30\n",
+        &["P-CHAN-00489=1"],
+    );
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    let s3 = 3f64.sqrt();
+    let close = |what: &str, got: f64, expected: f64| {
+        assert!(
+            (got - expected).abs() < 1e-9,
+            "{what}: {got}, expected {expected}"
+        );
+    };
+    let px = m.channel().pcs_limits(0).unwrap();
+    close("X +", px.positive, 400.0 / s3);
+    close("X −", px.negative, -400.0 / s3);
+    close("X to +", px.distance_positive, 400.0 / s3);
+    close("X to −", px.distance_negative, 400.0 / s3);
+    let py = m.channel().pcs_limits(1).unwrap();
+    close("Y +", py.positive, 300.0 / s3);
+    close("Y −", py.negative, -400.0 / s3);
+    // The CNC objects carry the same in 0.1 µm (seed 001 §4.5, index group 0x121301).
+    let obj = |offset| m.channel().read_cnc_object(1, 0x121301, offset).unwrap();
+    close("0x10096", obj(0x10096), 300.0 / s3 * 1e4);
+    close("0x10099", obj(0x10099), 400.0 / s3 * 1e4);
+}
+
+#[test]
+fn pcs_limits_with_g92_and_a_rotating_cs() {
+    // G92 X50 (ISG reference-point offset, N7): w = PCS + (50, 0, 0); #CS ON[0,0,0,0,0,90]:
+    // ACS X = −w_y, ACS Y = w_x. PCS X runs along ACS Y: w_x = PCS X + 50 ∈ [−200, 200] →
+    // PCS X ∈ [−250, 150]. PCS Y runs along −ACS X: ACS X = −PCS Y ∈ [−200, 200] → PCS Y ∈
+    // [−200, 200]. At PCS (10, 20): distances X 140 / 260, Y 180 / 220.
+    let (r, m) = run(
+        "N10 G92 X50\nN20 #CS ON[0,0,0,0,0,90]\nN30 G01 X10 Y20 F1000\nN40 M30\n",
+        &["P-CHAN-00489=1"],
+    );
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    let close = |what: &str, got: f64, expected: f64| {
+        assert!(
+            (got - expected).abs() < 1e-9,
+            "{what}: {got}, expected {expected}"
+        );
+    };
+    let px = m.channel().pcs_limits(0).unwrap();
+    close("X +", px.positive, 150.0);
+    close("X −", px.negative, -250.0);
+    close("X to +", px.distance_positive, 140.0);
+    close("X to −", px.distance_negative, 260.0);
+    let py = m.channel().pcs_limits(1).unwrap();
+    close("Y +", py.positive, 200.0);
+    close("Y −", py.negative, -200.0);
+    close("Y to +", py.distance_positive, 180.0);
+    close("Y to −", py.distance_negative, 220.0);
+}
+
+#[test]
 fn limits_are_restored_at_reset_and_mode_change_but_kept_into_jog() {
     use fieldprobe::channel::OperationMode;
     let mut m = machine(&[]);

@@ -27,9 +27,10 @@ mod prep;
 pub mod profile;
 
 use crate::axis::Axis;
+use crate::core::frames::Frames;
 use crate::core::measure::{AxisMeasConfig, ChannelMeasConfig, MeasurementOutcome};
 use crate::core::monitor::sls::{AxisLimitConfig, PcsLimits, SoftLimits, Violation};
-use crate::core::path::Segment;
+use crate::core::path::{Segment, MAX_AXES};
 
 use crate::messages::{BlockRef, CncMessage};
 use crate::units::Nanos;
@@ -265,8 +266,9 @@ pub struct Channel {
     mode: Mode,
     messages: Vec<CncMessage>,
     block: Option<BlockRef>,
-    /// PCS → ACS offsets (`acs = pcs + offset`), maintained by the executor (G92).
-    pcs_offset: Vec<f64>,
+    /// The executor's frames (zero shifts, MEIN, tool length, `#CS`), for the PCS limit display
+    /// (P-CHAN-00489).
+    frames: Frames,
     /// Command velocities of the last cycle (mm/s).
     velocity: Vec<f64>,
     /// Scratch buffers (no per-cycle allocation).
@@ -322,8 +324,10 @@ impl Channel {
             sls.set_referenced(i, a.is_referenced());
         }
         let n = axes.len();
-        let names = axes.iter().map(|a| a.name().to_string()).collect();
+        let names: Vec<String> = axes.iter().map(|a| a.name().to_string()).collect();
+        let frames = initial_frames(&names);
         Ok(Channel {
+            frames,
             areas: areas::ChannelAreas::new(names),
             cfg,
             axes,
@@ -331,7 +335,6 @@ impl Channel {
             mode: Mode::Enabling { cycles: 0 },
             messages: Vec::new(),
             block: None,
-            pcs_offset: vec![0.0; n],
             velocity: vec![0.0; n],
             next: vec![0.0; n],
             violations: Vec::new(),
@@ -429,27 +432,60 @@ impl Channel {
         self.axes.iter().map(Axis::actual).collect()
     }
 
-    /// Set the PCS → ACS offset of axis `i` (`acs = pcs + offset`; G92 / G54).
-    pub fn set_pcs_offset(&mut self, i: usize, offset: f64) {
-        if let Some(o) = self.pcs_offset.get_mut(i) {
-            *o = offset;
+    /// Tell the channel the executor's frames (G92, zero offset, MEIN, tool length, `#CS`) for
+    /// the PCS limit display (P-CHAN-00489). Frames for another number of axes are ignored.
+    pub fn set_frames(&mut self, frames: &Frames) {
+        if frames.axes() == self.axes.len() {
+            self.frames.clone_from(frames);
         }
     }
 
-    /// PCS → ACS offset of axis `i`.
+    /// The frames last set by [`Channel::set_frames`] (all offsets 0, no `#CS` after program
+    /// start).
+    pub fn frames(&self) -> &Frames {
+        &self.frames
+    }
+
+    /// PCS → `w` offset of axis `i` (zero shifts + MEIN + tool length; without `#CS`,
+    /// `acs = pcs + offset`).
     pub fn pcs_offset(&self, i: usize) -> f64 {
-        self.pcs_offset.get(i).copied().unwrap_or(0.0)
+        self.frames.pcs_offset(i)
     }
 
     /// The four PCS CNC objects of seed 001 §4.5 for axis `i`; `None` unless P-CHAN-00489 is
-    /// set and SLS monitoring is active for the axis.
+    /// set and an active software limit switch bounds the axis's PCS motion.
+    ///
+    /// Seed 001 §2.1 transforms the active ACS limits into the PCS "considering all offsets …
+    /// and Cartesian transformations (#CS)". With a rotating `#CS` a PCS axis may run along
+    /// another ACS axis, or obliquely across several. The rule (interpretation S15): from the
+    /// current PCS command position, move along PCS axis `i` alone; its PCS limits are where
+    /// that line first reaches an active ACS limit of any axis, in either direction; the
+    /// distances are the lengths of the two pieces. Without rotation this is the active limit of
+    /// axis `i` minus its offsets; with a 90° rotation it is the limit of the ACS axis that PCS
+    /// axis `i` runs along.
     pub fn pcs_limits(&self, i: usize) -> Option<PcsLimits> {
-        if !self.cfg.display_pcs_limits {
+        let n = self.axes.len();
+        if !self.cfg.display_pcs_limits || i >= n || n > MAX_AXES {
             return None;
         }
-        let offset = self.pcs_offset(i);
-        let pcs = self.axes.get(i)?.command() - offset;
-        self.sls.pcs_limits(i, offset, pcs)
+        let mut acs = [0.0; MAX_AXES];
+        for (p, a) in acs.iter_mut().zip(&self.axes) {
+            *p = a.command();
+        }
+        // Empty frames (a channel they cannot describe) convert nothing: PCS = ACS.
+        let mut pcs = acs;
+        self.frames.acs_to_pcs(&acs[..n], &mut pcs[..n]);
+        let mut unit = [0.0; MAX_AXES];
+        unit[i] = 1.0;
+        let mut dir = unit;
+        self.frames.dir_to_acs(&unit[..n], &mut dir[..n]);
+        let (s_min, s_max) = self.sls.range_along(&acs[..n], &dir[..n])?;
+        Some(PcsLimits {
+            positive: pcs[i] + s_max,
+            negative: pcs[i] + s_min,
+            distance_positive: s_max,
+            distance_negative: -s_min,
+        })
     }
 
     /// Read one of the four PCS-limit CNC objects of seed 001 §4.5 (`REAL64`, unit 0.1 µm or
@@ -501,7 +537,8 @@ impl Channel {
     /// monitored at the next program start").
     pub fn program_start(&mut self) {
         self.sls.reset();
-        self.pcs_offset.iter_mut().for_each(|o| *o = 0.0);
+        let names: Vec<String> = self.axes.iter().map(|a| a.name().to_string()).collect();
+        self.frames = initial_frames(&names);
         self.velocity.iter_mut().for_each(|v| *v = 0.0);
         self.mode = Mode::Enabling { cycles: 0 };
         for a in &mut self.axes {
@@ -546,6 +583,14 @@ impl Channel {
         }
     }
 
+    /// Abort the program for an error that is already queued (one cause, one error): the
+    /// channel stops as after [`Channel::report`] of that error, without a message of its own.
+    pub fn abort_reported(&mut self) {
+        if !matches!(self.mode, Mode::Stopping { .. } | Mode::Aborted) {
+            self.begin_stop(ChannelState::Aborted);
+        }
+    }
+
     /// A drive's emergency message (EMCY / CoE emergency): warning 900015 naming the axis and
     /// the code in words. Code 0x0000 ("error reset or no error") is not reported.
     pub fn drive_emergency(&mut self, axis: usize, code: u16, text: &str) {
@@ -571,3 +616,11 @@ impl Channel {
 
 /// Permitted difference between start and end radius of a G02 / G03 (mm).
 pub const ARC_RADIUS_TOLERANCE: f64 = 1e-3;
+
+/// The frames of a program start: no offsets, no `#CS`, main axes X, Y, Z by name (as the
+/// executor builds them). A channel the frames cannot describe gets empty frames, which leave
+/// the PCS limit display without offsets.
+fn initial_frames(names: &[String]) -> Frames {
+    let main = ["X", "Y", "Z"].map(|m| names.iter().position(|n| n.eq_ignore_ascii_case(m)));
+    Frames::new(names.len(), main).unwrap_or_else(|_| Frames::empty())
+}

@@ -30,6 +30,7 @@ impl Channel {
                 ids::NC_EVALUATION,
                 "motion target is not a finite position for every axis",
             ));
+            self.mode = Mode::Aborted;
             return Prepared::Rejected;
         }
         let start = self.command_positions();
@@ -90,7 +91,10 @@ impl Channel {
         let segment = match segment {
             Ok(s) => s,
             Err(e) => {
+                // The block is not executed and the program aborts here; the error is the one
+                // message for it (no further "program aborted").
                 self.push(CncMessage::error(ids::NC_ARC_GEOMETRY, e.to_string()));
+                self.mode = Mode::Aborted;
                 return Prepared::Rejected;
             }
         };
@@ -242,7 +246,8 @@ impl Channel {
             .map(|(a, b)| (b - a) / len)
             .collect();
         let n = start.len();
-        // Overtravel: as far as every moved axis permits (P-AXIS-00467 is per axis).
+        // Overtravel: as far as every moved axis permits (P-AXIS-00467 is per axis; in type 2
+        // the old P-AXIS-00114 when P-AXIS-00467 is not given).
         let mut ext = if mreq.mtype == MeasType::Type3 {
             0.0
         } else {
@@ -250,7 +255,12 @@ impl Channel {
         };
         for (d, c) in dir.iter().zip(&self.cfg.axes) {
             if d.abs() > 1e-12 {
-                ext = ext.min(c.meas.overtravel / d.abs());
+                let overtravel = if mreq.mtype == MeasType::Type2 {
+                    c.meas.overtravel_type2
+                } else {
+                    c.meas.overtravel
+                };
+                ext = ext.min(overtravel / d.abs());
             }
         }
         if !ext.is_finite() {

@@ -22,16 +22,16 @@
 //! Areas of other planes (e.g. additional axes X2/Y2 when plotting X,Y) are not drawn; a note on
 //! stderr says so.
 //!
-//! SVG text is real `<text>` (the viewer's sans-serif font). The PNG (plotters bitmap backend)
-//! needs no font at all: plotters is built without its `ttf` / `ab_glyph` features (those need
-//! system fonts or a bundled font), so labels and tick numbers of the PNG are drawn with a small
-//! built-in 5×7 pixel font, upper case. It works on a machine without any font installed.
+//! SVG text is real `<text>` (the viewer's sans-serif font); the PNG draws its labels and tick
+//! numbers with the built-in pixel font of [`super::plot`], so it works on a machine without any
+//! font installed.
 //!
 //! Messages as `fieldprobe run`: `#MSG` lines on stdout, `warning|error <ID>: <text> (N<block>)`
 //! on stderr. Exit code 0 program ended, 1 aborted by a CNC error (the picture is still
 //! written), 2 bad input (unreadable file, parse error as `file:line:col: …`, unknown `--out`
 //! extension).
 
+use super::plot::{frame_with_ticks, label, text_width, write_picture, Format, Labels, Picture};
 use super::{load_machine, load_program, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::channel::areas::AreaRefusal;
@@ -86,29 +86,14 @@ pub fn run(a: AreasArgs) -> anyhow::Result<i32> {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Format {
-    Svg,
-    Png,
-}
-
 /// Picture size in pixels.
 const SIZE: (u32, u32) = (1000, 800);
 
 fn plot(a: PlotArgs) -> anyhow::Result<i32> {
-    let ext = a
-        .out
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let format = match ext.as_deref() {
-        Some("svg") => Format::Svg,
-        Some("png") => Format::Png,
-        _ => {
-            eprintln!(
-                "fieldprobe: --out {}: unknown picture format, allowed extensions: .svg, .png",
-                a.out.display()
-            );
+    let format = match Format::of(&a.out) {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("fieldprobe: --out {e}");
             return Ok(EXIT_BAD_INPUT);
         }
     };
@@ -150,20 +135,8 @@ fn plot(a: PlotArgs) -> anyhow::Result<i32> {
     });
     let plane = given_plane.unwrap_or_else(|| default_plane(&machine, &names));
     let scene = Scene::collect(&machine, plane, &names);
-    match format {
-        Format::Svg => {
-            let root = SVGBackend::new(&a.out, SIZE).into_drawing_area();
-            draw(&root, &scene, Labels::Font)?;
-            root.present()
-                .with_context(|| format!("--out {}", a.out.display()))?;
-        }
-        Format::Png => {
-            let root = BitMapBackend::new(&a.out, SIZE).into_drawing_area();
-            draw(&root, &scene, Labels::Pixel)?;
-            root.present()
-                .with_context(|| format!("--out {}", a.out.display()))?;
-        }
-    }
+    write_picture(&scene, &a.out, format, SIZE)
+        .with_context(|| format!("--out {}", a.out.display()))?;
     Ok(match report.status {
         RunStatus::Completed => EXIT_OK,
         RunStatus::Aborted => EXIT_CNC_ERROR,
@@ -393,120 +366,6 @@ impl Scene {
     }
 }
 
-/// How text is drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Labels {
-    /// Through plotters' font (SVG `<text>`).
-    Font,
-    /// The built-in pixel font (bitmap output without a font engine).
-    Pixel,
-}
-
-/// Text with its top-left corner at pixel `pos`; `size` is the font height in pixels.
-fn label<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    mode: Labels,
-    pos: (i32, i32),
-    text: &str,
-    size: u32,
-    color: RGBColor,
-) -> anyhow::Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    match mode {
-        Labels::Font => {
-            let style = ("sans-serif", size).into_font().color(&color);
-            root.draw(&Text::new(text.to_string(), pos, style))?;
-        }
-        Labels::Pixel => {
-            // 5×7 glyphs and one column of spacing, scaled by a whole factor to about `size`.
-            let s = (size as i32 / 7).max(1);
-            let mut x = pos.0;
-            for c in text.chars() {
-                let rows = glyph(c.to_ascii_uppercase());
-                for (r, bits) in rows.iter().enumerate() {
-                    for col in 0..5 {
-                        if bits & (0x10 >> col) != 0 {
-                            let px = x + col * s;
-                            let py = pos.1 + r as i32 * s;
-                            root.draw(&Rectangle::new(
-                                [(px, py), (px + s, py + s)],
-                                color.filled(),
-                            ))?;
-                        }
-                    }
-                }
-                x += 6 * s;
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Width of `text` in pixels (estimate for the font, exact for the pixel font).
-fn text_width(mode: Labels, text: &str, size: u32) -> i32 {
-    let n = text.chars().count() as i32;
-    match mode {
-        Labels::Font => (f64::from(size) * 0.55 * f64::from(n)) as i32,
-        Labels::Pixel => 6 * (size as i32 / 7).max(1) * n,
-    }
-}
-
-/// 5×7 pixel font: rows top to bottom, bit 4 = left column.
-fn glyph(c: char) -> [u8; 7] {
-    match c {
-        '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
-        '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        '2' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F],
-        '3' => [0x1F, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0E],
-        '4' => [0x02, 0x06, 0x0A, 0x12, 0x1F, 0x02, 0x02],
-        '5' => [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E],
-        '6' => [0x06, 0x08, 0x10, 0x1E, 0x11, 0x11, 0x0E],
-        '7' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
-        '8' => [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E],
-        '9' => [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C],
-        'A' => [0x0E, 0x11, 0x11, 0x11, 0x1F, 0x11, 0x11],
-        'B' => [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E],
-        'C' => [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E],
-        'D' => [0x1C, 0x12, 0x11, 0x11, 0x11, 0x12, 0x1C],
-        'E' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F],
-        'F' => [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x10],
-        'G' => [0x0E, 0x11, 0x10, 0x17, 0x11, 0x11, 0x0F],
-        'H' => [0x11, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11],
-        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
-        'J' => [0x07, 0x02, 0x02, 0x02, 0x02, 0x12, 0x0C],
-        'K' => [0x11, 0x12, 0x14, 0x18, 0x14, 0x12, 0x11],
-        'L' => [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F],
-        'M' => [0x11, 0x1B, 0x15, 0x15, 0x11, 0x11, 0x11],
-        'N' => [0x11, 0x11, 0x19, 0x15, 0x13, 0x11, 0x11],
-        'O' => [0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
-        'P' => [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10],
-        'Q' => [0x0E, 0x11, 0x11, 0x11, 0x15, 0x12, 0x0D],
-        'R' => [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11],
-        'S' => [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E],
-        'T' => [0x1F, 0x04, 0x04, 0x04, 0x04, 0x04, 0x04],
-        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
-        'V' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04],
-        'W' => [0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A],
-        'X' => [0x11, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x11],
-        'Y' => [0x11, 0x11, 0x11, 0x0A, 0x04, 0x04, 0x04],
-        'Z' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x10, 0x1F],
-        ' ' => [0; 7],
-        ':' => [0x00, 0x0C, 0x0C, 0x00, 0x0C, 0x0C, 0x00],
-        '-' | '−' => [0x00, 0x00, 0x00, 0x1F, 0x00, 0x00, 0x00],
-        '.' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x0C, 0x0C],
-        ',' => [0x00, 0x00, 0x00, 0x00, 0x0C, 0x04, 0x08],
-        '(' => [0x02, 0x04, 0x08, 0x08, 0x08, 0x04, 0x02],
-        ')' => [0x08, 0x04, 0x02, 0x02, 0x02, 0x04, 0x08],
-        '[' => [0x0E, 0x08, 0x08, 0x08, 0x08, 0x08, 0x0E],
-        ']' => [0x0E, 0x02, 0x02, 0x02, 0x02, 0x02, 0x0E],
-        '=' => [0x00, 0x00, 0x1F, 0x00, 0x1F, 0x00, 0x00],
-        '/' => [0x00, 0x01, 0x02, 0x04, 0x08, 0x10, 0x00],
-        _ => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x00, 0x04],
-    }
-}
-
 /// 45° hatching inside the closed polygon `poly` (even-odd rule): segments on the lines
 /// `x + y = c`, `c` every `step`.
 fn hatch(poly: &[(f64, f64)], step: f64) -> Vec<[(f64, f64); 2]> {
@@ -546,6 +405,19 @@ const PROT_RED: RGBColor = RGBColor(210, 30, 30);
 const PATH_BLUE: RGBColor = RGBColor(20, 70, 220);
 const REFUSED_ORANGE: RGBColor = RGBColor(240, 130, 0);
 
+impl Picture for Scene {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        mode: Labels,
+    ) -> anyhow::Result<()>
+    where
+        DB::ErrorType: 'static,
+    {
+        draw(root, self, mode)
+    }
+}
+
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     scene: &Scene,
@@ -572,36 +444,8 @@ where
     // Frame and tick labels (drawn here so that the PNG needs no font engine).
     let coord = chart.as_coord_spec().clone();
     let px = |x: f64, y: f64| coord.translate(&(x, y));
-    let (x0, y0) = px(xr.start, yr.start);
-    let (x1, y1) = px(xr.end, yr.end);
-    root.draw(&Rectangle::new([(x0, y1), (x1, y0)], BLACK.stroke_width(1)))?;
-    let tick = 13;
-    for x in plotters::coord::types::RangedCoordf64::from(xr.clone()).key_points(10) {
-        let t = tick_text(x);
-        let (cx, _) = px(x, yr.start);
-        root.draw(&PathElement::new([(cx, y0), (cx, y0 + 5)], BLACK))?;
-        label(
-            root,
-            mode,
-            (cx - text_width(mode, &t, tick) / 2, y0 + 8),
-            &t,
-            tick,
-            BLACK,
-        )?;
-    }
-    for y in plotters::coord::types::RangedCoordf64::from(yr.clone()).key_points(10) {
-        let t = tick_text(y);
-        let (_, cy) = px(xr.start, y);
-        root.draw(&PathElement::new([(x0 - 5, cy), (x0, cy)], BLACK))?;
-        label(
-            root,
-            mode,
-            (x0 - 8 - text_width(mode, &t, tick), cy - 7),
-            &t,
-            tick,
-            BLACK,
-        )?;
-    }
+    let f = frame_with_ticks(root, &coord, xr.clone(), yr.clone(), (10, 10), mode)?;
+    let (x0, y0, x1, y1) = (f.x0, f.y0, f.x1, f.y1);
     let xdesc = format!("{} [mm]", scene.axes[0]);
     let xdesc_at = (x1 - text_width(mode, &xdesc, 15), y0 + 28);
     label(root, mode, xdesc_at, &xdesc, 15, BLACK)?;
@@ -781,14 +625,4 @@ where
         label(root, mode, (lx + 34, y - 7), text, 14, BLACK)?;
     }
     Ok(())
-}
-
-/// Tick label: integers without decimals, else up to 3 decimals.
-fn tick_text(v: f64) -> String {
-    if (v - v.round()).abs() < 1e-9 {
-        format!("{}", v.round() as i64)
-    } else {
-        let s = format!("{v:.3}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    }
 }

@@ -5,7 +5,9 @@
 //!                           [--probe-at AXIS=POS]... [--fixed-stop-at AXIS=POS]... [--json]
 //! ```
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
-//! 1 aborted by a CNC error, 2 bad input.
+//! 1 aborted by a CNC error, 2 bad input. Every `--set` is checked against its own data range
+//! where it stands; the checks between parameters (P-AXIS-00177 < P-AXIS-00178, …) run once
+//! after all of them, so their order does not matter.
 //!
 //! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `idn`,
 //! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (seed 000 control areas,
@@ -17,6 +19,7 @@ mod check;
 mod esi;
 mod jog;
 mod params;
+mod plot;
 mod run;
 mod sim;
 mod trace;
@@ -129,9 +132,8 @@ fn load_machine(
         Some(p) => fieldprobe::params::MachineConfig::load(p)?,
         None => fieldprobe::params::MachineConfig::default_machine(),
     };
-    for s in sets {
-        cfg.apply_set(s)?;
-    }
+    // All `--set`s first, then the cross checks: their order does not matter.
+    cfg.apply_sets(sets)?;
     Ok(cfg)
 }
 

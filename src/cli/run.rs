@@ -29,9 +29,9 @@ pub struct RunArgs {
     /// Print one JSON document on stdout instead of the `#MSG` lines.
     #[arg(long)]
     json: bool,
-    /// Draw the run into an SVG file: position and velocity per axis over time, probe edges and
-    /// latched values marked.
-    #[arg(long, value_name = "FILE.svg")]
+    /// Draw the run into an SVG or PNG file (by the extension): position and velocity per axis
+    /// over time, probe edges and the latched values of the axes that measured marked.
+    #[arg(long, value_name = "FILE.svg|FILE.png")]
     trace: Option<PathBuf>,
 }
 
@@ -50,6 +50,15 @@ fn parse_axis_pos(opt: &str, s: &str) -> anyhow::Result<(String, f64)> {
 
 /// Run the command; returns the exit code.
 pub fn run(a: RunArgs) -> anyhow::Result<i32> {
+    // A picture format we cannot write is bad input, refused before anything runs.
+    let trace_format = match a.trace.as_deref().map(super::plot::Format::of) {
+        Some(Err(e)) => {
+            eprintln!("fieldprobe: --trace {e}");
+            return Ok(EXIT_BAD_INPUT);
+        }
+        Some(Ok(f)) => Some(f),
+        None => None,
+    };
     let file = a.program.display().to_string();
     let Some(program) = load_program(&a.program)? else {
         return Ok(EXIT_BAD_INPUT);
@@ -91,8 +100,9 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         RunEvent::Message(m) => eprintln!("{m}"),
         RunEvent::Output(_) => {}
     });
-    if let (Some(path), Some(tr)) = (&a.trace, machine.trace()) {
-        super::trace::write_svg(tr, path).with_context(|| format!("--trace {}", path.display()))?;
+    if let (Some(path), Some(format), Some(tr)) = (&a.trace, trace_format, machine.trace()) {
+        super::trace::write(tr, path, format)
+            .with_context(|| format!("--trace {}", path.display()))?;
     }
     if json {
         println!(

@@ -247,8 +247,34 @@ impl MachineConfig {
     /// `P-MANU-00014=1`, `X.P-AXIS-00178=2000000`, `Z.kenngr.measure.signal=PLC`,
     /// `cycle_time_us=500`, `X.referenced=false`, `X.drive=NAME`. Keys without an axis prefix go
     /// to the channel or manual list by the parameter's scope; axis parameters need the prefix.
-    /// The cross checks of the changed list are re-run; on error nothing changes.
+    /// The cross checks are re-run; on error nothing changes. Several assignments that only
+    /// together satisfy a cross check go through [`MachineConfig::apply_sets`].
     pub fn apply_set(&mut self, assignment: &str) -> Result<(), ParamError> {
+        self.apply_sets(&[assignment])
+    }
+
+    /// Apply every `--set` of a command line, then run the cross checks (e.g. P-AXIS-00177 <
+    /// P-AXIS-00178, P-AXIS-00215 ≤ P-AXIS-00212) once on the result, so that the order of the
+    /// assignments does not matter: `X.P-AXIS-00177=2500000 X.P-AXIS-00178=3000000` moves the
+    /// whole range of X in either order. Each value is still checked against its own data range
+    /// as it is applied. On error nothing changes.
+    pub fn apply_sets<S: AsRef<str>>(&mut self, assignments: &[S]) -> Result<(), ParamError> {
+        let mut changed = self.clone();
+        for a in assignments {
+            changed.assign(a.as_ref())?;
+        }
+        let origin = Origin::new("--set", 0);
+        changed.channel.check_cross(&origin)?;
+        changed.manual.check_cross(&origin)?;
+        for axis in &changed.axes {
+            axis.params.check_cross(&origin)?;
+        }
+        *self = changed;
+        Ok(())
+    }
+
+    /// One assignment of [`MachineConfig::apply_sets`], without the cross checks.
+    fn assign(&mut self, assignment: &str) -> Result<(), ParamError> {
         let origin = Origin::new("--set", 0);
         let Some((key, value)) = assignment
             .split_once('=')
@@ -293,11 +319,7 @@ impl MachineConfig {
                     });
                 }
             };
-            let mut changed = set.clone();
-            changed.set(key, value, &origin)?;
-            changed.check_cross(&origin)?;
-            *set = changed;
-            return Ok(());
+            return set.set(key, value, &origin).map(|_| ());
         }
         if let Some((prefix, _)) = key.split_once('.') {
             if looks_like_axis_prefix(prefix) {
@@ -672,13 +694,8 @@ impl AxisConfig {
                 };
                 Ok(())
             }
-            _ => {
-                let mut changed = self.params.clone();
-                changed.set(key, value, origin)?;
-                changed.check_cross(origin)?;
-                self.params = changed;
-                Ok(())
-            }
+            // Cross checks: by the caller, after all assignments (`apply_sets`).
+            _ => self.params.set(key, value, origin).map(|_| ()),
         }
     }
 }

@@ -591,8 +591,8 @@ registry_table! {
         "Probing signal edge (old, replaced by P-AXIS-00518)", "seed 004 §8.2.4";
     MESS_OFFSET = "P-AXIS-00114", "kenngr.mess_offset", Axis, Uns32, di(0), ri(0, U32),
         "0 ≤ mess_offset ≤ MAX(UNS32)", "T: 0.1µm, R: 0.0001°",
-        "Measurement travel offset for measurement type 2 (old, replaced by P-AXIS-00467)",
-        "ISG online parameter docs (not in seeds)";
+        "Measurement travel offset for measurement type 2 (old, replaced by P-AXIS-00467; used in type 2 when P-AXIS-00467 is not set)",
+        "seed 004 §8.2.2 (P-AXIS-00467 remarks); name and range: ISG online parameter docs";
     MESS_SIGNAL_ACHS_STEUER = "P-AXIS-00115", "kenngr.mess_signal_achs_steuer", Axis, Boolean,
         di(0), BOOL, "0/1", "----",
         "Measurement signal via axis-specific control bit mask (old)", "seed 004 §8.2.4";

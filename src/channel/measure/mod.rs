@@ -11,12 +11,13 @@
 //! braking ──(standstill)──► done
 //! ```
 //!
-//! Which axes must latch (seed 004 §4): in 2.5D every measurement axis the block moves; with
-//! `#CS` all three main axes. Braking uses the deceleration of the §2.1 table ("measurement
+//! Which axes take part (seed 004 §1): the measurement axes programmed in the block, with `#CS`
+//! the three main axes; no other axis's probe is armed. Which of them must latch (§4): in 2.5D
+//! every measurement axis the block moves; with `#CS` all three main axes. Braking uses the deceleration of the §2.1 table ("measurement
 //! signal active" column) for the non-linear slope parameter set our interpolator uses.
 
 use super::Channel;
-use crate::core::measure::fixed_stop::{FixedStopAxis, FixedStopDetector};
+use crate::core::measure::fixed_stop::{FixedStopAxis, FixedStopDetector, FixedStopError};
 use crate::core::measure::plc::{
     BlockGate, EvaluatorConfig, ExtLatchClient, ExtLatchConfig, SignalEvaluator, SourceEvaluator,
     TimestampConfig,
@@ -51,6 +52,11 @@ pub struct MeasureRequest {
     pub gcode: u32,
     /// `#CS` is active: the three main axes must all latch (seed 004 §4).
     pub cs_active: bool,
+    /// Per channel axis: the axis is programmed in the measuring block. Only these (and with
+    /// `#CS` the three main axes) take part: "The measuring function is initialised and
+    /// activated for the axes programmed in the measurement block" (seed 004 §1). A shorter
+    /// list reads the missing axes as not programmed.
+    pub programmed: Vec<bool>,
     /// Per-axis signal overrides from `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`.
     pub overrides: Vec<SignalOverride>,
 }
@@ -289,7 +295,8 @@ impl Channel {
         self.latch_log = on.then(Vec::new);
     }
 
-    /// Latched values recorded since the last call: (time, axis, ACS position).
+    /// Latched values recorded since the last call: (time of the latch, axis, ACS position).
+    /// Only latches that became measurement results are recorded, when the block publishes them.
     pub fn take_latch_log(&mut self) -> Vec<(Nanos, usize, f64)> {
         self.latch_log
             .as_mut()

@@ -62,11 +62,13 @@ impl Channel {
             }
             _ => {}
         }
-        // Which axes take part and which must latch (seed 004 §4).
+        // Which axes take part (seed 004 §1: "initialised and activated for the axes programmed
+        // in the measurement block") and which must latch (§4).
         let mut axes = Vec::new();
         for i in 0..n {
             let c = &self.cfg.axes[i].meas;
             let in_cs = req.cs_active && main.contains(&Some(i));
+            let programmed = req.programmed.get(i).copied().unwrap_or(false);
             // Gantry slaves move along but the master measures (seed 004 §7.3).
             let slave = self.is_coupled_slave(i);
             let required = (moved[i] || in_cs) && !slave;
@@ -81,14 +83,40 @@ impl Channel {
                 )
                 .on_axis(self.axes[i].name()));
             }
-            // An independent axis measures alone: the other axes' latches belong to their own
-            // runs.
-            if !c.enabled || (only_moved && !required) {
+            // Only programmed axes (and the #CS main axes) are armed: an axis the block does not
+            // name keeps its probe for other uses and its previous results. An independent axis
+            // measures alone: the other axes' latches belong to their own runs.
+            if !c.enabled || !(required || programmed) || (only_moved && !required) {
                 continue;
             }
             let ov = req.overrides.iter().rev().find(|o| o.axis == i);
             let mut signal = ov.and_then(|o| o.signal).unwrap_or(c.signal);
             if mtype == MeasType::Type7 {
+                // Seed 004 §7.3 "The following entries must be assigned in the axis parameter
+                // lists: P-AXIS-00516 … FIXED_STOP" (P-AXIS-00330: "All other measurement signal
+                // sources … must be deselected"): an axis watched for the stop that is set up
+                // for another source is refused before anything moves. The other axes of the
+                // run only take their actual position when the stop is detected.
+                if required && signal != SignalSource::FixedStop {
+                    let name = self.axes[i].name();
+                    return Err(CncMessage::error(
+                        ids::MEAS_CONFIG,
+                        format!(
+                            "measurement type 7 (moving to a fixed stop) needs P-AXIS-00516 \
+                             kenngr.measure.signal = FIXED_STOP on axis {name}, which measures \
+                             with {}{}; set FIXED_STOP in its axis parameters or select it with \
+                             #MEAS [AXNR={} SIGNAL=FIXED_STOP] (seed 004 §7.3)",
+                            signal.name(),
+                            if ov.and_then(|o| o.signal).is_some() {
+                                " (#MEAS SIGNAL)"
+                            } else {
+                                ""
+                            },
+                            i + 1
+                        ),
+                    )
+                    .on_axis(name));
+                }
                 signal = SignalSource::FixedStop;
             }
             let edge = ov.and_then(|o| o.edge).unwrap_or(c.edge);
@@ -165,13 +193,11 @@ impl Channel {
                 let params = match (c.fixed_stop, monitored) {
                     (Some(p), _) => p,
                     (None, false) => crate::core::measure::fixed_stop::FixedStopParams::inactive(),
+                    // `from_params` refuses only a cycle time of 0.
                     (None, true) => {
-                        return Err(CncMessage::error(
-                            ids::MEAS_CONFIG,
-                            format!(
-                                "axis {name}: fixed-stop parameters invalid (P-AXIS-00774 … 00778)"
-                            ),
-                        ))
+                        return Err(FixedStopError::ZeroCycle
+                            .cnc_message(ids::MEAS_CONFIG, &[name])
+                            .on_axis(name))
                     }
                 };
                 if monitored {
@@ -180,10 +206,8 @@ impl Channel {
                 fa.push(FixedStopAxis { params, monitored });
             }
             Some(FixedStopDetector::new(&fa, target_len).map_err(|e| {
-                e.message(self.axes[axes[0].axis].name())
-                    .unwrap_or_else(|| {
-                        CncMessage::error(ids::MEAS_CONFIG, format!("fixed stop: {e:?}"))
-                    })
+                let names: Vec<&str> = axes.iter().map(|a| self.axes[a.axis].name()).collect();
+                e.cnc_message(ids::MEAS_CONFIG, &names)
             })?)
         } else {
             None

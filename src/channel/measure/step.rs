@@ -162,9 +162,6 @@ impl Channel {
                             // to measured value", `finish_measurement`).
                             for m in &mut run.axes {
                                 let p = self.axes[m.axis].actual();
-                                if let Some(log) = self.latch_log.as_mut() {
-                                    log.push((now, m.axis, p));
-                                }
                                 m.latched = Some((p, now));
                             }
                             run.event_s = Some(s);
@@ -178,9 +175,6 @@ impl Channel {
                         let m = &mut run.axes[k];
                         if m.latched.is_none() {
                             m.latched = Some((pos, now));
-                            if let Some(log) = self.latch_log.as_mut() {
-                                log.push((now, axis, pos));
-                            }
                         }
                     }
                 }
@@ -265,9 +259,14 @@ impl Channel {
         if complete {
             for a in &run.axes {
                 involved[a.axis] = true;
-                if let Some((p, _)) = a.latched {
+                if let Some((p, t)) = a.latched {
                     latched[a.axis] = Some(p);
                     merf[a.axis] = a.before_target;
+                    // The trace marks the latches that became results: an axis whose latch
+                    // belongs to an incomplete signal did not measure.
+                    if let Some(log) = self.latch_log.as_mut() {
+                        log.push((t, a.axis, p));
+                    }
                 }
             }
         } else {

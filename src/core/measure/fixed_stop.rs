@@ -85,14 +85,16 @@ pub struct FixedStopParams {
     pub max_delta_window_origin: Origin,
 }
 
-/// Errors of fixed-stop parameterisation and detection start.
+/// Errors of fixed-stop parameterisation and detection start. `axis` is the index of the axis in
+/// the list given to [`FixedStopDetector::new`]; [`FixedStopError::cnc_message`] turns every
+/// variant into a message in words that names the axis and the parameters concerned.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
 pub enum FixedStopError {
     /// The NC cycle is zero (P-AXIS-00332 counts cycles).
-    #[error("NC cycle time must be > 0")]
+    #[error("the NC cycle time is 0, so the minimum time of fixed-stop detection (P-AXIS-00775 / P-AXIS-00332) cannot be evaluated")]
     ZeroCycle,
     /// Effective per mille > 1000 at the start of the measuring travel (ID 51026).
-    #[error("axis index {axis}: minimum distance per mille {value} > 1000 (P-AXIS-00777 / P-AXIS-00772)")]
+    #[error("axis {axis} of the measurement: minimum distance per mille {value} exceeds 1000 (P-AXIS-00777 / P-AXIS-00772)")]
     PerMilleTooLarge {
         /// Index of the axis in the detector's list.
         axis: usize,
@@ -100,28 +102,71 @@ pub enum FixedStopError {
         value: i64,
     },
     /// A monitored axis has neither the lag nor the velocity criterion.
-    #[error("axis index {axis}: no fixed-stop criterion parameterised (lag limit and position window both off)")]
+    #[error("axis {axis} of the measurement: no fixed-stop criterion parameterised (position lag limit P-AXIS-00774 and position window P-AXIS-00778 both off)")]
     NoCriterion {
-        /// Index of the axis.
+        /// Index of the axis in the detector's list.
         axis: usize,
     },
     /// No axis is monitored (e.g. only gantry slaves).
-    #[error("no monitored axis in the fixed-stop measurement")]
+    #[error("no axis of the fixed-stop measurement is monitored (only gantry slaves move)")]
     NoMonitoredAxis,
     /// The block length is negative or not finite.
-    #[error("invalid measuring block length {0}")]
+    #[error("the measuring block length {0} mm is not a finite distance ≥ 0")]
     InvalidBlockLength(f64),
 }
 
 impl FixedStopError {
     /// The CNC message: 51026 for [`FixedStopError::PerMilleTooLarge`]; `None` for errors the
-    /// seed gives no ID (the channel reports them under its own ID).
+    /// seed gives no ID (the channel reports them under its own ID, see
+    /// [`cnc_message`](Self::cnc_message)).
     pub fn message(&self, axis_name: &str) -> Option<CncMessage> {
         match *self {
             FixedStopError::PerMilleTooLarge { value, .. } => {
                 Some(per_mille_error(axis_name, value))
             }
             _ => None,
+        }
+    }
+
+    /// Every variant as a CNC error in words: 51026 (seed 004 §8.2.2) for a per mille above
+    /// 1000, `config_id` (the caller's ID for a measuring block that may not run) for the others.
+    /// `axis_names` are the names of the detector's axes in list order; the message names the
+    /// axis concerned (or, without one, every axis of the measurement) and the parameters.
+    pub fn cnc_message(&self, config_id: u32, axis_names: &[&str]) -> CncMessage {
+        let name = |i: usize| axis_names.get(i).copied().unwrap_or("?");
+        match *self {
+            FixedStopError::PerMilleTooLarge { axis, value } => per_mille_error(name(axis), value),
+            FixedStopError::NoCriterion { axis } => CncMessage::error(
+                config_id,
+                format!(
+                    "measuring travel to fixed stop: axis {} has no fixed-stop criterion: the \
+                     position lag limit (P-AXIS-00774, or P-AXIS-00769 / P-AXIS-00331 when it is \
+                     < 0) and the position window (P-AXIS-00778, or P-AXIS-00773 when it is < 0) \
+                     are both off; set P-AXIS-00774 > 0 or P-AXIS-00778 ≥ 0 (seed 004 §7.3)",
+                    name(axis)
+                ),
+            )
+            .on_axis(name(axis)),
+            FixedStopError::NoMonitoredAxis => CncMessage::error(
+                config_id,
+                format!(
+                    "measuring travel to fixed stop: none of the axes {} is monitored for the \
+                     stop (gantry slaves are not; the master axis must move, seed 004 §7.3)",
+                    axis_names.join(", ")
+                ),
+            ),
+            FixedStopError::InvalidBlockLength(len) => CncMessage::error(
+                config_id,
+                format!(
+                    "measuring travel to fixed stop: the measuring block length {len} mm is not a \
+                     finite distance ≥ 0"
+                ),
+            ),
+            FixedStopError::ZeroCycle => CncMessage::error(
+                config_id,
+                "measuring travel to fixed stop: the NC cycle time is 0, so the minimum time of \
+                 fixed-stop detection (P-AXIS-00775 µs, or P-AXIS-00332 cycles) cannot be evaluated",
+            ),
         }
     }
 }
@@ -132,8 +177,8 @@ pub fn per_mille_warning(axis_name: &str, value: i64) -> CncMessage {
     CncMessage::warning(
         PER_MILLE_WARNING_ID,
         format!(
-            "fixed stop detection: minimum distance per mille {value} exceeds 1000 \
-             (P-AXIS-00777 / P-AXIS-00772); value not corrected"
+            "fixed stop detection: axis {axis_name}: minimum distance per mille {value} exceeds \
+             1000 (P-AXIS-00777 / P-AXIS-00772); value not corrected"
         ),
     )
     .on_axis(axis_name)
@@ -145,8 +190,8 @@ pub fn per_mille_error(axis_name: &str, value: i64) -> CncMessage {
     CncMessage::error(
         PER_MILLE_ERROR_ID,
         format!(
-            "measuring travel to fixed stop: minimum distance per mille {value} exceeds 1000 \
-             (check P-AXIS-00777 and, if it is < 0, P-AXIS-00772)"
+            "measuring travel to fixed stop: axis {axis_name}: minimum distance per mille {value} \
+             exceeds 1000 (check P-AXIS-00777 and, if it is < 0, P-AXIS-00772)"
         ),
     )
     .on_axis(axis_name)

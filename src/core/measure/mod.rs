@@ -168,8 +168,12 @@ pub struct AxisMeasConfig {
     pub stroke: f64,
     /// P-AXIS-00215 `kenngr.vb_messen`: measuring feed of type 2.
     pub feed_type2: f64,
-    /// P-AXIS-00467 `kenngr.probing_offset`: permitted travel past the target.
+    /// P-AXIS-00467 `kenngr.probing_offset`: permitted travel past the target (types 1, 2, 4–7).
     pub overtravel: f64,
+    /// The permitted travel past the target in measurement type 2: P-AXIS-00467 when it is set,
+    /// else the old P-AXIS-00114 `kenngr.mess_offset`, which "only has an influence on
+    /// measurement travels with measurement type 2" (seed 004 §8.2.2, P-AXIS-00467 remarks).
+    pub overtravel_type2: f64,
     /// P-AXIS-00053 `a_feedh` (0 → P-AXIS-00004): feedhold deceleration.
     pub a_feedhold: f64,
     /// P-AXIS-00168 `getriebe[i].slep_max`: CNC position lag limit; 0 = off.
@@ -192,6 +196,7 @@ impl Default for AxisMeasConfig {
             stroke: 5.0,
             feed_type2: 16.666,
             overtravel: 0.0,
+            overtravel_type2: 0.0,
             a_feedhold: 1000.0,
             lag_limit: 10.0,
             sercos: false,

@@ -550,9 +550,33 @@ impl SoftLimits {
         (lo, hi)
     }
 
-    /// P-CHAN-00489: the active limits of axis `i` in the programming coordinate system, given
-    /// the PCS → ACS offset of the axis (`acs = pcs + offset`, G92 / G54) and the current PCS
-    /// position. `None` when monitoring is not active for the axis (no limit to display).
+    /// How far the point `acs` may move along the direction `dir` (ACS, one entry per axis; a
+    /// unit vector when `s` is to be a distance) before an active limit is reached: the interval
+    /// `(s_min, s_max)` of all `s` with `neg ≤ acs + s·dir ≤ pos` on every axis whose monitoring
+    /// is active and whose share of `dir` is not zero (|share| > 1e-12: the 6e-17 of cos 90° is
+    /// none). `None` when no active limit lies on the line. For P-CHAN-00489 with `#CS`, where a
+    /// PCS axis may run along another ACS axis or obliquely (seed 001 §2.1). `s_min > s_max`
+    /// when the point lies outside the range on an axis the line crosses.
+    pub fn range_along(&self, acs: &[f64], dir: &[f64]) -> Option<(f64, f64)> {
+        let mut range: Option<(f64, f64)> = None;
+        for ((a, &p), &d) in self.axes.iter().zip(acs).zip(dir) {
+            if d.abs() <= 1e-12 || !axis_active(a) {
+                continue;
+            }
+            let (s1, s2) = ((a.neg - p) / d, (a.pos - p) / d);
+            let (lo, hi) = (s1.min(s2), s1.max(s2));
+            range = Some(match range {
+                Some((l, h)) => (l.max(lo), h.min(hi)),
+                None => (lo, hi),
+            });
+        }
+        range
+    }
+
+    /// P-CHAN-00489 in 2.5D: the active limits of axis `i` in the programming coordinate system,
+    /// given the PCS → ACS offset of the axis (`acs = pcs + offset`, G92 / G54) and the current
+    /// PCS position. `None` when monitoring is not active for the axis (no limit to display).
+    /// With `#CS` the channel uses [`SoftLimits::range_along`] (`Channel::pcs_limits`).
     pub fn pcs_limits(&self, i: usize, offset: f64, pcs_position: f64) -> Option<PcsLimits> {
         let a = self.axes.get(i)?;
         if !axis_active(a) {

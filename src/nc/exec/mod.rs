@@ -623,9 +623,7 @@ impl Executor {
     /// are, so their PCS positions change. Also tells the channel the PCS offset for the PCS
     /// limit display (P-CHAN-00489).
     fn frames_changed(&mut self, ch: &mut Channel) {
-        for i in 0..self.prog.len() {
-            ch.set_pcs_offset(i, self.frames.pcs_offset(i));
-        }
+        ch.set_frames(&self.frames);
         self.resync_positions(ch);
     }
 

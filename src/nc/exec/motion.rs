@@ -3,6 +3,7 @@
 
 use super::{err, Executor, Fail, MotionMode, PendingMeasurement, Plane};
 use crate::channel::{Channel, MeasureRequest, MotionKind, MotionRequest, Prepared};
+use crate::core::measure::MeasType;
 use crate::core::path::Segment;
 use crate::messages::ids;
 use crate::nc::ast::{IndependentMotion, Span};
@@ -39,6 +40,12 @@ impl Executor {
         }
         let feed = match (self.modal.motion, meas_g) {
             (MotionMode::G0, None) => 0.0,
+            // Measurement type 2 travels with P-AXIS-00215 of its axis, not with F (seed 004 §3
+            // "Measurement feed is specified in the axis data list", §8.2.2 P-AXIS-00215): an F
+            // is neither needed nor used.
+            (_, Some(_)) if self.modal.meas_type == MeasType::Type2 => {
+                self.modal.feed.unwrap_or(0.0)
+            }
             _ => self.modal.feed.ok_or_else(|| {
                 err(
                     ids::NC_NO_FEED,
@@ -52,6 +59,7 @@ impl Executor {
                     mtype: self.modal.meas_type,
                     gcode: g,
                     cs_active: self.frames.cs().is_some(),
+                    programmed: programmed.clone(),
                     overrides: self.overrides.clone(),
                 };
                 (MotionKind::Linear, Some(m))
@@ -183,19 +191,29 @@ impl Executor {
         }
         let _ = block_meas;
         let pos = self.num(&motion.pos, span, ch)?;
-        let feed = match &motion.feed {
-            Some(f) => self.num(f, span, ch)?,
-            None => self
-                .modal
-                .feed
-                .ok_or_else(|| err(ids::NC_NO_FEED, format!("independent axis {name}: no FEED")))?,
+        // Type 2 travels with P-AXIS-00215, not with FEED / F (seed 004 §3, §8.2.2).
+        let type2 = meas && self.modal.meas_type == MeasType::Type2;
+        let feed = match (&motion.feed, self.modal.feed) {
+            (Some(f), _) => {
+                let feed = self.num(f, span, ch)?;
+                if feed.is_nan() || feed <= 0.0 {
+                    return Err(err(
+                        ids::NC_NO_FEED,
+                        format!("independent axis {name}: FEED{feed} must be > 0"),
+                    ));
+                }
+                feed
+            }
+            // The modal F was checked (> 0) where it was programmed.
+            (None, Some(f)) => f,
+            (None, None) if type2 => 0.0,
+            (None, None) => {
+                return Err(err(
+                    ids::NC_NO_FEED,
+                    format!("independent axis {name}: no FEED"),
+                ))
+            }
         };
-        if feed.is_nan() || feed <= 0.0 {
-            return Err(err(
-                ids::NC_NO_FEED,
-                format!("independent axis {name}: FEED{feed} must be > 0"),
-            ));
-        }
         let target_pcs = if absolute { pos } else { self.prog[i] + pos };
         let mut prog = self.prog.clone();
         prog[i] = target_pcs;
@@ -205,6 +223,7 @@ impl Executor {
             mtype: self.modal.meas_type,
             gcode: 100,
             cs_active: false,
+            programmed: (0..prog.len()).map(|k| k == i).collect(),
             overrides: self.overrides.clone(),
         });
         let start_pcs = self.prog.clone();
