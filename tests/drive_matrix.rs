@@ -193,6 +193,14 @@ fn the_sercos_gantry_fixed_stop_example_latches_the_wall_on_every_family_with_an
         if def.idn("S-0-0092").is_none() || def.idn("S-0-0159").is_none() {
             continue;
         }
+        if !def.model.feed_forward {
+            // A drive without feed-forward lags v / kv: X at this feed (1000 mm/min along the
+            // 4-axis line, X's share 900 / 1952: 7.7 mm/s) lags 0.19 mm, above the example
+            // machine's 0.1 mm criterion — it would "detect" a stop in free air, as it would
+            // on a real machine.
+            // tests/drive_physics.rs runs it at the seed's §7.3.2 feed.
+            continue;
+        }
         let extra = if drive == "cia402-drive-defined" {
             "\"P-AXIS-00702\" = \"DRIVE_DEFINED\"\n"
         } else {

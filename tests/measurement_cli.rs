@@ -439,7 +439,7 @@ fn fixed_stop_canopen_example() {
 
 #[test]
 fn fixed_stop_sercos_gantry_example() {
-    // examples/machines/gantry.toml: messtyp 7, lag limit 1 mm for 20 ms on X, Y, Z, Z2; X2 is
+    // examples/machines/gantry.toml: messtyp 7, lag limit 0.1 mm for 10 ms on X, Y, Z, Z2; X2 is
     // the gantry slave of X. Wall at X = 300: X latches the wall; N130 G01 X100 moves back.
     let r = run_json(
         "meas_fixed_stop_sercos.nc",

@@ -284,7 +284,7 @@ fn check(case: &Case, link: &str) -> Result<(), String> {
         let a_step = tol(b.a_max[i] * cycle * cycle);
         for k in 0..cmd.len() {
             let c = cmd[k];
-            if !(c >= -LIMIT - 1e-6 && c <= LIMIT + 1e-6) {
+            if !(-LIMIT - 1e-6..=LIMIT + 1e-6).contains(&c) {
                 return Err(format!(
                     "{} cycle {k}: set-point {c} outside the SLS ±{LIMIT}\n{}",
                     AXES[i],

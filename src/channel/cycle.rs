@@ -462,7 +462,9 @@ impl Channel {
                 continue;
             }
             let off = (self.next[i] - self.axes[i].actual()).abs();
-            if !(off <= self.cfg.axes[i].in_position) && worst.is_none_or(|(_, w)| off > w) {
+            // NaN (a garbage position) counts as out of position.
+            let inside = off <= self.cfg.axes[i].in_position;
+            if !inside && worst.is_none_or(|(_, w)| off > w || off.is_nan()) {
                 worst = Some((i, off));
             }
         }

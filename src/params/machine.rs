@@ -4,6 +4,7 @@
 //! ```toml
 //! [channel]
 //! cycle_time_us = 1000                 # project key: interpolation cycle, 100 ..= 100000 µs
+//! in_position_timeout_ms = 1000        # project key: how long an exact stop may wait, ms
 //! "P-CHAN-00498" = 1                   # parameters by ID …
 //! range_check_prog_soft_limits = 1     # … or by name path (seed 001 §4.2)
 //! [manual]
@@ -14,6 +15,9 @@
 //! referenced = true                    # project key: axis referenced at start
 //! node = 5                             # project key: CANopen node id 1 ..= 127 on CAN links
 //!                                      # (default: axis number, i.e. 1, 2, …)
+//! in_position_window = 10              # project key: exact-stop window, 0.1 µm (default 1 µm)
+//! dead_time_cycles = 2                 # project key: cycles from a set-point to its position
+//!                                      # read back, 1 ..= 16 (default: the link's, 2)
 //! list = "x_axis.lis"                  # project key (also in [channel] / [manual]): an ISG
 //!                                      # parameter-list file, relative to this file, applied
 //!                                      # before the table's own keys

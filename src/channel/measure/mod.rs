@@ -425,7 +425,7 @@ impl Channel {
     pub(super) fn record_plc_view(&mut self, now: Nanos) {
         for (i, seen) in self.plc_seen.iter_mut().enumerate() {
             let keep = self.axes[i].dead_time_cycles().max(1) as usize;
-            seen.push_front((now, self.plc[i].clone()));
+            seen.push_front((now, self.plc[i]));
             seen.truncate(keep);
         }
     }

@@ -1,10 +1,10 @@
 //! Lightbus AX2000 drive model: the drive side of [`crate::drive::lightbus::LightbusAdapter`]
 //! (telegram: [`crate::drive::lightbus::telegram`]; seed 004 §6.2, notes cnc.md §4.2).
 //!
-//! - **Axis physics**: the shared [`AxisPlant`] ([`super::axis`]) wraps the CiA 402 model's
-//!   position loop ([`crate::drive::model::ds402::motion`]: first-order loop with gain kv,
-//!   set-point ramped over the cycle, sub-samples, speed / torque clipping, fixed stop); the
-//!   terminal drive model uses the same plant with a velocity input.
+//! - **Axis physics**: the shared servo of every family ([`AxisPlant::servo`], `[model]`:
+//!   cascade with feed-forward or first-order loop, set-point ramped over the cycle,
+//!   sub-samples, speed / torque clipping, fixed stop); the terminal drive model uses the same
+//!   plant with a velocity input.
 //! - **Power** (assumption, no AX2000 state machine in the seeds): ready after the first step;
 //!   enabled while control word bit 0 is set and no fault; quick stop holds the position; a
 //!   fault (lag error or injected) stays until a rising edge of control word bit 1.

@@ -13,21 +13,22 @@
 //!   back to ready to switch on, bit 1 = 0 (OFF2) to switching on inhibited, bit 2 = 0 (OFF3)
 //!   holds the axis (quick stop active) until bit 0 = 0. A fault is "fault reaction" for one
 //!   cycle, then fault; a rising edge of STW1 bit 7 acknowledges it.
-//! - **Speed loop** (telegrams 3 / 102): the speed set-point NSOLL_B (N4, `[profidrive]
-//!   reference_speed`), limited to `[model] max_velocity`, is integrated into an internal
-//!   position set-point that the axis follows through the CiA 402 model's first-order loop
-//!   ([`motion::integrate`]) with the speed loop gain [`SPEED_LOOP_GAIN`] (assumption):
-//!   sub-sampled trajectory, fixed stop, torque clipping. The torque demand is that lag ×
-//!   `[model] torque_per_increment`, clipped to P1520 (assumption) × (1 − MOMRED / 0x4000); the
-//!   internal set-point is held within the clipped lag (anti wind-up), so against a fixed stop
-//!   the torque stays at the (reduced) limit.
+//! - **Speed control** (telegrams 3 / 102): the speed set-point NSOLL_B (N4, `[profidrive]
+//!   reference_speed`) is followed by the drive's speed loop (the shared servo of every family,
+//!   [`AxisPlant::servo`] with [`Demand::Speed`]: NSOLL_B and its change as feed-forward, speed
+//!   and torque clipping, fixed stop); the position loop is the master's. The torque limit is
+//!   P1520 (assumption) × (1 − MOMRED / 0x4000). Without feed-forward (`[model] feed_forward =
+//!   false`) NSOLL_B is integrated into an internal set-point followed by a fast first-order loop
+//!   (anti wind-up at the torque limit), as before.
 //! - **DSC** (telegrams 5 / 105): the drive closes the position loop itself with gain KPC
-//!   (0.001 1/s, assumption) on the set-point `x₀ + XERR + NSOLL_B · t` over the cycle (`x₀` the
-//!   position at the cycle start): with the adapter's XERR = previous target − x₀ and NSOLL_B =
-//!   the target's slope this is the CiA 402 model's linearly interpolated set-point, so the
-//!   axis moves exactly as a CiA 402 drive in CSP with kv = KPC (same [`motion::integrate`],
-//!   same torque = lag × `torque_per_increment` clipped to the effective limit).
-//! - **Following error monitoring** (assumption): |XERR| (DSC) or the speed loop's lag exceeding
+//!   (0.001 1/s, assumption) on its fine set-point, a ramp with slope NSOLL_B (also the velocity
+//!   feed-forward) starting at `x_s + XERR + NSOLL_B(previous) · T`: XERR is the master's
+//!   set-point minus the actual value `x_s` the drive sampled at the start of the previous cycle
+//!   (the one the master received: PROFIdrive isochronous timing, assumption), so the ramp runs
+//!   from the previous target to the new one, as a CiA 402 drive in CSP does
+//!   ([`Demand::Ramp`]).
+//! - **Following error monitoring** (assumption): |XERR| (DSC) or the distance between the
+//!   integrated speed set-point and the axis (speed control) exceeding
 //!   P2546 for longer than `[model] following_error_timeout_ms` faults with [`FAULT_FOLLOWING`];
 //!   P2546 = 4294967295 switches it off.
 //! - **Encoder interface** (G1_STW / G1_ZSW / G1_XIST1 / G1_XIST2): command 1 with bit 7

@@ -1,8 +1,8 @@
 //! SERCOS drive model: the drive side of [`crate::drive::sercos::SercosAdapter`] (AX5000 kind).
 //!
 //! Reads the MDT and writes the AT of [`crate::drive::sercos::Telegram`]; the axis physics is the
-//! CiA 402 model's ([`super::ds402::motion`]: position loop with sub-sampled trajectory, speed and
-//! torque clipping, fixed stop).
+//! shared servo of every family ([`super::axis::AxisPlant::servo`]: cascade with feed-forward or
+//! first-order loop per `[model]`, sub-sampled trajectory, speed and torque clipping, fixed stop).
 //!
 //! # Behaviour
 //!
@@ -16,7 +16,7 @@
 //!   S-0-0099 (assumption for the cyclic reset). S-0-0011 reads the class 1 diagnostic
 //!   (bit 11 = excessive position deviation, AX2000 IDN 159).
 //! - **S-0-0092** bipolar torque limit, 0.1 % of rated, start value 1000 = 100.0 %: clips the
-//!   torque demand (lag × `[model] torque_per_increment`) in both directions, as 0x6072 in the
+//!   torque demand (see [`super::axis`]) in both directions, as 0x6072 in the
 //!   CiA 402 model. The AX5000 caps it at 100.0 %; the model accepts the whole UNS16 range so
 //!   that the seed's CANopen example (`VAL=5000`, "torque limiting off") runs (assumption).
 //! - **S-0-0159** monitoring window (increments): 0 = off; values above the IDN's maximum

@@ -44,20 +44,21 @@
 //!   active), bit 9 remote, bit 10 target reached (|0x60F4| ≤ position window 0x6067), bit 11
 //!   internal limit active (a speed or torque limit cut the motion, or the torque demand is
 //!   clipped), bit 12 drive follows the command value (CSP), bit 13 following error.
-//! - **Position loop** in OPERATION ENABLED with mode 8: a first-order lag with gain kv
-//!   (`[model] kv`). The set-point is interpolated linearly over the cycle (as CSP drives
-//!   interpolate their fine set-points) and the exact solution of `ẋ = kv·(r − x)` for that ramp
-//!   is used (module [`motion`]), so the steady-state lag at constant velocity v is exactly v / kv
-//!   and a constant set-point gives `actual += (target − actual) · (1 − e^(−kv·dt))` per cycle.
-//!   The solution is recorded at [`motion::SUBSAMPLES`] sub-samples per cycle (the trajectory).
-//!   The actual position is kept as `f64` increments and reported rounded in 0x6064; 0x60F4 =
-//!   0x607A − 0x6064. In every other state the position holds (brake).
-//! - **Speed and torque limits**: `[model] max_velocity` limits the speed. The torque demand is
-//!   the loop's lag × `[model] torque_per_increment` (‰ of rated torque per increment); the
-//!   effective limit is min(0x6072, 0x60E0) for positive and min(0x6072, 0x60E1) for negative
-//!   torque. 0x6077 torque actual value = demand clipped to the limit. With the first-order loop a
-//!   clipped torque is a clipped speed (`kv · limit / torque_per_increment`), so the model moves
-//!   a viscous load.
+//! - **Servo** in OPERATION ENABLED with mode 8: the shared servo of every family
+//!   ([`AxisPlant::servo`], `[model]`): by default a CSP cascade with velocity and acceleration
+//!   feed-forward from the set-point sequence (following error 0 at constant speed, sub-µm on
+//!   ramps); with `feed_forward = false` a first-order lag with gain kv whose exact solution for
+//!   the linearly interpolated set-point gives the lag v / kv at constant speed and
+//!   `actual += (target − actual) · (1 − e^(−kv·dt))` per cycle at a constant set-point. The
+//!   solution is recorded at [`motion::SUBSAMPLES`] sub-samples per cycle (the trajectory). The
+//!   actual position is kept as `f64` increments and reported rounded in 0x6064; 0x60F4 =
+//!   0x607A − 0x6064 (the drive's control deviation at the end of the ramp). In every other
+//!   state the position holds (brake).
+//! - **Speed and torque limits**: `[model] max_velocity` limits the speed. The torque demand
+//!   (0x6077, ‰) is the demanded acceleration / `[model] rated_acceleration` × 1000 (without
+//!   feed-forward: the lag × `[model] torque_per_increment`); the effective limit is
+//!   min(0x6072, 0x60E0) for positive and min(0x6072, 0x60E1) for negative torque, and clips the
+//!   acceleration (without feed-forward: the speed, a viscous load).
 //! - **Fixed stop** ([`Ds402Model::set_fixed_stop`]): a rigid wall the axis cannot pass from the
 //!   side it is on. Pressed against it, the actual position stays, the following error grows,
 //!   the torque saturates at the limit (bit 11).
