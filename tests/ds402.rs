@@ -4,6 +4,14 @@
 //! Traces read like the bus: each `cycle!(rig => STATE, CW)` runs one exchange, lets the adapter
 //! decode the input image and write the output image, and asserts the power state the adapter saw
 //! and the controlword it wrote in that cycle.
+//!
+//! Bus timing (`SimLink`, as every link): at exchange k the drive takes the outputs written
+//! after exchange k − 1 and steps, but the input image exchange k returns is the one the drive
+//! sampled at exchange k − 1 (sampled at SYNC0, sent with the next frame); the very first
+//! exchange returns an all-zero image. A controlword written after exchange k is thus processed
+//! at exchange k + 1 and its effect shows in the inputs of exchange k + 2 (dead time 2 cycles).
+//! So the adapter writes every command word twice: the image after its first write was sampled
+//! before the drive saw it and still shows the old state.
 
 use fieldprobe::drive::catalogue::{self, DriveDefinition};
 use fieldprobe::drive::ds402::{decode_statusword, Ds402Adapter};
@@ -81,11 +89,12 @@ impl Rig {
         self.link.model_as::<Ds402Model>(0).expect("model 0")
     }
 
-    /// Power up with the standard sequence (asserted in `power_on_to_operation_enabled`).
+    /// Power up with the standard sequence (asserted in `power_on_to_operation_enabled`): six
+    /// cycles up to the last SWITCHED ON image, plus the drive's enable delay.
     #[track_caller]
     fn enable(&mut self) {
         self.cmd.enable = true;
-        for _ in 0..3 + self.def.model.enable_delay_cycles {
+        for _ in 0..6 + self.def.model.enable_delay_cycles {
             self.cycle();
         }
         let fb = self.expect(PowerState::OperationEnabled, 0x0F);
@@ -104,15 +113,28 @@ macro_rules! cycle {
 fn power_on_to_operation_enabled() {
     let mut rig = Rig::new(generic());
     rig.cmd.enable = true;
-    // Cycle 0 carries the zeroed output image (controlword 0x0000); the drive leaves NOT READY
-    // TO SWITCH ON by itself (transition 1).
-    let fb = cycle!(rig => SwitchOnDisabled, 0x06);
+    // Exchange 0 returns the all-zero image (nothing sampled yet): statusword 0 decodes as NOT
+    // READY TO SWITCH ON, and the adapter starts with shutdown. The drive stepped there with the
+    // zeroed output image (controlword 0x0000) and left NOT READY TO SWITCH ON by itself
+    // (transition 1).
+    let fb = cycle!(rig => NotReadyToSwitchOn, 0x06);
+    assert_eq!(fb.statusword, 0x0000);
+    // Exchange 1 carries what the drive sampled at exchange 0.
+    let fb = cycle!(rig => SwitchOnDisabled, 0x06); // 0x06 written twice
     assert_eq!(fb.statusword, 0x0250); // switch on disabled | voltage enabled | remote
+    assert_eq!(fb.mode_display, Some(0), "sampled before 0x6060 arrived");
+    // The drive took the first 0x06 at exchange 1 (transition 2); the image shows it now.
     let fb = cycle!(rig => ReadyToSwitchOn, 0x07);
-    assert_eq!(fb.statusword, 0x0231); // ready to switch on | quick stop off | voltage | remote
-    assert_eq!(fb.mode_display, Some(8)); // 0x6060 = 8 arrived with the 0x06 image
+    // ready to switch on | quick stop off | voltage | remote; 0x6060 = 8 arrived with the first
+    // 0x06 image
+    assert_eq!((fb.statusword, fb.mode_display), (0x0231, Some(8)));
+    // Sampled before the drive saw 0x07: still READY TO SWITCH ON, 0x07 once more.
+    let fb = cycle!(rig => ReadyToSwitchOn, 0x07);
+    assert_eq!(fb.statusword, 0x0231);
     let fb = cycle!(rig => SwitchedOn, 0x0F);
     assert_eq!(fb.statusword, 0x0233);
+    assert!(!fb.operational);
+    let fb = cycle!(rig => SwitchedOn, 0x0F); // sampled before the drive saw 0x0F
     assert!(!fb.operational);
     let fb = cycle!(rig => OperationEnabled, 0x0F);
     // operation enabled | voltage | remote | target reached | drive follows the command value
@@ -127,10 +149,14 @@ fn enable_delay_adds_switched_on_cycles() {
     def.model.enable_delay_cycles = 3;
     let mut rig = Rig::new(def);
     rig.cmd.enable = true;
+    cycle!(rig => NotReadyToSwitchOn, 0x06);
     cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => ReadyToSwitchOn, 0x07);
-    // The drive sees 0x0F 1 + enable_delay_cycles times before it reports operation enabled.
-    for _ in 0..1 + 3 {
+    cycle!(rig => ReadyToSwitchOn, 0x07);
+    // The drive takes the first 0x0F at exchange 5 and needs it 1 + enable_delay_cycles = 4
+    // times (exchanges 5..=8); its image of exchange 8 arrives at exchange 9. The adapter sees
+    // SWITCHED ON from exchange 4 on: 2 + enable_delay_cycles images.
+    for _ in 0..2 + 3 {
         cycle!(rig => SwitchedOn, 0x0F);
     }
     assert!(cycle!(rig => OperationEnabled, 0x0F).operational);
@@ -142,47 +168,54 @@ fn disable_and_quick_stop() {
     rig.enable();
     rig.cmd.quick_stop = true;
     cycle!(rig => OperationEnabled, 0x02);
+    cycle!(rig => OperationEnabled, 0x02); // sampled before the drive saw 0x02
     cycle!(rig => QuickStopActive, 0x02);
     rig.cmd.quick_stop = false;
     cycle!(rig => QuickStopActive, 0x00); // disable voltage: transition 12
+    cycle!(rig => QuickStopActive, 0x00);
+    cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => SwitchedOn, 0x0F);
     cycle!(rig => SwitchedOn, 0x0F);
     cycle!(rig => OperationEnabled, 0x0F);
     rig.cmd.enable = false;
     cycle!(rig => OperationEnabled, 0x06); // shutdown: transition 8
+    cycle!(rig => OperationEnabled, 0x06);
     cycle!(rig => ReadyToSwitchOn, 0x06);
 }
 
-/// At constant set-point velocity v the steady-state following error of the first-order
-/// position loop is v / kv; afterwards the position settles on the target.
-#[test]
-fn csp_following_error_converges_to_v_over_kv() {
-    let def = generic();
-    let mut rig = Rig::new(def.clone());
-    rig.enable();
-    let v_mm_s = 100.0;
-    let expected_lag_inc = v_mm_s * def.scaling.increments_per_unit / def.model.kv;
-    let mut pos_mm = 0.0;
-    let mut fb = None;
-    for _ in 0..1000 {
-        pos_mm += v_mm_s * CYCLE.as_secs_f64();
-        rig.cmd.target = def.scaling.to_increments(pos_mm).unwrap();
-        fb = Some(rig.cycle().0);
-    }
-    let fb = fb.unwrap();
-    let fe = f64::from(fb.following_error.unwrap());
-    assert!(
-        (fe - expected_lag_inc).abs() <= 0.01 * expected_lag_inc,
-        "following error {fe} inc, v/kv = {expected_lag_inc} inc"
-    );
-    assert!(fb.operational && !fb.following_error_flag);
-    assert_eq!(
-        rig.model().read_object(0x60F4, 0),
-        Ok(i64::from(fb.following_error.unwrap()))
-    );
+/// The generic drive without feed-forward (`[model] feed_forward = false`): the plain
+/// first-order position loop `ẋ = kv·(r − x)`.
+fn first_order() -> DriveDefinition {
+    let mut def = generic();
+    def.model.feed_forward = false;
+    def
+}
 
-    // Hold the set-point: the lag decays with time constant 1/kv = 25 ms.
+/// Enable, ramp the set-point at `v_mm_s` for 1000 cycles (1 s), and return the feedback of the
+/// last cycle after checking that it carries the 0x60F4 the drive sampled at the exchange
+/// before (the bus delivers the image one exchange late).
+fn ramp_for_a_second(rig: &mut Rig, v_mm_s: f64) -> DriveFeedback {
+    rig.enable();
+    let scaling = rig.def.scaling;
+    let mut pos_mm = 0.0;
+    for k in 0..1000 {
+        pos_mm += v_mm_s * CYCLE.as_secs_f64();
+        rig.cmd.target = scaling.to_increments(pos_mm).unwrap();
+        if k < 999 {
+            rig.cycle();
+        }
+    }
+    let sampled = rig.model().read_object(0x60F4, 0);
+    let fb = rig.cycle().0;
+    assert_eq!(Ok(i64::from(fb.following_error.unwrap())), sampled);
+    fb
+}
+
+/// Hold the set-point for 500 cycles: the axis settles on it.
+fn settles(rig: &mut Rig) {
     for _ in 0..500 {
         rig.cycle();
     }
@@ -193,6 +226,50 @@ fn csp_following_error_converges_to_v_over_kv() {
     assert_ne!(fb.statusword & 0x0400, 0, "target reached");
 }
 
+/// Without feed-forward, at constant set-point velocity v the steady-state following error of
+/// the first-order position loop is v / kv and the torque is that lag × torque_per_increment;
+/// afterwards the position settles on the target.
+#[test]
+fn csp_following_error_converges_to_v_over_kv() {
+    let def = first_order();
+    let mut rig = Rig::new(def.clone());
+    let v_mm_s = 100.0;
+    let expected_lag_inc = v_mm_s * def.scaling.increments_per_unit / def.model.kv;
+    let fb = ramp_for_a_second(&mut rig, v_mm_s);
+    let fe = f64::from(fb.following_error.unwrap());
+    assert!(
+        (fe - expected_lag_inc).abs() <= 0.01 * expected_lag_inc,
+        "following error {fe} inc, v/kv = {expected_lag_inc} inc"
+    );
+    assert!(fb.operational && !fb.following_error_flag);
+    // 25000 inc × 0.004 ‰/inc = 100 ‰.
+    let torque = expected_lag_inc * def.model.torque_per_increment;
+    assert_eq!(fb.torque, Some(torque.round() as i32));
+
+    // Hold the set-point: the lag decays with time constant 1/kv = 25 ms.
+    settles(&mut rig);
+}
+
+/// The default drive (cascade with velocity and acceleration feed-forward): at constant
+/// set-point velocity the steady-state following error is 0 and no torque is demanded. The
+/// start of the ramp (a velocity step, capped by the torque limit) leaves an error that decays
+/// with the slow root of `tv·s² + s + kv = 0` (≈ −41.7 1/s for kv = 40 1/s, tv = 1 ms), i.e. to
+/// e^(−41.7) of itself within the second; 0x6064 is rounded to whole increments, so |0x60F4| ≤ 1
+/// — against 25000 increments (v / kv) for the drive without feed-forward.
+#[test]
+fn csp_following_error_with_feed_forward_is_zero_at_constant_speed() {
+    let def = generic();
+    assert!(def.model.feed_forward, "the default drive has feed-forward");
+    let mut rig = Rig::new(def);
+    let fb = ramp_for_a_second(&mut rig, 100.0);
+    let fe = fb.following_error.unwrap();
+    assert!(fe.abs() <= 1, "following error {fe} inc");
+    assert!(fb.operational && !fb.following_error_flag);
+    assert_ne!(fb.statusword & 0x0400, 0, "target reached while moving");
+    assert_eq!(fb.torque, Some(0), "no acceleration, no torque");
+    settles(&mut rig);
+}
+
 #[test]
 fn following_error_window_and_timeout_fault_then_reset() {
     let mut def = generic();
@@ -200,9 +277,14 @@ fn following_error_window_and_timeout_fault_then_reset() {
     def.model.following_error_timeout_ms = 10;
     let mut rig = Rig::new(def);
     rig.enable();
-    // A 5000-increment overshoot outside the loop: |0x60F4| = 5000 > 0x6065 from now on.
+    // A 5000-increment overshoot outside the loop: |0x60F4| = 5000 > 0x6065 from the drive's
+    // next step on.
     rig.model().set_disturbance(5000.0);
-    // Over the window for longer than 0x6066: the 11th over-window cycle of 1 ms faults.
+    // This exchange's image was sampled at the step before the disturbance.
+    let fb = cycle!(rig => OperationEnabled, 0x0F);
+    assert_eq!(fb.following_error, Some(0));
+    // Over the window for longer than 0x6066: the drive faults in its 11th over-window step of
+    // 1 ms; the images of its first 10 arrive one exchange late, then FAULT REACTION ACTIVE.
     let over_cycles = 10 * 1_000_000 / CYCLE.0 + 1;
     for _ in 1..over_cycles {
         let fb = cycle!(rig => OperationEnabled, 0x0F);
@@ -220,11 +302,18 @@ fn following_error_window_and_timeout_fault_then_reset() {
     cycle!(rig => Fault, 0x00);
     rig.model().set_disturbance(0.0);
     rig.cmd.fault_reset = true;
-    cycle!(rig => Fault, 0x80); // rising edge of bit 7 after a 0x00 cycle
+    // Rising edge of bit 7 after a 0x00 cycle.
+    cycle!(rig => Fault, 0x80);
+    // The image was sampled before the drive saw 0x80: still FAULT, so the adapter goes back to
+    // 0x00 (ready for another edge) — the drive resets on the 0x80 meanwhile (transition 15).
+    cycle!(rig => Fault, 0x00);
     let fb = cycle!(rig => SwitchOnDisabled, 0x06);
     assert!(!fb.following_error_flag);
     rig.cmd.fault_reset = false;
+    cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => SwitchedOn, 0x0F);
     cycle!(rig => SwitchedOn, 0x0F);
     let fb = cycle!(rig => OperationEnabled, 0x0F);
     assert!(fb.operational && fb.statusword & 0x2000 == 0);
@@ -255,10 +344,16 @@ fn fault_reset_requested_before_the_fault_gives_00_then_80() {
     rig.cmd.fault_reset = true; // harmless outside FAULT
     cycle!(rig => OperationEnabled, 0x0F);
     rig.model().inject_fault(0x7500);
+    // The drive faults at its next step; this exchange's image was sampled before.
+    cycle!(rig => OperationEnabled, 0x0F);
     cycle!(rig => FaultReactionActive, 0x00);
     cycle!(rig => Fault, 0x80);
+    cycle!(rig => Fault, 0x00); // sampled before the drive saw 0x80
+    cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => SwitchOnDisabled, 0x06);
     cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => SwitchedOn, 0x0F);
     cycle!(rig => SwitchedOn, 0x0F);
     cycle!(rig => OperationEnabled, 0x0F);
     assert_eq!(rig.model().last_error_code(), 0x7500);
@@ -269,8 +364,8 @@ fn lost_exchange_leaves_inputs_and_models_alone() {
     let mut rig = Rig::new(generic());
     rig.link.lose_exchange_at(2);
     rig.cmd.enable = true;
+    cycle!(rig => NotReadyToSwitchOn, 0x06);
     cycle!(rig => SwitchOnDisabled, 0x06);
-    cycle!(rig => ReadyToSwitchOn, 0x07);
     let inputs = rig.images[0].inputs.clone();
     let model = rig.link.model_ref_as::<Ds402Model>(0).unwrap().clone();
     let err = rig.link.exchange(rig.now, &mut rig.images).unwrap_err();
@@ -281,7 +376,11 @@ fn lost_exchange_leaves_inputs_and_models_alone() {
     assert_eq!(rig.images[0].inputs, inputs);
     assert_eq!(rig.link.model_ref_as::<Ds402Model>(0).unwrap(), &model);
     assert_eq!(rig.link.exchanges(), 3);
-    // The next exchange goes through and the sequence continues where it was.
+    // The next exchange goes through and the sequence continues where it was: it delivers what
+    // the drive sampled at exchange 1 (where it took the first 0x06), and the drive, not
+    // stepped at the lost exchange, takes the same output image (0x06) now.
+    cycle!(rig => ReadyToSwitchOn, 0x07);
+    cycle!(rig => ReadyToSwitchOn, 0x07);
     cycle!(rig => SwitchedOn, 0x0F);
 
     let mut two = vec![ProcessImage::new(9, 31); 2];

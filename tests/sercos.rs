@@ -3,6 +3,12 @@
 //! real-time bits for every P-AXIS-00060 value and edge, S-0-0092 / S-0-0159, error paths, the
 //! commissioning check and meas1 end to end.
 //!
+//! Bus timing (as on every link, `SimLink`): the drive takes the MDT at the next SYNC0 and steps;
+//! the AT it writes there is sampled at SYNC0 and reaches the master with the *next* frame. So
+//! the AT the adapter reads in a cycle is the drive's state before it saw the MDT written in
+//! that cycle, and a control word's effect shows one cycle after it was written (dead time 2
+//! cycles; the very first AT is all zeros).
+//!
 //! Trace notation: each telegram entry in wire order (little-endian), `|` between entries.
 //! Default telegram: MDT = S-0-0134 control word | S-0-0047 position command; AT = S-0-0135
 //! status word | S-0-0051 position feedback | S-0-0189 following distance | S-0-0130 probe
@@ -51,12 +57,17 @@ fn hex(bytes: &[u8], entries: &[(usize, usize)]) -> String {
         .join(" | ")
 }
 
+/// Adapter and drive model on one simulated bus with the bus's timing (module documentation;
+/// the adapter keeps its default feedback delay 1).
 struct Rig {
     a: SercosAdapter,
     m: SercosModel,
     now: Nanos,
     mdt: Vec<u8>,
+    /// The AT the adapter read in the last cycle.
     at: Vec<u8>,
+    /// The AT the drive wrote at its last step, delivered with the next frame.
+    sampled: Vec<u8>,
     cmd: DriveCommand,
     /// Position the model's trajectory had at the last edge.
     edge_pos: f64,
@@ -72,6 +83,7 @@ impl Rig {
             m,
             now: Nanos::ZERO,
             mdt,
+            sampled: at.clone(),
             at,
             cmd: DriveCommand {
                 enable: true,
@@ -81,20 +93,23 @@ impl Rig {
         }
     }
 
-    /// One cycle: adapter writes the MDT, the model runs with optional input edges at
-    /// `frac` of the cycle, the adapter reads the AT.
+    /// One cycle: the adapter writes the MDT, the drive takes it and steps with optional input
+    /// edges at `frac` of the cycle, and the adapter reads the AT of this frame — the one the
+    /// drive wrote at its *previous* step.
     fn cycle(&mut self, edges: &[(u8, bool, f64)]) -> DriveFeedback {
         self.a
             .write_outputs(self.now, &self.cmd, &mut self.mdt)
             .unwrap();
         self.now = Nanos(self.now.0 + DT_NS);
+        // The frame delivers what the drive sampled at the previous SYNC0.
+        std::mem::swap(&mut self.at, &mut self.sampled);
         self.m.begin_step(self.now, 1e-3, &self.mdt);
         for &(input, rising, frac) in edges {
             let at = Nanos(self.now.0 - DT_NS + (DT_NS as f64 * frac) as u64);
             self.edge_pos = self.m.position_at(at).unwrap();
             self.m.input_edge(input, rising, at);
         }
-        self.m.finish_step(&mut self.at);
+        self.m.finish_step(&mut self.sampled);
         self.a.read_inputs(self.now, &self.at).unwrap()
     }
 
@@ -122,10 +137,11 @@ impl Rig {
         hex(&self.at, &e)
     }
 
-    /// Power up and run until operational.
+    /// Power up and run until operational: the drive follows from its third step on (ready for
+    /// power-up, main power on, enabled), whose AT arrives in the fourth cycle.
     fn power_up(&mut self) {
         for _ in 0..3 {
-            self.cycle(&[]);
+            assert!(!self.cycle(&[]).operational);
         }
         assert!(self.cycle(&[]).operational);
     }
@@ -150,15 +166,31 @@ fn seed_axis() -> ParamSet {
     ])
 }
 
-#[test]
-fn power_up_trace() {
-    let def = catalogue::load("sercos-ax5000").unwrap();
-    let mut r = Rig::new(&def, &seed_axis());
+/// Little-endian bytes of an `i32` as in the trace notation.
+fn le(v: i32) -> String {
+    hex(&v.to_le_bytes(), &[(0, 4)])
+}
+
+/// The power-up trace on `def`, whose axis is at `x1` after its first following step (set-point
+/// 0 → 1000) and at `x2` after the second (set-point standing at 1000).
+fn power_up_trace_on(def: &DriveDefinition, x1: i32, x2: i32) {
+    let mut r = Rig::new(def, &seed_axis());
     assert_eq!((r.a.output_len(), r.a.input_len()), (6, 16));
     let fb = r.cycle(&[]);
     // MDT: control word 0xE000 = drive on, enable, run | position command 0
     assert_eq!(r.mdt_hex(), "00 e0 | 00 00 00 00");
-    // AT: status 0x4000 = ready for power-up | feedback 0 | distance 0 | value 0 | probe status 0
+    // AT: the first frame carries nothing sampled yet: status 0 = not ready
+    assert_eq!(
+        r.at_hex(),
+        "00 00 | 00 00 00 00 | 00 00 00 00 | 00 00 00 00 | 00 00"
+    );
+    assert_eq!(
+        (fb.state, fb.operational),
+        (PowerState::NotReadyToSwitchOn, false)
+    );
+    let fb = r.cycle(&[]);
+    // AT of the drive's first step: status 0x4000 = ready for power-up | feedback 0 | distance 0
+    // | value 0 | probe status 0
     assert_eq!(
         r.at_hex(),
         "00 40 | 00 00 00 00 | 00 00 00 00 | 00 00 00 00 | 00 00"
@@ -167,38 +199,85 @@ fn power_up_trace() {
         (fb.state, fb.operational),
         (PowerState::SwitchOnDisabled, false)
     );
+    r.cmd.target = 1000;
     let fb = r.cycle(&[]);
-    // AT: status 0x8000 = ready, main power on
+    // MDT: 0xE000 | position command 1000 = 0x3E8. The drive, in main power on since its second
+    // step, takes drive on + enable with this MDT and follows at once (enable_delay_cycles = 0).
+    assert_eq!(r.mdt_hex(), "00 e0 | e8 03 00 00");
+    // AT of the second step: status 0x8000 = ready, main power on
     assert_eq!(
         r.at_hex(),
         "00 80 | 00 00 00 00 | 00 00 00 00 | 00 00 00 00 | 00 00"
     );
     assert_eq!(fb.state, PowerState::SwitchedOn);
-    r.cmd.target = 1000;
     let fb = r.cycle(&[]);
-    // MDT: 0xE000 | position command 1000 = 0x3E8
     assert_eq!(r.mdt_hex(), "00 e0 | e8 03 00 00");
-    // AT: status 0xC008 = drive enabled, command values processed | feedback 20 (the command
-    // ramps from 0 to 1000 over the cycle) | distance 980
+    // AT of the first following step: status 0xC008 = drive enabled, command values processed |
+    // feedback x1 | distance 1000 − x1
     assert_eq!(
         r.at_hex(),
-        "08 c0 | 14 00 00 00 | d4 03 00 00 | 00 00 00 00 | 00 00"
+        format!(
+            "08 c0 | {} | {} | 00 00 00 00 | 00 00",
+            le(x1),
+            le(1000 - x1)
+        )
     );
     assert_eq!(
         (fb.state, fb.operational, fb.position),
-        (PowerState::OperationEnabled, true, 20)
+        (PowerState::OperationEnabled, true, x1)
     );
-    assert_eq!(fb.following_error, Some(980));
-    // Disable: control word 0, status back to 0x8000 (no following, position held).
+    assert_eq!(fb.following_error, Some(1000 - x1));
+    // Disable: control word 0.
     r.cmd.enable = false;
     let fb = r.cycle(&[]);
     assert_eq!(r.mdt_hex(), "00 00 | e8 03 00 00");
-    // AT: status 0x8000, feedback 20 held (power stage off at once)
+    // AT sampled before the drive saw control word 0: still following, feedback x2
     assert_eq!(
         r.at_hex(),
-        "00 80 | 14 00 00 00 | 00 00 00 00 | 00 00 00 00 | 00 00"
+        format!(
+            "08 c0 | {} | {} | 00 00 00 00 | 00 00",
+            le(x2),
+            le(1000 - x2)
+        )
+    );
+    assert!(fb.operational);
+    let fb = r.cycle(&[]);
+    // AT: status 0x8000, feedback x2 held (power stage off at once), no following distance
+    assert_eq!(
+        r.at_hex(),
+        format!("00 80 | {} | 00 00 00 00 | 00 00 00 00 | 00 00", le(x2))
     );
     assert!(!fb.operational);
+}
+
+#[test]
+fn power_up_trace() {
+    // The default drive (cascade with velocity and acceleration feed-forward): the set-point
+    // step 0 → 1000 in one cycle demands a velocity step of 10⁶ inc/s, so the drive accelerates
+    // at its torque limit S-0-0092 = 100 % = rated_acceleration 20 m/s² = 2·10⁸ inc/s² for the
+    // whole cycle: x1 = a·T²/2 = 100. With the set-point standing, it brakes at the limit from
+    // a·T: x2 = x1 + a·T² − a·T²/2 = 200, at rest.
+    let def = catalogue::load("sercos-ax5000").unwrap();
+    assert!(def.model.feed_forward);
+    let a = def.model.rated_acceleration * def.scaling.increments_per_unit; // inc/s²
+    let t = 1e-3;
+    let x1 = a * t * t / 2.0;
+    let x2 = x1 + a * t * t - a * t * t / 2.0;
+    assert_eq!((x1.round(), x2.round()), (100.0, 200.0));
+    power_up_trace_on(&def, x1.round() as i32, x2.round() as i32);
+
+    // Without feed-forward (`[model] feed_forward = false`): the first-order loop
+    // ẋ = kv·(r − x) with the command ramping 0 → 1000 over the cycle leaves e1 = (s/kv)·(1 −
+    // e^(−kv·T)) = 980.3, x1 = 19.7; with the command standing e2 = e1·e^(−kv·T) = 941.8,
+    // x2 = 58.2.
+    let mut def = def;
+    def.model.feed_forward = false;
+    let kv = def.model.kv;
+    let e1 = 1000.0 / t / kv * (1.0 - (-kv * t).exp());
+    let e2 = e1 * (-kv * t).exp();
+    let (x1, x2) = ((1000.0 - e1).round(), (1000.0 - e2).round());
+    assert_eq!((x1, x2), (20.0, 58.0));
+    power_up_trace_on(&def, x1 as i32, x2 as i32);
 }
 
 /// One configuration of the probe by real-time bits.
@@ -239,7 +318,8 @@ fn run_case(c: &Case) {
     r.a.arm_probe(&request(c.probe, c.edge)).unwrap();
     assert_eq!(r.a.probe_state(), ProbeState::Arming);
     r.cycle(&[]);
-    // Enable bit still 0 (clearing cycle): the drive reports 'done' clear.
+    // Enable bit still 0 (clearing cycle); the AT shows 'done' clear (nothing latched since
+    // power-up), so the next MDT sets the enable bit.
     assert_eq!(r.mdt_hex().split(" | ").next(), Some("00 e0"));
     r.cycle(&[]);
     assert_eq!(r.a.probe_state(), ProbeState::Armed);
@@ -256,6 +336,11 @@ fn run_case(c: &Case) {
     let rising = c.edge == ProbeEdge::Positive;
     let fb = r.cycle(&[(input, rising, 0.375)]);
     let expected = r.edge_pos.round() as i32;
+    // This cycle's AT was sampled before the edge: 'done' clear, no event yet.
+    assert_eq!(fb.statusword & c.done, 0, "{:04x}", fb.statusword);
+    assert_eq!(r.a.take_probe_event(), None);
+    // The next frame carries the latch.
+    let fb = r.cycle(&[]);
     assert_ne!(
         fb.statusword & c.done,
         0,
@@ -348,7 +433,13 @@ fn rearming_never_reports_the_stale_latch() {
     r.a.arm_probe(&request(1, ProbeEdge::Positive)).unwrap();
     r.cycle(&[]);
     r.cycle(&[]);
+    assert_eq!(r.a.probe_state(), ProbeState::Armed);
     r.cycle(&[(1, true, 0.5)]);
+    // Sampled before the edge: status 0xC008, S-0-0179 = 0.
+    assert!(r.at_hex().starts_with("08 c0 |"), "{}", r.at_hex());
+    assert!(r.at_hex().ends_with("| 00 00"), "{}", r.at_hex());
+    assert_eq!(r.a.take_probe_event(), None);
+    r.cycle(&[]);
     // AT: status 0xC0C8 = enabled, following, RT status bit 1 (S-0-0409 latched), RT status
     // bit 2 (S-0-0401 probe 1 input high) | … | S-0-0179 = 1
     assert!(r.at_hex().starts_with("c8 c0 |"), "{}", r.at_hex());
@@ -358,7 +449,14 @@ fn rearming_never_reports_the_stale_latch() {
     // Re-arm while the drive still shows the old latch.
     r.a.arm_probe(&request(1, ProbeEdge::Positive)).unwrap();
     let fb = r.cycle(&[]);
-    // MDT: 0xE000, enable bit 1 cleared for one cycle -> drive clears S-0-0179
+    // MDT: 0xE000, enable bit 1 cleared. The AT was sampled before the drive saw it: 'done'
+    // (status bit 6) and S-0-0179 still set — the adapter keeps the bit cleared and waits.
+    assert_eq!(r.mdt_hex().split(" | ").next(), Some("00 e0"));
+    assert_ne!(fb.statusword & 0x0040, 0);
+    assert!(r.at_hex().ends_with("| 01 00"), "{}", r.at_hex());
+    assert_eq!(r.a.take_probe_event(), None, "stale value never reported");
+    let fb = r.cycle(&[]);
+    // Still 0xE000; now the AT shows the drive cleared S-0-0179 on the falling enable bit.
     assert_eq!(r.mdt_hex().split(" | ").next(), Some("00 e0"));
     assert_eq!(fb.statusword & 0x0040, 0);
     assert!(r.at_hex().ends_with("| 00 00"), "{}", r.at_hex());
@@ -370,6 +468,8 @@ fn rearming_never_reports_the_stale_latch() {
     }
     assert_eq!(r.a.take_probe_event(), None, "stale value never reported");
     r.cycle(&[(1, true, 0.25)]);
+    assert_eq!(r.a.take_probe_event(), None, "sampled before the edge");
+    r.cycle(&[]);
     let second = r.a.take_probe_event().unwrap();
     assert_eq!(second.sequence, 1);
     assert_eq!(second.position, r.edge_pos.round() as i32);
@@ -421,6 +521,28 @@ fn latch_never_comes_and_stuck_done_bit_fails() {
     assert!(a.read_inputs(Nanos(0), &at[..3]).is_err());
 }
 
+/// Press the axis of `def` against a wall at 5000 (set-point 200000) with S-0-0092 = 10 %, then
+/// raise S-0-0092 to 100 % for one cycle: the torque feedback S-0-0084 in both.
+fn press_against_a_wall(def: &DriveDefinition) -> (i64, i64) {
+    let mut r = Rig::new(def, &seed_axis());
+    r.power_up();
+    assert_eq!(r.m.read_object(92, 0), Ok(1000));
+    r.m.write_object(92, 0, 100).unwrap();
+    assert_eq!(r.m.write_object(92, 0, 65536), Err(abort::VALUE_RANGE));
+    DriveModel::set_fixed_stop(&mut r.m, Some(5_000.0));
+    r.cmd.target = 200_000;
+    for _ in 0..50 {
+        r.cycle(&[]);
+    }
+    // Pressed against the wall: feedback at the wall.
+    assert_eq!(r.m.read_object(51, 0), Ok(5_000));
+    let clipped = r.m.read_object(84, 0).unwrap();
+    r.m.write_object(92, 0, 1000).unwrap();
+    r.cycle(&[]);
+    assert_eq!(r.m.read_object(51, 0), Ok(5_000));
+    (clipped, r.m.read_object(84, 0).unwrap())
+}
+
 #[test]
 fn torque_limit_s_0_0092_clips_torque() {
     let def = catalogue::load("sercos-ax5000").unwrap();
@@ -431,23 +553,16 @@ fn torque_limit_s_0_0092_clips_torque() {
         Some(5000),
         "the seed's CANopen 'off' value is accepted"
     );
-    let mut r = Rig::new(&def, &seed_axis());
-    r.power_up();
-    assert_eq!(r.m.read_object(92, 0), Ok(1000));
-    r.m.write_object(92, 0, 100).unwrap();
-    assert_eq!(r.m.write_object(92, 0, 65536), Err(abort::VALUE_RANGE));
-    DriveModel::set_fixed_stop(&mut r.m, Some(5_000.0));
-    r.cmd.target = 200_000;
-    for _ in 0..50 {
-        r.cycle(&[]);
-    }
-    // Pressed against the wall: feedback at the wall, torque at S-0-0092 = 10 %.
-    assert_eq!(r.m.read_object(51, 0), Ok(5_000));
-    assert_eq!(r.m.read_object(84, 0), Ok(100));
-    // Full limit again: the demand (195000 × 0.004 = 780) is below 100 %.
-    r.m.write_object(92, 0, 1000).unwrap();
-    r.cycle(&[]);
-    assert_eq!(r.m.read_object(84, 0), Ok(780));
+    // Without feed-forward (`[model] feed_forward = false`) the torque demand is the lag ×
+    // torque_per_increment: at S-0-0092 = 10 % it is clipped to 100; at the full limit the
+    // demand (195000 × 0.004 = 780) is below 100 %.
+    let mut first_order = def.clone();
+    first_order.model.feed_forward = false;
+    assert_eq!(press_against_a_wall(&first_order), (100, 780));
+    // With feed-forward (the default) the stalled axis makes the speed loop demand ever more
+    // acceleration: the torque sits at the limit, 10 % and then 100 %.
+    assert!(def.model.feed_forward);
+    assert_eq!(press_against_a_wall(&def), (100, 1000));
 }
 
 #[test]
@@ -467,6 +582,8 @@ fn monitoring_window_s_0_0159() {
         r.m.write_object(159, 0, window).unwrap();
         assert_eq!(r.m.read_object(159, 0), Ok(window));
         DriveModel::set_disturbance(&mut r.m, 2000.0);
+        // The drive monitors (and faults) at its next step; this cycle's AT was sampled before.
+        assert!(!r.cycle(&[]).fault, "window {window}");
         let fb = r.cycle(&[]);
         assert_eq!(fb.fault, trips, "window {window}");
         if trips {
@@ -488,6 +605,8 @@ fn drive_error_and_reset() {
     let mut r = Rig::new(&def, &seed_axis());
     r.power_up();
     DriveModel::inject_fault(&mut r.m, 0x0002);
+    // The drive faults at its next step; this cycle's AT was sampled before.
+    assert!(r.cycle(&[]).operational);
     let fb = r.cycle(&[]);
     assert!(fb.fault && !fb.operational);
     assert_eq!(fb.state, PowerState::Fault);
@@ -495,12 +614,16 @@ fn drive_error_and_reset() {
     assert!(r.cycle(&[]).fault);
     // Fault reset: control word 0 for a cycle, then the rising edge of bit 15 clears C1D.
     r.cmd.fault_reset = true;
-    r.cycle(&[]);
+    assert!(r.cycle(&[]).fault);
     assert_eq!(r.mdt_hex().split(" | ").next(), Some("00 00"));
     r.cmd.fault_reset = false;
+    // 0xE000 again: the drive clears C1D on the rising bit 15 and, drive on + enable set,
+    // enables in the same step; this AT was sampled before it saw the edge.
     let fb = r.cycle(&[]);
-    assert!(!fb.fault);
-    assert!(r.cycle(&[]).operational);
+    assert_eq!(r.mdt_hex().split(" | ").next(), Some("00 e0"));
+    assert!(fb.fault);
+    let fb = r.cycle(&[]);
+    assert!(!fb.fault && fb.operational);
     assert_eq!(
         r.m.read_object(11, 0),
         Ok(2),

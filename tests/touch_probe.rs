@@ -2,9 +2,19 @@
 //! [`Ds402Model`]s (drives) and a [`Plant`] (probe surfaces, fixed stops).
 //!
 //! Expected values come from closed-form formulas in this file, not from the code under test:
-//! a drive at rest at `xs` whose set-point then ramps with speed `v` (increments/s, exactly
-//! `vT` increments per cycle) follows the first-order loop `ẋ = kv·(r − x)`:
-//! `x(τ) = xs + v·τ − (v/kv)·(1 − e^(−kv·τ))`, τ = time since the ramp began.
+//! a drive without feed-forward ([`first_order`], `[model] feed_forward = false`) at rest at
+//! `xs` whose set-point then ramps with speed `v` (increments/s, exactly `vT` increments per
+//! cycle) follows the first-order loop `ẋ = kv·(r − x)`:
+//! `x(τ) = xs + v·τ − (v/kv)·(1 − e^(−kv·τ))`, τ = time since the ramp began. The default drive
+//! (servo cascade with velocity and acceleration feed-forward) has no such closed form at the
+//! start of a ramp; its latches are checked against the surface position and against the
+//! drive's own trajectory at the plant's edge time, recorded as the edge happens.
+//!
+//! Bus timing (`SimLink`, as every link): the image an exchange returns was sampled by the drive
+//! at the exchange before, so a latch (or a fault) reaches the adapter one exchange after the
+//! step it happened in, and a 0x60B8 word written after exchange k shows in 0x60B9 at exchange
+//! k + 2. The set-point path is not delayed: a target written after exchange k is the drive's
+//! set-point for the cycle ending at exchange k + 1.
 
 use fieldprobe::drive::catalogue::{self, DriveDefinition};
 use fieldprobe::drive::ds402::{touch_probe_byte, touch_probe_function, Ds402Adapter};
@@ -24,6 +34,13 @@ const MS: u64 = 1_000_000;
 
 fn generic() -> DriveDefinition {
     catalogue::builtin("cia402-generic").expect("built-in drive")
+}
+
+/// The generic drive without feed-forward (`[model] feed_forward = false`): the first-order
+/// loop of the closed forms in this file, torque = lag × `torque_per_increment`.
+fn first_order(mut def: DriveDefinition) -> DriveDefinition {
+    def.model.feed_forward = false;
+    def
 }
 
 /// The generic drive with the edge counters 0x60D5..0x60D8 in the TxPDO.
@@ -63,6 +80,9 @@ struct Bench {
     feedback: Vec<Option<DriveFeedback>>,
     /// Plant edges of every cycle so far.
     edges: Vec<ProbeEdgeEvent>,
+    /// Every plant edge with each axis's actual position at its time (read from the drive's
+    /// trajectory of the cycle the edge fell in, right after that cycle).
+    edge_positions: Vec<(ProbeEdgeEvent, Vec<Option<f64>>)>,
 }
 
 impl Bench {
@@ -83,6 +103,7 @@ impl Bench {
             targets: vec![0; defs.len()],
             feedback: vec![None; defs.len()],
             edges: Vec::new(),
+            edge_positions: Vec::new(),
         }
     }
 
@@ -100,6 +121,15 @@ impl Bench {
             .exchange(self.now, &mut self.images)
             .expect("exchange");
         self.edges.extend_from_slice(self.link.plant().last_edges());
+        for &e in self.link.plant().last_edges() {
+            let at: Vec<Option<f64>> = self
+                .link
+                .models()
+                .iter()
+                .map(|m| m.position_at(e.at))
+                .collect();
+            self.edge_positions.push((e, at));
+        }
         let next = self.now.saturating_add(self.cycle);
         for i in 0..self.adapters.len() {
             let fb = self.adapters[i]
@@ -147,7 +177,9 @@ impl Bench {
         }
     }
 
-    /// Arm and cycle at rest until every listed axis confirms.
+    /// Arm and cycle at rest until every listed axis confirms (from idle the adapter writes the
+    /// function at once; the image after it was sampled before the drive saw it, the next one
+    /// confirms: 3 cycles).
     #[track_caller]
     fn arm(&mut self, axes: &[usize], req: &ProbeRequest) {
         for &i in axes {
@@ -227,11 +259,13 @@ fn per_cycle(feed_mm_min: i64, cycle: Nanos) -> i64 {
 
 /// The probed axis latches the trigger position and a second axis moving at the same time
 /// latches its own true position at the crossing time, both within 1 increment (0.1 µm), for
-/// feeds up to 10 m/min and several trigger positions.
-#[test]
-fn latch_accuracy_sweep() {
-    let def = generic();
+/// feeds up to 10 m/min and several trigger positions. On a drive without feed-forward the true
+/// position and the crossing time are the closed forms; on the default drive the true position
+/// is the drive's trajectory at the plant's edge time, and the probed axis's trajectory passes
+/// the surface at that time.
+fn latch_accuracy_sweep_on(def: &DriveDefinition) {
     let kv = def.model.kv;
+    let closed_form = !def.model.feed_forward;
     let sweeps: [(Nanos, &[i64]); 2] = [
         (Nanos(MS), &[60, 600, 1200, 3000, 6000, 9996]),
         (Nanos(600_000), &[100, 2500, 10_000]),
@@ -268,11 +302,10 @@ fn latch_accuracy_sweep() {
                 };
                 b.run(k + 100, &target);
 
-                let v0 = v_cyc as f64 * 1e9 / cycle.0 as f64;
-                let v1 = v1_cyc as f64 * 1e9 / cycle.0 as f64;
-                let tc = crossing_time(f64::from(xs0), v0, kv, t0, p);
-                let x1 = ramp_position(f64::from(xs1), v1, kv, t1, Nanos(tc.round() as u64));
-                let what = format!("cycle {} feed {feed} p {p}", cycle.0);
+                let what = format!(
+                    "feed-forward {} cycle {} feed {feed} p {p}",
+                    def.model.feed_forward, cycle.0
+                );
                 let e0 = b.events(0);
                 let e1 = b.events(1);
                 assert_eq!(e0.len(), 1, "{what}: {e0:?}");
@@ -286,22 +319,58 @@ fn latch_accuracy_sweep() {
                     "{what}: probed axis latched {} for surface {p}",
                     e0[0].position
                 );
+                let (edge, at) = b
+                    .edge_positions
+                    .iter()
+                    .find(|(e, _)| e.rising)
+                    .cloned()
+                    .expect("contact edge");
+                let (x0, x1) = (at[0].unwrap(), at[1].unwrap());
+                if closed_form {
+                    let v0 = v_cyc as f64 * 1e9 / cycle.0 as f64;
+                    let v1 = v1_cyc as f64 * 1e9 / cycle.0 as f64;
+                    let tc = crossing_time(f64::from(xs0), v0, kv, t0, p);
+                    let x1 = ramp_position(f64::from(xs1), v1, kv, t1, Nanos(tc.round() as u64));
+                    assert!(
+                        (f64::from(e1[0].position) - x1).abs() <= 1.0,
+                        "{what}: second axis latched {}, true position {x1} at {tc} ns",
+                        e1[0].position
+                    );
+                    // The plant saw the crossing where the closed form puts it (±1 µs).
+                    assert!(
+                        (edge.at.0 as f64 - tc).abs() < 1_000.0,
+                        "{what}: {edge:?} vs {tc}"
+                    );
+                } else {
+                    assert!(
+                        (f64::from(e1[0].position) - x1).abs() <= 1.0,
+                        "{what}: second axis latched {}, its trajectory at {edge:?}: {x1}",
+                        e1[0].position
+                    );
+                }
+                // Either way the plant's edge is where the probed axis passes the surface (the
+                // edge time is whole nanoseconds: below 0.002 increments at 10 m/min).
                 assert!(
-                    (f64::from(e1[0].position) - x1).abs() <= 1.0,
-                    "{what}: second axis latched {}, true position {x1} at {tc} ns",
-                    e1[0].position
-                );
-                // The plant saw the crossing where the closed form puts it (±1 µs).
-                let edge = b.edges.iter().find(|e| e.rising).expect("contact edge");
-                assert!(
-                    (edge.at.0 as f64 - tc).abs() < 1_000.0,
-                    "{what}: {edge:?} vs {tc}"
+                    (x0 - p).abs() < 0.01,
+                    "{what}: {edge:?} at {x0}, surface {p}"
                 );
                 runs += 1;
             }
         }
     }
     assert_eq!(runs, 27);
+}
+
+#[test]
+fn latch_accuracy_sweep() {
+    latch_accuracy_sweep_on(&first_order(generic()));
+}
+
+#[test]
+fn latch_accuracy_sweep_with_feed_forward() {
+    let def = generic();
+    assert!(def.model.feed_forward);
+    latch_accuracy_sweep_on(&def);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -375,13 +444,13 @@ fn first_event_once_continuous_every_crossing() {
     }
 }
 
-/// A drive with kv = 1000 1/s, no speed limit: the set-point 0 → 1000 → −86 makes the axis
-/// overshoot and come back within one 1 ms cycle. With x = r − e, e = s/kv + (e₀ − s/kv)e^(−kv t):
-/// cycle 1 ends at 367.9 inc (e₀ = 632.1); cycle 2 (s = −1.086e6 inc/s) peaks at 501.7 inc at
-/// 0.459 ms and ends at 367.9 again, so a surface at 400 is crossed up at ≈ 0.055 ms and down at
-/// ≈ 0.93 ms of that cycle.
+/// A drive without feed-forward with kv = 1000 1/s, no speed limit: the set-point 0 → 1000 →
+/// −86 makes the axis overshoot and come back within one 1 ms cycle. With x = r − e,
+/// e = s/kv + (e₀ − s/kv)e^(−kv t): cycle 1 ends at 367.9 inc (e₀ = 632.1); cycle 2
+/// (s = −1.086e6 inc/s) peaks at 501.7 inc at 0.459 ms and ends at 367.9 again, so a surface at
+/// 400 is crossed up at ≈ 0.055 ms and down at ≈ 0.93 ms of that cycle.
 fn fast_drive(counters: bool) -> DriveDefinition {
-    let mut def = generic();
+    let mut def = first_order(generic());
     def.model.kv = 1000.0;
     def.model.max_velocity = None;
     if counters {
@@ -416,6 +485,13 @@ fn two_crossings_in_one_cycle(def: DriveDefinition) -> Bench {
         rising.iter().all(|t| t.0 > cycle_start && t.0 < b.now.0),
         "{rising:?}"
     );
+    // The image of that cycle was sampled before the crossings: nothing yet.
+    assert!(b.events(0).is_empty());
+    assert_eq!(b.adapters[0].probe_state(), ProbeState::Armed);
+    // The next exchange delivers the drive's image with the two latches (settling towards
+    // −86 from 367.9, the axis stays below the surface).
+    b.step();
+    assert_eq!(b.rising_edges(), 2, "{:?}", b.edges);
     b
 }
 
@@ -499,15 +575,22 @@ fn rearm_case(def: DriveDefinition, expect_words: &[u16]) {
 
 #[test]
 fn rearm_after_a_latch_never_reports_the_old_value() {
-    // Enabled in 0x60B9: 0 first, then the function once the drive shows it disabled.
-    rearm_case(generic(), &[0x0000, 0x0011, 0x0011]);
+    // Enabled in 0x60B9: 0 first — twice, as the image after the first 0 was sampled before the
+    // drive saw it and still shows the probe enabled with the old latch —, then the function
+    // once the drive shows it disabled.
+    rearm_case(generic(), &[0x0000, 0x0000, 0x0011, 0x0011]);
 }
 
 #[test]
 fn drive_that_needs_zero_before_rearming() {
     let mut def = generic();
     def.probe.rearm_requires_zero = true;
-    rearm_case(def.clone(), &[0x0000, 0x0011, 0x0011]);
+    // After its single shot this drive already reports the probe disabled (0x60B9 = 0x0002),
+    // so the image after the first 0 — sampled before the drive saw the 0 — shows it disabled
+    // and the adapter writes the function next: the drive takes 0 for one cycle, then the
+    // function (its 0 → 1 edge re-arms it). The image after the function was sampled while the
+    // drive held 0, so it is confirmed one cycle later.
+    rearm_case(def.clone(), &[0x0000, 0x0011, 0x0011, 0x0011]);
 
     // The drive side of the option: after the single shot it reports the probe disabled, and
     // writing the same word again does not re-arm it.
@@ -515,7 +598,8 @@ fn drive_that_needs_zero_before_rearming() {
     plant.add_probe_surface(ProbeSurface::new(0, 5_000.0, vec![(0, 1)]));
     let mut b = Bench::new(&[def.clone()], Nanos(MS), plant);
     b.enable();
-    // Even from idle (word 0, probe disabled) the adapter writes 0 once more and waits.
+    // Even from idle (word 0, probe disabled) the adapter writes 0 once more and waits for an
+    // image showing the probe disabled.
     b.adapters[0]
         .arm_probe(&request(1, ProbeEdge::Positive))
         .unwrap();
@@ -523,6 +607,9 @@ fn drive_that_needs_zero_before_rearming() {
     assert_eq!(b.adapters[0].probe_function_word(), 0x0000);
     b.step();
     assert_eq!(b.adapters[0].probe_function_word(), 0x0011);
+    // This image was sampled while the drive took the 0: not enabled yet.
+    b.step();
+    assert_eq!(b.adapters[0].probe_state(), ProbeState::Arming);
     b.step();
     assert_eq!(b.adapters[0].probe_state(), ProbeState::Armed);
     let start = b.now;
@@ -554,6 +641,9 @@ fn drive_that_needs_zero_before_rearming() {
     b.enable();
     b.arm(&[0], &request(1, ProbeEdge::Positive));
     b.link.model_mut(0).unwrap().input_edge(1, true, b.now);
+    // The image of the next exchange was sampled before the edge; the one after carries it.
+    b.step();
+    assert!(b.events(0).is_empty());
     b.step();
     assert_eq!(b.events(0).len(), 1);
     b.adapters[0]
@@ -682,11 +772,13 @@ fn zero_pulse_trigger_latches_the_index_positions() {
 
 #[test]
 fn negative_edge_and_probe_2() {
-    let kv = generic().model.kv;
     // Active-high probe, negative edge: latched when the pulse ends, 5 ms after the crossing.
+    // Without feed-forward the closed forms give the crossing and the position 5 ms later.
+    let def = first_order(generic());
+    let kv = def.model.kv;
     let p = 12_345.0;
     let (mut b, t0) = one_pass(
-        generic(),
+        def,
         ProbeSurface::new(0, p, vec![(0, 1)]),
         &request(1, ProbeEdge::Negative),
     );
@@ -700,6 +792,30 @@ fn negative_edge_and_probe_2() {
     assert!(
         (f64::from(e[0].position) - expect).abs() <= 1.0,
         "{e:?} vs {expect}"
+    );
+
+    // The default drive (feed-forward): the pulse ends 5 ms after the plant's contact edge and
+    // the latch is the drive's position at that time. Over 100 ms into the ramp the drive moves
+    // with its set-point (what is left of the start of the ramp decays with ≈ 24 ms and is
+    // below an increment), so that is p + 10 mm/s × 5 ms = p + 500 increments.
+    let (mut b, _) = one_pass(
+        generic(),
+        ProbeSurface::new(0, p, vec![(0, 1)]),
+        &request(1, ProbeEdge::Negative),
+    );
+    let (contact, at_contact) = b.edge_positions[0].clone();
+    let (release, at_release) = b.edge_positions[1].clone();
+    assert!(contact.rising && !release.rising, "{:?}", b.edge_positions);
+    assert_eq!(release.at, contact.at.saturating_add(Nanos(5 * MS)));
+    assert!((at_contact[0].unwrap() - p).abs() < 0.01, "{at_contact:?}");
+    let e = b.events(0);
+    assert_eq!(e.len(), 1);
+    assert_eq!(e[0].edge, ProbeEdge::Negative);
+    let x = at_release[0].unwrap();
+    assert!((f64::from(e[0].position) - x).abs() <= 1.0, "{e:?} vs {x}");
+    assert!(
+        (f64::from(e[0].position) - (p + 500.0)).abs() <= 1.0,
+        "{e:?}"
     );
 
     // Active-low probe: the negative edge is the contact itself.
@@ -729,17 +845,23 @@ fn negative_edge_and_probe_2() {
 // (e) torque limit and fixed stop
 // ---------------------------------------------------------------------------------------------
 
-/// Axis 0 at rest at 0 moves at +100 inc per 1 ms cycle against a wall at 20000 with
-/// TORQUE_LIMIT 10 % (0x6072 = 100 ‰). Returns the bench after `cycles` and the first cycle
-/// (1-based from the start of the motion) whose feedback showed a fault.
-fn press(window: Option<i64>, cycles: usize) -> (Bench, Option<usize>) {
-    let def = generic();
+/// Axis 0 of `def` at rest at 0 moves at +100 inc per 1 ms cycle against a wall at 20000 with
+/// TORQUE_LIMIT 10 % (0x6072 = 100 ‰). Returns the bench after `cycles`, the first cycle
+/// (1-based from the start of the motion) whose feedback showed a fault, and every feedback.
+///
+/// The drive's set-point at cycle n is 100 n and at the wall its following error is
+/// 100 n − 20000; the feedback of cycle n carries the drive's sample of cycle n − 1.
+fn press(
+    def: &DriveDefinition,
+    window: Option<i64>,
+    cycles: usize,
+) -> (Bench, Option<usize>, Vec<DriveFeedback>) {
     let mut plant = Plant::new();
     plant.add_fixed_stop(FixedStop {
         device: 0,
         position: 20_000.0,
     });
-    let mut b = Bench::new(std::slice::from_ref(&def), Nanos(MS), plant);
+    let mut b = Bench::new(std::slice::from_ref(def), Nanos(MS), plant);
     let tl = def.function("TORQUE_LIMIT").unwrap();
     b.link
         .write_object(0, tl.index, tl.sub, tl.encode(10.0).unwrap())
@@ -751,71 +873,136 @@ fn press(window: Option<i64>, cycles: usize) -> (Bench, Option<usize>) {
     b.enable();
     let start = b.now;
     let mut fault = None;
+    let mut fbs = Vec::new();
     for n in 1..=cycles {
         b.step_with(&|_, t| Some(((t.0 - start.0) / MS) as i32 * 100));
+        fbs.push(b.fb(0));
         if fault.is_none() && b.fb(0).fault {
             fault = Some(n);
         }
     }
-    (b, fault)
+    (b, fault, fbs)
+}
+
+/// The torque law in every operational feedback of an axis pushed against a wall at `wall`
+/// with the effective torque limits `pos` / `neg` (‰), `at_wall` the limit on the wall's side
+/// (signed). Without feed-forward: 0x6077 = 0x60F4 × torque_per_increment clipped to the
+/// limits (±1 for the rounding of 0x6064), both clipped and unclipped cycles must occur. With
+/// feed-forward: pressed against the wall (at it, the set-point beyond it) the stalled axis
+/// makes the speed loop demand ever more acceleration, so 0x6077 sits at the limit.
+fn check_torque_law(
+    def: &DriveDefinition,
+    fbs: &[DriveFeedback],
+    wall: i32,
+    (pos, neg): (f64, f64),
+    at_wall: i32,
+) {
+    let (mut clipped, mut free, mut pressed) = (0, 0, 0);
+    for fb in fbs.iter().filter(|fb| fb.operational) {
+        let torque = fb.torque.expect("0x6077 mapped");
+        let fe = fb.following_error.expect("0x60F4 mapped");
+        let is_pressed = fb.position == wall && fe.signum() == at_wall.signum();
+        if is_pressed {
+            pressed += 1;
+        }
+        if def.model.feed_forward {
+            if is_pressed {
+                assert_eq!(torque, at_wall, "{fb:?}");
+            }
+        } else {
+            let demand = f64::from(fe) * def.model.torque_per_increment;
+            let expected = demand.clamp(-neg, pos);
+            if expected != demand {
+                clipped += 1;
+            } else {
+                free += 1;
+            }
+            assert!(
+                (f64::from(torque) - expected).abs() <= 1.0,
+                "{fb:?}: demand {demand}"
+            );
+        }
+    }
+    assert!(pressed > 0, "never at the wall");
+    if !def.model.feed_forward {
+        assert!(clipped > 0 && free > 0, "clipped {clipped}, free {free}");
+    }
 }
 
 #[test]
 fn fixed_stop_with_reduced_torque_limit_stalls_and_faults() {
-    // Window 50000 inc, time out 10 ms (drive file). The set-point after n cycles is 100 n; at
-    // the wall the lag is 100 n − 20000, over the window from n = 701 on, and the drive faults
-    // in the 11th cycle over the window (> 10 ms), n = 711.
-    let (b, fault) = press(Some(50_000), 705);
-    let fb = b.fb(0);
-    assert!(fault.is_none() && fb.operational);
-    assert_eq!(fb.position, 20_000, "the wall holds");
-    assert_eq!(fb.following_error, Some(100 * 705 - 20_000));
-    // Demand 0.004 ‰/inc × 50500 = 202 ‰ > 100 ‰: clipped, internal limit active.
-    assert_eq!(fb.torque, Some(100));
-    assert_ne!(fb.statusword & 0x0800, 0, "bit 11");
+    // Window 50000 inc, time out 10 ms (drive file). At the wall the drive's lag is
+    // 100 n − 20000, over the window from n = 701 on, and the drive faults in its 11th cycle
+    // over the window (> 10 ms), n = 711; its image reaches the adapter at n = 712.
+    for def in [first_order(generic()), generic()] {
+        let what = format!("feed-forward {}", def.model.feed_forward);
+        let (b, fault, fbs) = press(&def, Some(50_000), 705);
+        let fb = b.fb(0);
+        assert!(fault.is_none() && fb.operational, "{what}");
+        assert_eq!(fb.position, 20_000, "{what}: the wall holds");
+        // The sample of cycle 704.
+        assert_eq!(fb.following_error, Some(100 * 704 - 20_000), "{what}");
+        // Without feed-forward the demand is 0.004 ‰/inc × 50400 = 201.6 ‰ > 100 ‰; with it
+        // the stalled axis demands ever more. Clipped either way, internal limit active.
+        assert_eq!(fb.torque, Some(100), "{what}");
+        assert_ne!(fb.statusword & 0x0800, 0, "{what}: bit 11");
+        check_torque_law(&def, &fbs, 20_000, (100.0, 100.0), 100);
 
-    let (b, fault) = press(Some(50_000), 720);
-    assert_eq!(fault, Some(711));
-    assert_eq!(b.link.models()[0].last_error_code(), 0x8611);
-    assert_ne!(b.fb(0).statusword & 0x2000, 0);
+        let (b, fault, _) = press(&def, Some(50_000), 720);
+        assert_eq!(fault, Some(712), "{what}");
+        assert_eq!(b.link.models()[0].last_error_code(), 0x8611, "{what}");
+        assert_ne!(b.fb(0).statusword & 0x2000, 0, "{what}");
+    }
 }
 
 #[test]
 fn fixed_stop_with_monitoring_off_only_stalls() {
     // S-0-0159 = 0 ("monitoring off") maps to 0x6065 = 0xFFFFFFFF.
     let idn = generic().idn("S-0-0159").cloned().unwrap();
-    let (mut b, fault) = press(idn.encode(0), 1500);
-    assert_eq!(fault, None);
-    let fb = b.fb(0);
-    assert_eq!((fb.position, fb.torque), (20_000, Some(100)));
-    assert_eq!(fb.following_error, Some(130_000));
-    assert_eq!(
-        b.link.read_object(0, 0x6065, 0).map(|v| idn.decode(v)),
-        Ok(0)
-    );
+    for def in [first_order(generic()), generic()] {
+        let (mut b, fault, fbs) = press(&def, idn.encode(0), 1500);
+        assert_eq!(fault, None);
+        let fb = b.fb(0);
+        assert_eq!((fb.position, fb.torque), (20_000, Some(100)));
+        // The sample of cycle 1499.
+        assert_eq!(fb.following_error, Some(129_900));
+        check_torque_law(&def, &fbs, 20_000, (100.0, 100.0), 100);
+        assert_eq!(
+            b.link.read_object(0, 0x6065, 0).map(|v| idn.decode(v)),
+            Ok(0)
+        );
+    }
 }
 
 #[test]
 fn fixed_stop_from_above_uses_the_negative_limit() {
-    let mut plant = Plant::new();
-    plant.add_fixed_stop(FixedStop {
-        device: 0,
-        position: -5_000.0,
-    });
-    let mut b = Bench::new(&[generic()], Nanos(MS), plant);
-    b.link.write_object(0, 0x60E1, 0, 50).unwrap();
-    b.enable();
-    let start = b.now;
-    b.run(300, &|_, t| Some(-(((t.0 - start.0) / MS) as i32) * 100));
-    let fb = b.fb(0);
-    assert_eq!(fb.position, -5_000);
-    // min(0x6072 = 3000, 0x60E1 = 50) for negative torque; demand −0.004 × 25000 = −100 ‰.
-    assert_eq!(fb.torque, Some(-50));
-    // Taking the stop out of the plant frees the axis.
-    b.link.plant_mut().fixed_stops_mut().clear();
-    b.run(5, &|_, _| None);
-    assert!(b.fb(0).position < -5_000);
-    assert_eq!(b.link.models()[0].fixed_stop(), None);
+    for def in [first_order(generic()), generic()] {
+        let mut plant = Plant::new();
+        plant.add_fixed_stop(FixedStop {
+            device: 0,
+            position: -5_000.0,
+        });
+        let mut b = Bench::new(std::slice::from_ref(&def), Nanos(MS), plant);
+        b.link.write_object(0, 0x60E1, 0, 50).unwrap();
+        b.enable();
+        let start = b.now;
+        let mut fbs = Vec::new();
+        for _ in 0..300 {
+            b.step_with(&|_, t| Some(-(((t.0 - start.0) / MS) as i32) * 100));
+            fbs.push(b.fb(0));
+        }
+        let fb = b.fb(0);
+        assert_eq!(fb.position, -5_000);
+        // min(0x6072 = 3000, 0x60E1 = 50) for negative torque. Without feed-forward the
+        // demand is −0.004 × 24900 = −99.6 ‰; with it the stalled axis demands ever more.
+        assert_eq!(fb.torque, Some(-50));
+        check_torque_law(&def, &fbs, -5_000, (3000.0, 50.0), -50);
+        // Taking the stop out of the plant frees the axis.
+        b.link.plant_mut().fixed_stops_mut().clear();
+        b.run(5, &|_, _| None);
+        assert!(b.fb(0).position < -5_000);
+        assert_eq!(b.link.models()[0].fixed_stop(), None);
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1002,6 +1189,10 @@ fn disabling_the_drive_while_armed_fails_the_latch() {
     b.enable();
     b.arm(&[0], &request(1, ProbeEdge::Positive));
     b.link.model_mut(0).unwrap().inject_fault(0x7500);
+    // The drive faults at this exchange's step; the image was sampled before.
+    b.step();
+    assert_eq!(b.fb(0).state, PowerState::OperationEnabled);
+    assert_eq!(b.adapters[0].probe_state(), ProbeState::Armed);
     b.step();
     assert!(matches!(b.adapters[0].probe_state(), ProbeState::Failed(_)));
     assert_eq!(
