@@ -27,7 +27,12 @@
 //! ever reported as new**:
 //!
 //! A confirmation only counts from an input image read after the phase's word went out in an
-//! output image, so an image still showing the drive's previous state never confirms.
+//! output image. On a bus whose drives sample at SYNC0 (every link: the image of an exchange
+//! was sampled one exchange earlier) the first such image may still be from before the drive
+//! saw the word; it can then only confirm a state the drive was already in — the disabled probe
+//! of *Clearing*, which the probe was in, or nothing for *Enabling* (a probe that was not
+//! enabled with clear stored bits cannot show "enabled, stored bits clear" before it saw the
+//! word) — so no stale value is ever reported; the sequence is only a cycle shorter.
 //!
 //! 1. *Clearing* — when the probe is enabled in the last 0x60B9 (bit 0 / 8), when no 0x60B9 was
 //!    seen yet, when the adapter's last word for that probe was not 0, or when the drive file
