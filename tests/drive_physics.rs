@@ -261,8 +261,11 @@ fn corner_before_a_measuring_block_is_an_exact_stop() {
 fn probe_stroke_holds_with_the_dead_time_and_the_drives_own_lag() {
     // Type 2, stroke 0.1 mm (P-AXIS-00086 = 1000), contact at Z = 30 moving down: the axis must
     // come to rest within 0.1 mm of the contact — with feed-forward, and without it (lag v/kv).
-    for link in ["sim", "ethercat-emu"] {
-        for drive in ["cia402-generic", "cia402-no-feedforward", "sercos-ax5000"] {
+    for link in LINKS {
+        for &drive in drives_on(link)
+            .iter()
+            .filter(|d| !matches!(**d, "profidrive-t105" | "ax2000-lightbus"))
+        {
             let mut m = machine_on(
                 link,
                 &[
@@ -356,4 +359,96 @@ fn an_axis_that_cannot_reach_its_target_times_out_with_900016() {
         text.contains("axis Z") && text.contains("in-position"),
         "{text}"
     );
+}
+
+#[test]
+fn probe_stroke_0_is_not_monitored() {
+    // P-AXIS-00086 = 0: no stroke to protect, so the measuring feed is not reduced (before,
+    // a stroke of 0 cut the feed to nearly nothing).
+    let mut m = machine_on("sim", &["P-CHAN-00057=2", "Z.P-AXIS-00086=0"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(&mut m, "N10 G00 Z50\nN20 G100 Z10 F1000\nN30 M30\n");
+    completed(&r, "stroke 0");
+    assert_eq!(r.message_ids(), Vec::<u32>::new(), "no 900044");
+    assert!((r.measurements[Z].result.unwrap().acs - 30.0).abs() <= INC);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Independent axes beside a path (seed 004 §2)
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn independent_axes_beside_a_path_end_where_they_were_programmed() {
+    for link in LINKS {
+        // Y finishes before the path (at 1200 mm/min it needs 1.5 s for 30 mm, X 5 s for 50 mm)
+        // and must stay where it went; then the same with Y finishing within the path.
+        for y in [-30.0, -5.0] {
+            let mut m = machine_on(link, &[]);
+            let r = run(
+                &mut m,
+                &format!(
+                    "N10 G0 X0 Y0 Z0\nN20 G01 X50 F600 Y[INDP_SYN G01 G90 POS{y} FEED1200]\nN30 M30\n"
+                ),
+            );
+            completed(&r, &format!("{link} Y{y}"));
+            assert!(r.message_ids().is_empty(), "{link}: {:?}", r.messages());
+            let axes = m.channel().axes();
+            assert_eq!(axes[X].command(), 50.0, "{link}");
+            assert_eq!(axes[Y].command(), y, "{link}");
+            assert!((axes[Y].actual() - y).abs() <= 0.001, "{link}");
+        }
+        // An independent measuring run beside the path, probe at Y = -10: Y latches -10 and
+        // stops just past it (braking from 20 mm/s at 1 m/s²: 0.2 mm, plus the dead time).
+        let mut m = machine_on(link, &[]);
+        m.add_probe("Y", -10.0).unwrap();
+        let r = run(
+            &mut m,
+            "N10 G0 X0 Y0 Z0\nN20 G01 X50 F600 Y[INDP_SYN G100 G90 POS-30 FEED1200]\nN30 M30\n",
+        );
+        completed(&r, link);
+        assert!(r.message_ids().is_empty(), "{link}: {:?}", r.messages());
+        assert_eq!(m.channel().axes()[X].command(), 50.0, "{link}");
+        let y = m.channel().axes()[Y].command();
+        assert!(y < -10.0 && y > -10.5, "{link}: Y stopped at {y}");
+        let latched = r.measurements[Y].result.expect("Y latched").acs;
+        assert!((latched + 10.0).abs() <= INC, "{link}: {latched}");
+        assert!(r.measurements[Y].merf);
+    }
+}
+
+#[test]
+fn jog_reports_a_settled_position() {
+    // A drive without feed-forward lags v / kv = 0.4 mm at the jog's 1000 mm/min; `jog` prints
+    // the position once the axis is in position (1 µm), not where it was when the set-points
+    // stopped.
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+        .args([
+            "jog",
+            "--axis",
+            "X",
+            "--step",
+            "10",
+            "--set",
+            "X.drive=cia402-no-feedforward",
+        ])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    let words: Vec<&str> = out.split_whitespace().collect();
+    let value = |name: &str| -> f64 {
+        let i = words
+            .iter()
+            .position(|w| *w == name)
+            .unwrap_or_else(|| panic!("{out}"));
+        words[i + 1].parse().unwrap()
+    };
+    assert_eq!(value("command"), 10.0, "{out}");
+    assert!((value("actual") - 10.0).abs() <= 0.001, "{out}");
 }
