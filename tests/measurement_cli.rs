@@ -211,9 +211,10 @@ fn meas_run_latches_both_axes_on_the_line() {
     // N30 G100 X10 Y10 from (5, 0): the line is Y = 2·(X − 5); the probe at X = 8 is crossed
     // at Y = 6, so X latches 8 and Y latches 6. N40 G01 X7 moves X on.
     // X latches where the probe is (the plant switches it on X's own trajectory): 8 to the
-    // increment. Y latches where Y is at that instant: on the line up to the drives' tracking
-    // error (servos with feed-forward: well below 0.1 µm at constant speed) plus the rounding
-    // to an increment — within two increments.
+    // increment. Y latches where Y is at that instant: on the line up to the set-points'
+    // rounding to whole increments (0x607A is an INTEGER32 of increments, so each axis follows
+    // its own staircase within half an increment of the line) plus the latch's own rounding —
+    // within two increments.
     let r = run_json("meas_run.nc", &["--probe-at", "X=8"], 0);
     completed_without_messages(&r);
     let on_line = 2.0 * LATCH_TOL;
