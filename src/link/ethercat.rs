@@ -18,12 +18,13 @@
 //!
 //! # One exchange at `now`
 //!
-//! Outputs go into ethercrab's PDI and one LRW carries them to the devices; on `ethercat-emu`
-//! the emulated segment then runs SYNC0 at `now` (every drive model steps once, with the plant
-//! — probe surfaces and fixed stops — exactly as [`SimLink`](super::sim::SimLink) does) and a
-//! second LRW brings back the inputs of that step, so the axis layer sees the same numbers as
-//! over `--link sim`. On a real interface one LRW per cycle is sent (the devices' own SYNC0
-//! decides when they sample). A wrong working counter or a frame that does not come back is
+//! Outputs go into ethercrab's PDI and one LRW carries them to the devices and brings back the
+//! inputs the devices latched at their previous SYNC0; on `ethercat-emu` the emulated segment
+//! then runs SYNC0 at `now` (every drive model steps once, with the plant — probe surfaces and
+//! fixed stops — exactly as [`SimLink`](super::sim::SimLink) does), filling the inputs the next
+//! frame reads. The actual values thus arrive one cycle after they were sampled: the link's dead
+//! time is two cycles ([`Link::dead_time_cycles`]), as over `--link sim`. On a real interface
+//! the same one LRW per cycle is sent (the devices' own SYNC0 decides when they sample). A wrong working counter or a frame that does not come back is
 //! [`LinkError::Lost`]; the inputs are then left untouched.
 //!
 //! # Acyclic access
