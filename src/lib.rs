@@ -25,5 +25,6 @@ pub mod machine;
 pub mod messages;
 pub mod nc;
 pub mod params;
+pub mod rt;
 pub mod sim;
 pub mod units;

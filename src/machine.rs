@@ -256,6 +256,7 @@ impl Machine {
                 cfg.in_position_timeout_ms,
                 cycle,
             ),
+            max_lost_cycles: cfg.max_lost_cycles,
             meas: channel_meas_config(&cfg.channel),
         };
         // P-AXIS-00777 > 1000: warning 110757 at controller start (seed 004 §8.2.2).

@@ -213,7 +213,10 @@ fn lost_tpdos_a_lost_heartbeat_or_a_drive_fault_during_a_measuring_run_publish_n
         let (ids, exec) = measuring_run(&mut m, |m, k| match (fault, k) {
             ("lost TPDOs", 300) => {
                 let next = m.link_mut().exchanges();
-                m.link_mut().lose_exchange_at(next);
+                // One more than max_lost_cycles (3) in a row: the link is lost.
+                for j in 0..4 {
+                    m.link_mut().lose_exchange_at(next + j);
+                }
             }
             // Heartbeat consumer: 3 × 100 ms without one is a lost node.
             ("lost heartbeat", 10) => {

@@ -284,7 +284,10 @@ fn a_lost_frame_or_a_drive_fault_during_a_measuring_run_publishes_nothing() {
                 if k == 300 {
                     if fault == "lost frame" {
                         let next = m.link_mut().exchanges();
-                        m.link_mut().lose_exchange_at(next);
+                        // One more than max_lost_cycles (3) in a row: the link is lost.
+                        for j in 0..4 {
+                            m.link_mut().lose_exchange_at(next + j);
+                        }
                     } else {
                         m.link_mut().model_mut(Z).unwrap().inject_fault(0x8611);
                     }

@@ -13,7 +13,10 @@ fn default_machine() -> Machine {
 fn lost_exchange_during_motion_aborts_and_brakes() {
     let mut m = default_machine();
     // Enabling takes a few exchanges; lose one well inside the motion.
-    m.link_mut().lose_exchange_at(300);
+    // One more than max_lost_cycles (3) in a row: the link is lost.
+    for j in 0..4 {
+        m.link_mut().lose_exchange_at(300 + j);
+    }
     let r = m.run_program(
         &parse("N10 G01 G90 X100 F6000\nN20 M30\n").unwrap(),
         &mut |_| {},

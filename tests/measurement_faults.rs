@@ -234,7 +234,10 @@ fn lost_exchange_during_a_measuring_run_publishes_nothing() {
     let t = run_traced(&mut m, "N10 G100 Z100 F3000\nN20 M30\n", |m, _, k| {
         if k == 300 {
             let next = m.link_mut().exchanges();
-            m.link_mut().lose_exchange_at(next);
+            // One more than max_lost_cycles (3) in a row: the link is lost.
+            for j in 0..4 {
+                m.link_mut().lose_exchange_at(next + j);
+            }
         }
     });
     assert_eq!(t.ids(), vec![900012], "{:?}", t.messages);
@@ -251,7 +254,10 @@ fn lost_exchange_in_a_second_measuring_block_keeps_the_first_result() {
     let t = run_traced(&mut m, TWO_BLOCKS, |m, block, k| {
         if block == 1 && k == 200 {
             let next = m.link_mut().exchanges();
-            m.link_mut().lose_exchange_at(next);
+            // One more than max_lost_cycles (3) in a row: the link is lost.
+            for j in 0..4 {
+                m.link_mut().lose_exchange_at(next + j);
+            }
         }
     });
     assert_eq!(t.ids(), vec![900012], "{:?}", t.messages);
@@ -264,7 +270,10 @@ fn lost_exchange_through_run_program() {
     // The same with the machine's own loop: exchange 500 is inside the 2 s measuring block.
     let mut m = machine(&[]);
     m.add_probe("Z", 80.0).unwrap();
-    m.link_mut().lose_exchange_at(500);
+    // One more than max_lost_cycles (3) in a row: the link is lost.
+    for j in 0..4 {
+        m.link_mut().lose_exchange_at(500 + j);
+    }
     let r = run(&mut m, "N10 G100 Z100 F3000\nN20 M30\n");
     assert_eq!(r.status, RunStatus::Aborted);
     assert_eq!(r.message_ids(), vec![900012]);
@@ -450,7 +459,10 @@ fn every_drive_family_stops_safely_on_a_fault_or_lost_exchange() {
                         m.link_mut().model_mut(Z).unwrap().inject_fault(0x8611);
                     } else {
                         let next = m.link_mut().exchanges();
-                        m.link_mut().lose_exchange_at(next);
+                        // One more than max_lost_cycles (3) in a row: the link is lost.
+                        for j in 0..4 {
+                            m.link_mut().lose_exchange_at(next + j);
+                        }
                     }
                 }
             });

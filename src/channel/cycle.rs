@@ -17,20 +17,39 @@ pub const LINK_LOST_GIVE_UP_CYCLES: u32 = 100;
 impl Channel {
     // ----- the interpolation cycle --------------------------------------------------------
 
-    /// The link failed to exchange process data this cycle: the inputs are stale. Stop (the
-    /// drives receive braking set-points as soon as the link is back) and report.
+    /// The link failed to exchange process data this cycle: the inputs are stale.
     ///
-    /// 900012 is reported once per run of consecutive lost exchanges (later ones are logged).
-    /// When the link stays lost for [`LINK_LOST_GIVE_UP_CYCLES`], the channel stops waiting for
-    /// the axes to confirm standstill (it cannot see them) and is aborted: the drives' own
-    /// watchdogs (EtherCAT SM watchdog, CANopen heartbeat consumer) stop them.
+    /// A lost exchange is a counted event, not the end of a run: up to `max_lost_cycles`
+    /// (machine key, default [`crate::params::DEFAULT_MAX_LOST_CYCLES`]) consecutive ones are counted
+    /// ([`Channel::lost_cycles`]) and the channel holds — its interpolation does not advance, the
+    /// drives keep the last set-point, a latch that happened meanwhile is still in the next
+    /// image and is reported once. One more is error 900012 (once per outage): the axes are
+    /// stopped (the drives receive braking set-points as soon as the link is back). A master
+    /// that stalled ([`LinkError::Stalled`]) counts every cycle it missed. When the link stays
+    /// lost for [`LINK_LOST_GIVE_UP_CYCLES`], the channel stops waiting for the axes to confirm
+    /// standstill (it cannot see them) and is aborted: the drives' own watchdogs (EtherCAT SM
+    /// watchdog, CANopen heartbeat consumer) stop them.
     pub fn link_lost(&mut self, err: &LinkError) {
+        let missed = match err {
+            LinkError::Stalled { missed, .. } => u32::try_from(*missed).unwrap_or(u32::MAX).max(1),
+            _ => 1,
+        };
         self.cycles += 1;
-        self.lost_streak = self.lost_streak.saturating_add(1);
-        if self.lost_streak == 1 {
+        self.lost_total = self.lost_total.saturating_add(u64::from(missed));
+        let before = self.lost_streak;
+        self.lost_streak = self.lost_streak.saturating_add(missed);
+        let limit = self.cfg.max_lost_cycles;
+        if self.lost_streak <= limit {
+            tracing::debug!(target: "fieldprobe::channel", streak = self.lost_streak, limit, "exchange lost, holding: {err}");
+            return;
+        }
+        if before <= limit {
             self.push(CncMessage::error(
                 ids::LINK_LOST,
-                format!("{err}; axes stopped"),
+                format!(
+                    "{err}; {} consecutive cycles without process data (more than {limit}, max_lost_cycles); axes stopped",
+                    self.lost_streak
+                ),
             ));
         } else {
             tracing::debug!(target: "fieldprobe::channel", streak = self.lost_streak, "exchange lost again: {err}");
@@ -41,6 +60,12 @@ impl Channel {
         if self.lost_streak >= LINK_LOST_GIVE_UP_CYCLES && !matches!(self.mode, Mode::Aborted) {
             self.mode = Mode::Aborted;
         }
+    }
+
+    /// Exchanges lost so far (counted ones and those beyond the limit; a stall counts every
+    /// cycle it missed).
+    pub fn lost_cycles(&self) -> u64 {
+        self.lost_total
     }
 
     /// One interpolation cycle. `images[i]` is axis `i`'s process image after this cycle's

@@ -86,6 +86,9 @@ pub struct ChannelConfig {
     /// Cycles an exact stop may wait for the axes to come inside their in-position windows
     /// (machine key `in_position_timeout_ms`); then error 900016.
     pub in_position_timeout_cycles: u32,
+    /// Consecutive lost exchanges the channel rides through before error 900012 (machine key
+    /// `max_lost_cycles`, see [`Channel::link_lost`]).
+    pub max_lost_cycles: u32,
     /// Channel measurement settings (seed 004 §8.2.1).
     pub meas: ChannelMeasConfig,
 }
@@ -260,6 +263,8 @@ struct AxisBrake {
 pub struct Channel {
     /// Consecutive cycles whose exchange was lost (see [`Channel::link_lost`]).
     lost_streak: u32,
+    /// Lost exchanges in all.
+    lost_total: u64,
     cfg: ChannelConfig,
     axes: Vec<Axis>,
     sls: SoftLimits,
@@ -340,6 +345,7 @@ impl Channel {
             violations: Vec::new(),
             cycles: 0,
             lost_streak: 0,
+            lost_total: 0,
             operation_mode: OperationMode::Automatic,
             measurement: None,
             acyclic: Default::default(),

@@ -45,6 +45,16 @@ pub enum LinkError {
         /// Why (e.g. "frame lost", "working counter 2, expected 3").
         reason: String,
     },
+    /// The master did not run for `missed` cycles (stopped, overloaded): the devices went
+    /// without set-points for that long and their watchdogs may have stopped them. Counts as
+    /// `missed` lost exchanges (see [`crate::channel::Channel::link_lost`]).
+    #[error("the master missed {missed} cycles ({ms:.1} ms without a frame)")]
+    Stalled {
+        /// Cycles without a frame.
+        missed: u64,
+        /// How long, ms.
+        ms: f64,
+    },
     /// The images do not match the link's devices.
     #[error("link has {devices} devices but {images} process images were given")]
     Mismatch {
@@ -198,6 +208,20 @@ pub trait Link: Send {
     /// per axis for a drive with its own extra delay (`dead_time_cycles`).
     fn dead_time_cycles(&self) -> u32 {
         DEFAULT_DEAD_TIME_CYCLES
+    }
+
+    /// The statistics of the paced cycle of a link that leaves the process (`ethercat:IF`,
+    /// `canopen-udp`, `socketcan:IF`); `None` on the in-process links, which run on virtual time.
+    fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {
+        None
+    }
+
+    /// Flush the per-cycle log (`--cycle-log`), if one is written.
+    ///
+    /// # Errors
+    /// A write to the log failed, naming the file.
+    fn finish_cycle_log(&mut self) -> Result<(), String> {
+        Ok(())
     }
 }
 

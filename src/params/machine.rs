@@ -5,6 +5,7 @@
 //! [channel]
 //! cycle_time_us = 1000                 # project key: interpolation cycle, 100 ..= 100000 µs
 //! in_position_timeout_ms = 1000        # project key: how long an exact stop may wait, ms
+//! max_lost_cycles = 3                  # project key: lost exchanges ridden through before 900012
 //! "P-CHAN-00498" = 1                   # parameters by ID …
 //! range_check_prog_soft_limits = 1     # … or by name path (seed 001 §4.2)
 //! [manual]
@@ -47,6 +48,8 @@ pub const MAX_CYCLE_TIME_US: u32 = 100_000;
 pub const DEFAULT_IN_POSITION_WINDOW: u32 = 10;
 /// Default time an exact stop waits for the in-position windows, ms.
 pub const DEFAULT_IN_POSITION_TIMEOUT_MS: u32 = 1000;
+/// Default of `max_lost_cycles`.
+pub const DEFAULT_MAX_LOST_CYCLES: u32 = 3;
 /// Largest dead time (cycles) an axis may declare.
 pub const MAX_DEAD_TIME_CYCLES: u32 = 16;
 /// Default drive definition (`drives/cia402-generic.toml`).
@@ -99,6 +102,9 @@ pub struct MachineConfig {
     /// ms (project key `in_position_timeout_ms`, 1 ..= 600000; default
     /// [`DEFAULT_IN_POSITION_TIMEOUT_MS`]).
     pub in_position_timeout_ms: u32,
+    /// Consecutive lost process-data exchanges the channel rides through before error 900012
+    /// (project key `max_lost_cycles`, 0 ..= 1000; default [`DEFAULT_MAX_LOST_CYCLES`]).
+    pub max_lost_cycles: u32,
     /// Channel parameter list (P-CHAN-*).
     pub channel: ParamSet,
     /// Manual-mode parameter list (P-MANU-*).
@@ -125,6 +131,7 @@ impl MachineConfig {
             source: file.to_string(),
             cycle_time_us: DEFAULT_CYCLE_TIME_US,
             in_position_timeout_ms: DEFAULT_IN_POSITION_TIMEOUT_MS,
+            max_lost_cycles: DEFAULT_MAX_LOST_CYCLES,
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes: Vec::new(),
@@ -230,6 +237,7 @@ impl MachineConfig {
             source: "<default>".to_string(),
             cycle_time_us: DEFAULT_CYCLE_TIME_US,
             in_position_timeout_ms: DEFAULT_IN_POSITION_TIMEOUT_MS,
+            max_lost_cycles: DEFAULT_MAX_LOST_CYCLES,
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes,
@@ -307,6 +315,10 @@ impl MachineConfig {
         }
         if key == "in_position_timeout_ms" {
             self.in_position_timeout_ms = project_int(value, key, 1, 600_000, "ms", &origin)?;
+            return Ok(());
+        }
+        if key == "max_lost_cycles" {
+            self.max_lost_cycles = project_int(value, key, 0, 1000, "cycles", &origin)?;
             return Ok(());
         }
         if let Some(def) = find(key) {
@@ -522,12 +534,21 @@ impl MachineConfig {
                 let raw = int_text(leaf);
                 self.in_position_timeout_ms =
                     project_int(&raw, &leaf.key, 1, 600_000, "ms", &ctx.at(leaf.line))?;
+            } else if leaf.key == "max_lost_cycles" {
+                let raw = int_text(leaf);
+                self.max_lost_cycles =
+                    project_int(&raw, &leaf.key, 0, 1000, "cycles", &ctx.at(leaf.line))?;
             } else {
                 set_leaf(
                     &mut self.channel,
                     leaf,
                     ctx,
-                    &["cycle_time_us", "in_position_timeout_ms", "list"],
+                    &[
+                        "cycle_time_us",
+                        "in_position_timeout_ms",
+                        "max_lost_cycles",
+                        "list",
+                    ],
                 )?;
             }
         }
