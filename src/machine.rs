@@ -131,6 +131,8 @@ pub struct LinkChoice {
     pub pcap: Option<std::path::PathBuf>,
     /// Log every CAN frame into this file (candump -L format).
     pub candump: Option<std::path::PathBuf>,
+    /// Write one CSV row per cycle of a paced link into this file (`--cycle-log`).
+    pub cycle_log: Option<std::path::PathBuf>,
 }
 
 impl LinkChoice {
@@ -140,7 +142,17 @@ impl LinkChoice {
             link: link.to_string(),
             pcap: None,
             candump: None,
+            cycle_log: None,
         }
+    }
+
+    /// The link leaves the process (`ethercat:IF`, `canopen-udp…`, `socketcan:IF`): it runs
+    /// at the bus's real cycle on the wall clock; the others run on virtual time.
+    pub fn leaves_process(&self) -> bool {
+        let l = self.link.as_str();
+        (l.starts_with("ethercat:") && l.len() > "ethercat:".len())
+            || l.starts_with("canopen-udp")
+            || l.starts_with("socketcan:")
     }
 }
 
@@ -332,6 +344,14 @@ impl Machine {
                 "--pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE)".into(),
             ));
         }
+        let mut link = link;
+        if let Some(path) = &choice.cycle_log {
+            let file = std::fs::File::create(path).map_err(|e| {
+                MachineError::Config(format!("--cycle-log {}: {e}", path.display()))
+            })?;
+            link.set_cycle_log(&path.display().to_string(), Box::new(file))
+                .map_err(|e| MachineError::Config(e.to_string()))?;
+        }
         let mut channel = channel;
         for (i, a) in cfg.axes.iter().enumerate() {
             channel.set_dead_time_cycles(i, a.dead_time_cycles.unwrap_or(link.dead_time_cycles()));
@@ -354,6 +374,20 @@ impl Machine {
     /// The channel.
     pub fn channel(&self) -> &Channel {
         &self.channel
+    }
+
+    /// The statistics of the paced cycle (links that leave the process), see
+    /// [`crate::rt::CycleStats`].
+    pub fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {
+        self.link.cycle_summary()
+    }
+
+    /// Flush the cycle log (`--cycle-log`).
+    ///
+    /// # Errors
+    /// A write to it failed, naming the file.
+    pub fn finish_cycle_log(&mut self) -> Result<(), String> {
+        self.link.finish_cycle_log()
     }
 
     /// The channel, mutable (manual mode, reset, referencing).

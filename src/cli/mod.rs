@@ -154,6 +154,22 @@ pub struct LinkArgs {
     /// Log every CAN frame (both directions) in candump -L format into this file (CAN links).
     #[arg(long, value_name = "FILE.log")]
     candump: Option<std::path::PathBuf>,
+    /// One CSV row per cycle (deadline, send time, period error, round trip, missed, lost, DC
+    /// system-time difference) for links that leave the process (ethercat:IF, canopen-udp,
+    /// socketcan:IF).
+    #[arg(long, value_name = "FILE.csv")]
+    cycle_log: Option<std::path::PathBuf>,
+    /// Run the cyclic thread with SCHED_FIFO at this priority (1 ..= 99; needs CAP_SYS_NICE or
+    /// RLIMIT_RTPRIO). Links that leave the process only.
+    #[arg(long, value_name = "N")]
+    rt_priority: Option<u8>,
+    /// Pin the cyclic thread to this CPU. Links that leave the process only.
+    #[arg(long, value_name = "N")]
+    cpu: Option<usize>,
+    /// Lock all memory (mlockall) so no page fault delays a cycle. Links that leave the
+    /// process only.
+    #[arg(long)]
+    mlock: bool,
 }
 
 impl LinkArgs {
@@ -170,7 +186,46 @@ impl LinkArgs {
             link,
             pcap: self.pcap.clone(),
             candump: self.candump.clone(),
+            cycle_log: self.cycle_log.clone(),
         }
+    }
+
+    /// The real-time options given (`--rt-priority`, `--cpu`, `--mlock`).
+    pub fn rt(&self) -> fieldprobe::rt::RtOptions {
+        fieldprobe::rt::RtOptions {
+            priority: self.rt_priority,
+            cpu: self.cpu,
+            lock_memory: self.mlock,
+        }
+    }
+
+    /// Refuse the real-time options and the cycle log on a link that runs on virtual time, and
+    /// apply the real-time options (before the link opens, so its start-up runs with them too).
+    /// Errors name the option and the reason; the caller exits 2.
+    pub fn apply_rt(&self, choice: &fieldprobe::machine::LinkChoice) -> Result<Vec<String>, String> {
+        let rt = self.rt();
+        let wants = !rt.is_empty() || self.cycle_log.is_some();
+        if wants && !choice.leaves_process() {
+            let mut given = Vec::new();
+            if let Some(p) = rt.priority {
+                given.push(format!("--rt-priority {p}"));
+            }
+            if let Some(c) = rt.cpu {
+                given.push(format!("--cpu {c}"));
+            }
+            if rt.lock_memory {
+                given.push("--mlock".into());
+            }
+            if let Some(p) = &self.cycle_log {
+                given.push(format!("--cycle-log {}", p.display()));
+            }
+            return Err(format!(
+                "{}: only for links that leave the process (ethercat:IF, canopen-udp[:GROUP:PORT], socketcan:IF); --link {} runs on virtual time",
+                given.join(", "),
+                choice.link
+            ));
+        }
+        rt.apply().map_err(|e| e.to_string())
     }
 }
 

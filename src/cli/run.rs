@@ -64,7 +64,19 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         return Ok(EXIT_BAD_INPUT);
     };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
-    let mut machine = Machine::with_link(&cfg, &a.link.choice(&cfg))?;
+    let choice = a.link.choice(&cfg);
+    match a.link.apply_rt(&choice) {
+        Ok(applied) => {
+            for what in applied {
+                tracing::info!("real-time: {what}");
+            }
+        }
+        Err(e) => {
+            eprintln!("fieldprobe: {e}");
+            return Ok(EXIT_BAD_INPUT);
+        }
+    }
+    let mut machine = Machine::with_link(&cfg, &choice)?;
     for p in &a.probe_at {
         let (ax, pos) = parse_axis_pos("--probe-at", p)?;
         machine
@@ -100,6 +112,15 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         RunEvent::Message(m) => eprintln!("{m}"),
         RunEvent::Output(_) => {}
     });
+    // The paced cycle of a link that leaves the process: one summary line, and the log.
+    let cycle = machine.cycle_summary();
+    if let Some(c) = &cycle {
+        eprintln!("{c}");
+    }
+    if let Err(e) = machine.finish_cycle_log() {
+        // A log that could not be written is an error (exit 2, as for --trace), never silent.
+        anyhow::bail!("--cycle-log {e}");
+    }
     if let (Some(path), Some(format), Some(tr)) = (&a.trace, trace_format, machine.trace()) {
         super::trace::write(tr, path, format)
             .with_context(|| format!("--trace {}", path.display()))?;
@@ -167,5 +188,6 @@ fn report_json(name: &Option<String>, r: &RunReport, m: &Machine) -> serde_json:
         "msg": r.output(),
         "messages": messages,
         "axes": axes,
+        "cycle": m.cycle_summary(),
     })
 }

@@ -63,6 +63,7 @@ use crate::sim::esc::segment::Segment;
 use crate::sim::esc::{Esc, EscConfig, NullApp};
 use crate::sim::plant::Plant;
 use crate::sim::world::World;
+use crate::rt::{CycleClock, CycleRecord};
 use crate::units::Nanos;
 
 /// SubDevices a link can hold.
@@ -306,7 +307,25 @@ pub struct EthercatLink {
     lose: BTreeSet<u64>,
     miscount: BTreeSet<u64>,
     emulated: bool,
+    /// The paced cycle on a network interface (`None` in-process: virtual time).
+    clock: Option<CycleClock>,
+    /// Configured addresses of the DC devices (0x092C is read round-robin).
+    dc_devices: Vec<u16>,
+    dc_next: usize,
+    /// The shortest sync-manager watchdog time of the devices (0x0400 / 0x0420), ns: a master
+    /// that sends no frame for this long has stalled.
+    watchdog_ns: u64,
 }
+
+/// Every this many cycles the link reads one DC device's system-time difference (0x092C) in an
+/// extra frame (round-robin), so the watch costs next to nothing.
+pub const DC_WATCH_EVERY: u64 = 100;
+
+/// The ETG default sync-manager watchdog: (0x09C2 + 2) × 40 ns × 1000 = 100 ms.
+pub const DEFAULT_WATCHDOG_NS: u64 = 100_000_000;
+
+/// Longest wait for the devices to reach OP while the paced cycle already runs.
+const OP_TIMEOUT: Duration = Duration::from_secs(5);
 
 impl std::fmt::Debug for EthercatLink {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -356,7 +375,26 @@ impl EthercatLink {
                 .into_pre_op_pdi(md)
                 .await
                 .map_err(ec_err("PDO configuration"))?;
-            let group = if any_dc {
+            let group = if any_dc && !emulated {
+                // As in the field: SYNC0 at the cycle period, starting well in the future (at
+                // least 10 ms or 10 periods after the activation is written), the master's
+                // frame half a period after SYNC0 (ethercrab aligns its cycle with
+                // `CycleInfo::next_cycle_wait`); OP is requested and reached while the paced
+                // process-data cycle already runs, so no sync-manager watchdog expires.
+                let g = pdi
+                    .configure_dc_sync(
+                        md,
+                        DcConfiguration {
+                            start_delay: (cycle * 10).max(Duration::from_millis(10)),
+                            sync0_period: cycle,
+                            sync0_shift: cycle / 2,
+                        },
+                    )
+                    .await
+                    .map_err(ec_err("DC SYNC0"))?;
+                let g = g.into_safe_op(md).await.map_err(ec_err("SAFE-OP"))?;
+                Group::Dc(g.request_into_op(md).await.map_err(ec_err("OP"))?)
+            } else if any_dc {
                 let g = pdi
                     .configure_dc_sync(
                         md,
@@ -376,6 +414,14 @@ impl EthercatLink {
             };
             Ok::<_, LinkError>((group, axes))
         })?;
+        let dc_devices = match &group {
+            Group::Dc(g) => g
+                .iter(md)
+                .filter(|sd| sd.dc_support().any())
+                .map(|sd| sd.configured_address())
+                .collect(),
+            Group::NoDc(_) => Vec::new(),
+        };
         let mut link = EthercatLink {
             md,
             group,
@@ -387,9 +433,88 @@ impl EthercatLink {
             lose: BTreeSet::new(),
             miscount: BTreeSet::new(),
             emulated,
+            clock: (!emulated).then(|| CycleClock::new(spec.cycle)),
+            dc_devices,
+            dc_next: 0,
+            watchdog_ns: DEFAULT_WATCHDOG_NS,
         };
+        link.watchdog_ns = link.read_watchdog();
+        link.reach_op()?;
         link.check_images()?;
         Ok(link)
+    }
+
+    /// The shortest sync-manager watchdog of the devices with outputs: (0x0400 + 2) × 40 ns ×
+    /// 0x0420 (ETG.1000.4); [`DEFAULT_WATCHDOG_NS`] where it cannot be read or is 0 (off).
+    fn read_watchdog(&mut self) -> u64 {
+        if self.clock.is_none() {
+            return DEFAULT_WATCHDOG_NS;
+        }
+        let md = self.md;
+        let addrs: Vec<u16> = match &self.group {
+            Group::Dc(g) => g
+                .iter(md)
+                .filter(|sd| !sd.io_raw().outputs().is_empty())
+                .map(|sd| sd.configured_address())
+                .collect(),
+            Group::NoDc(g) => g
+                .iter(md)
+                .filter(|sd| !sd.io_raw().outputs().is_empty())
+                .map(|sd| sd.configured_address())
+                .collect(),
+        };
+        let mut shortest: Option<u64> = None;
+        for a in addrs {
+            let div = drive(&mut self.wire, ethercrab::Command::fprd(a, 0x0400).receive::<u16>(md));
+            let time = drive(&mut self.wire, ethercrab::Command::fprd(a, 0x0420).receive::<u16>(md));
+            if let (Ok(div), Ok(time)) = (div, time) {
+                let ns = (u64::from(div) + 2) * 40 * u64::from(time);
+                if ns > 0 {
+                    shortest = Some(shortest.map_or(ns, |s| s.min(ns)));
+                }
+            }
+        }
+        shortest.unwrap_or(DEFAULT_WATCHDOG_NS)
+    }
+
+    /// On a network interface with DC: run the paced cycle (outputs zero) until every device
+    /// reports OP, at most [`OP_TIMEOUT`]; the devices' SYNC0 and watchdogs see process data
+    /// from the first moment. Elsewhere nothing to do (the group is in OP already).
+    fn reach_op(&mut self) -> Result<(), LinkError> {
+        if self.emulated || !matches!(self.group, Group::Dc(_)) {
+            return Ok(());
+        }
+        let start = Instant::now();
+        loop {
+            let wake = match self.clock.as_mut() {
+                Some(c) => c.tick(),
+                None => return Ok(()),
+            };
+            let md = self.md;
+            let Group::Dc(g) = &self.group else {
+                return Ok(());
+            };
+            let r = drive(&mut self.wire, g.tx_rx_dc(md)).map_err(ec_err("OP transition"))?;
+            if let Some(c) = self.clock.as_mut() {
+                c.align(wake.woke.saturating_add(r.extra.next_cycle_wait.as_nanos() as u64));
+            }
+            if r.all_op() {
+                return Ok(());
+            }
+            if start.elapsed() > OP_TIMEOUT {
+                let states: Vec<String> = r
+                    .subdevice_states
+                    .iter()
+                    .enumerate()
+                    .map(|(i, s)| format!("device {i}: {s:?}"))
+                    .collect();
+                return Err(LinkError::Other(format!(
+                    "EtherCAT OP: not every device reached OP within {} s of process data ({})",
+                    OP_TIMEOUT.as_secs(),
+                    states.join(", ")
+                )));
+            }
+        }
     }
 
     /// Compare ethercrab's image sizes with the drive definitions; compute the expected WKC.
@@ -456,6 +581,47 @@ impl EthercatLink {
         self.exchanges
     }
 
+    /// One exchange of the paced cycle on a network interface: wait for the deadline (with DC
+    /// half a period after SYNC0), send, receive, record. A wait that found deadlines already
+    /// passed (the process was stopped or overloaded) is [`LinkError::Stalled`] after the frame
+    /// went out: the devices had no set-point for that long, the channel counts every missed
+    /// cycle. The images are only updated from a good frame.
+    fn paced_exchange(&mut self, now: Nanos, images: &mut [ProcessImage]) -> Result<(), LinkError> {
+        let Some(clock) = self.clock.as_mut() else {
+            return Ok(());
+        };
+        let wake = clock.tick();
+        let sent = crate::rt::monotonic_ns();
+        let result = self.cycle_frame(now);
+        let done = crate::rt::monotonic_ns();
+        let dc_diff = if result.is_ok() { self.dc_watch() } else { None };
+        if let Some(clock) = self.clock.as_mut() {
+            if let Ok(Some(wait)) = &result {
+                clock.align(sent.saturating_add(wait.as_nanos() as u64));
+            }
+            clock.stats_mut().record(CycleRecord {
+                deadline: wake.deadline,
+                sent,
+                done,
+                missed: wake.missed,
+                lost: result.is_err(),
+                dc_diff,
+            });
+        }
+        result?;
+        // Periods without a frame: counted (overruns); the drives held their set-points and the
+        // channel did not advance either. Only a gap as long as the devices' sync-manager
+        // watchdog is a stalled master: by then they have dropped to SAFE-OP.
+        let gap_ns = wake.missed.saturating_mul(self.cycle.0);
+        if wake.missed > 0 && gap_ns >= self.watchdog_ns {
+            return Err(LinkError::Stalled {
+                missed: wake.missed,
+                ms: gap_ns as f64 * 1e-6,
+            });
+        }
+        self.copy_inputs(images)
+    }
+
     /// Working counter a good cycle returns.
     pub fn expected_wkc(&self) -> u16 {
         self.expected_wkc
@@ -471,13 +637,32 @@ impl EthercatLink {
         self.wire.segment.as_mut()
     }
 
-    /// One LRW; returns the working counter.
-    fn tx_rx(&mut self) -> Result<u16, ethercrab::error::Error> {
+    /// One LRW; returns the working counter and, with DC, the time from now to the next cycle
+    /// start at its shift from SYNC0 (ethercrab's `CycleInfo::next_cycle_wait`).
+    fn tx_rx(&mut self) -> Result<(u16, Option<Duration>), ethercrab::error::Error> {
         let md = self.md;
         match &self.group {
-            Group::Dc(g) => drive(&mut self.wire, g.tx_rx_dc(md)).map(|r| r.working_counter),
-            Group::NoDc(g) => drive(&mut self.wire, g.tx_rx(md)).map(|r| r.working_counter),
+            Group::Dc(g) => drive(&mut self.wire, g.tx_rx_dc(md))
+                .map(|r| (r.working_counter, Some(r.extra.next_cycle_wait))),
+            Group::NoDc(g) => drive(&mut self.wire, g.tx_rx(md)).map(|r| (r.working_counter, None)),
         }
+    }
+
+    /// Every [`DC_WATCH_EVERY`] cycles: one DC device's system-time difference (0x092C: bit 31
+    /// sign, bits 0..30 magnitude in ns), round-robin. `None` in the other cycles or without DC.
+    fn dc_watch(&mut self) -> Option<u32> {
+        if self.dc_devices.is_empty() || self.exchanges % DC_WATCH_EVERY != 0 {
+            return None;
+        }
+        let addr = self.dc_devices[self.dc_next % self.dc_devices.len()];
+        self.dc_next = self.dc_next.wrapping_add(1);
+        let md = self.md;
+        let raw = drive(
+            &mut self.wire,
+            ethercrab::Command::fprd(addr, 0x092C).receive::<u32>(md),
+        )
+        .ok()?;
+        Some(raw & 0x7FFF_FFFF)
     }
 
     fn copy_outputs(&self, images: &[ProcessImage]) -> Result<(), LinkError> {
@@ -526,10 +711,10 @@ impl EthercatLink {
         LinkError::Lost { at: now, reason }
     }
 
-    fn cycle_frame(&mut self, now: Nanos) -> Result<(), LinkError> {
+    fn cycle_frame(&mut self, now: Nanos) -> Result<Option<Duration>, LinkError> {
         match self.tx_rx() {
-            Ok(w) if w == self.expected_wkc => Ok(()),
-            Ok(w) => Err(self.lost(
+            Ok((w, next)) if w == self.expected_wkc => Ok(next),
+            Ok((w, _)) => Err(self.lost(
                 now,
                 format!("working counter {w}, expected {}", self.expected_wkc),
             )),
@@ -977,6 +1162,9 @@ impl Link for EthercatLink {
         // (a network interface's emulator steps after the frame by itself). The actual values
         // thus arrive one exchange after they were sampled (dead time: docs/ethercat.md).
         self.copy_outputs(images)?;
+        if self.clock.is_some() {
+            return self.paced_exchange(now, images);
+        }
         self.cycle_frame(now)?;
         if self.emulated {
             if let Some(seg) = self.wire.segment.as_mut() {
@@ -1064,5 +1252,32 @@ impl Link for EthercatLink {
 
     fn exchanges(&self) -> u64 {
         self.exchanges
+    }
+
+    fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {
+        self.clock.as_ref().map(|c| c.stats().summary())
+    }
+
+    fn finish_cycle_log(&mut self) -> Result<(), String> {
+        match self.clock.as_mut() {
+            Some(c) => c.stats_mut().finish_log(),
+            None => Ok(()),
+        }
+    }
+
+    fn set_cycle_log(
+        &mut self,
+        name: &str,
+        out: Box<dyn std::io::Write + Send>,
+    ) -> Result<(), LinkError> {
+        match self.clock.as_mut() {
+            Some(c) => {
+                c.stats_mut().log_to(name, out);
+                Ok(())
+            }
+            None => Err(LinkError::Other(
+                "--cycle-log: ethercat-emu runs on virtual time; the cycle log is for links that leave the process (ethercat:IF, canopen-udp, socketcan:IF)".into(),
+            )),
+        }
     }
 }

@@ -216,6 +216,22 @@ pub trait Link: Send {
         None
     }
 
+    /// Write one CSV row per cycle of the paced cycle to `out` (`--cycle-log FILE.csv`; `name`
+    /// names it in errors).
+    ///
+    /// # Errors
+    /// The in-process links run on virtual time and have no cycle log.
+    fn set_cycle_log(
+        &mut self,
+        name: &str,
+        out: Box<dyn std::io::Write + Send>,
+    ) -> Result<(), LinkError> {
+        let _ = (name, out);
+        Err(LinkError::Other(
+            "--cycle-log: this link runs on virtual time; the cycle log is for links that leave the process (ethercat:IF, canopen-udp, socketcan:IF)".into(),
+        ))
+    }
+
     /// Flush the per-cycle log (`--cycle-log`), if one is written.
     ///
     /// # Errors
