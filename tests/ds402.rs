@@ -23,6 +23,10 @@ use fieldprobe::link::{Link, LinkError, ProcessImage};
 use fieldprobe::units::Nanos;
 use proptest::prelude::*;
 
+#[path = "common/test_data.rs"]
+mod test_data;
+use test_data::test_data;
+
 const CYCLE: Nanos = Nanos::from_micros(1000);
 
 fn generic() -> DriveDefinition {
@@ -632,12 +636,13 @@ fn decode_dump(bytes: &[u8]) -> String {
 /// SOEM SDO info dump in `../shared/test-data/`).
 #[test]
 fn object_types_agree_with_leadshine_dump() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/test-data/sdo-dumps/leadshine-el7-ec400s-sdinfo.txt");
-    let Ok(bytes) = std::fs::read(&path) else {
-        eprintln!("skipped: {} not present", path.display());
+    let Some(path) = test_data(
+        "sdo-dumps/leadshine-el7-ec400s-sdinfo.txt",
+        "object_types_agree_with_leadshine_dump",
+    ) else {
         return;
     };
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let text = decode_dump(&bytes);
     // "Index: 6040 Datatype: 0006 …" then "  Sub: 00 Datatype: 0006 Bitlength: 0010 …"
     let mut index = None;

@@ -8,25 +8,27 @@ use fieldprobe::bus::canopen::eds::{
 };
 use proptest::prelude::*;
 
-const E35: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../shared/test-data/eds/python-canopen-e35.eds"
-);
-const IPOS: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../shared/test-data/eds/technosoft-ipos-cia402.eds"
-);
+#[path = "common/test_data.rs"]
+mod test_data;
+use test_data::test_data;
 
-fn read(path: &str) -> String {
-    std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"))
+/// The reference files, in `../shared/test-data/`.
+const E35: &str = "eds/python-canopen-e35.eds";
+const IPOS: &str = "eds/technosoft-ipos-cia402.eds";
+
+/// The text of reference file `rel`; `None`: absent, `test` skips (see `common/test_data.rs`).
+fn read(rel: &str, test: &str) -> Option<String> {
+    let path = test_data(rel, test)?;
+    let text = std::fs::read_to_string(&path);
+    Some(text.unwrap_or_else(|e| panic!("{}: {e}", path.display())))
 }
 
-fn e35() -> eds::Eds {
-    eds::parse(&read(E35), "e35.eds").unwrap_or_else(|e| panic!("{e}"))
+fn e35(test: &str) -> Option<eds::Eds> {
+    Some(eds::parse(&read(E35, test)?, "e35.eds").unwrap_or_else(|e| panic!("{e}")))
 }
 
-fn ipos() -> eds::Eds {
-    eds::parse(&read(IPOS), "ipos.eds").unwrap_or_else(|e| panic!("{e}"))
+fn ipos(test: &str) -> Option<eds::Eds> {
+    Some(eds::parse(&read(IPOS, test)?, "ipos.eds").unwrap_or_else(|e| panic!("{e}")))
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -34,7 +36,9 @@ fn ipos() -> eds::Eds {
 
 #[test]
 fn e35_header_sections() {
-    let e = e35();
+    let Some(e) = e35("e35_header_sections") else {
+        return;
+    };
     assert_eq!(e.file_info.file_name.as_deref(), Some("e35.eds"));
     assert_eq!(e.file_info.eds_version.as_deref(), Some("402")); // sic, line 5
     let d = &e.device_info;
@@ -66,7 +70,9 @@ fn e35_header_sections() {
 
 #[test]
 fn e35_objects_and_lists() {
-    let e = e35();
+    let Some(e) = e35("e35_objects_and_lists") else {
+        return;
+    };
     // 211 object sections: 101 VAR + 63 RECORD + 47 ARRAY; 894 sub-index sections.
     assert_eq!(e.object_headers.len(), 211);
     assert_eq!(e.objects.len(), 101 + 894);
@@ -86,7 +92,10 @@ fn e35_objects_and_lists() {
 
 #[test]
 fn e35_object_list_defects_are_warnings() {
-    let e = e35();
+    let Some(text) = read(E35, "e35_object_list_defects_are_warnings") else {
+        return;
+    };
+    let e = eds::parse(&text, "e35.eds").unwrap_or_else(|e| panic!("{e}"));
     let w: Vec<String> = e.warnings.iter().map(ToString::to_string).collect();
     assert_eq!(
         w,
@@ -96,7 +105,7 @@ fn e35_object_list_defects_are_warnings() {
             "e35.eds:6662: [2FFF]: object is in no object list",
         ]
     );
-    let err = eds::parse_with(&read(E35), "e35.eds", ParseOptions { strict: true }).unwrap_err();
+    let err = eds::parse_with(&text, "e35.eds", ParseOptions { strict: true }).unwrap_err();
     assert_eq!(
         err.to_string(),
         "e35.eds:115: [ManufacturerObjects] 105: missing; SupportedObjects=105"
@@ -106,7 +115,9 @@ fn e35_object_list_defects_are_warnings() {
 
 #[test]
 fn e35_values() {
-    let e = e35();
+    let Some(e) = e35("e35_values") else {
+        return;
+    };
     // [1000] DefaultValue=0x20192 (line 53).
     let dt = e.get(0x1000, 0).unwrap();
     assert_eq!(
@@ -171,7 +182,9 @@ fn e35_values() {
 
 #[test]
 fn ipos_header_sections() {
-    let e = ipos();
+    let Some(e) = ipos("ipos_header_sections") else {
+        return;
+    };
     assert_eq!(e.file_info.file_name.as_deref(), Some("iPOS.D.v1.04.eds"));
     assert_eq!(
         (e.file_info.file_version, e.file_info.file_revision),
@@ -210,7 +223,9 @@ fn ipos_header_sections() {
 
 #[test]
 fn ipos_touch_probe_objects() {
-    let e = ipos();
+    let Some(e) = ipos("ipos_touch_probe_objects") else {
+        return;
+    };
     // Lines 2124-2164.
     let expect = [
         (
@@ -269,7 +284,9 @@ fn ipos_touch_probe_objects() {
 
 #[test]
 fn ipos_values() {
-    let e = ipos();
+    let Some(e) = ipos("ipos_values") else {
+        return;
+    };
     // [1013] AccessType=rwr, the only one in the file (line 386).
     assert_eq!(e.get(0x1013, 0).unwrap().access, AccessType::ReadWriteInput);
     assert_eq!(
@@ -313,7 +330,10 @@ fn ipos_values() {
 
 #[test]
 fn load_reads_a_file() {
-    let e = eds::load(IPOS).unwrap();
+    let Some(path) = test_data(IPOS, "load_reads_a_file") else {
+        return;
+    };
+    let e = eds::load(path).unwrap();
     assert_eq!(e.objects.len(), 344);
     let err = eds::load("/nonexistent/x.eds").unwrap_err();
     assert_eq!(err.kind, EdsErrorKind::Io);
@@ -700,21 +720,50 @@ proptest! {
     }
 
     #[test]
-    fn damaged_e35_never_panics(
+    fn decode_never_panics(code in 0u16..0x300, bytes in prop::collection::vec(any::<u8>(), 0..12)) {
+        if let Some(dt) = DataType::from_code(code) {
+            if let Ok(v) = dt.decode(&bytes) {
+                let _ = dt.encode(&v);
+            }
+        }
+    }
+}
+
+// The reference files as seeds: property tests over damaged copies. Each skips as a whole where
+// the files are absent (closure form of `proptest!`, run only once the files are read).
+
+fn seed_config() -> ProptestConfig {
+    ProptestConfig {
+        cases: 200,
+        ..ProptestConfig::default()
+    }
+}
+
+#[test]
+fn damaged_e35_never_panics() {
+    let Some(e35) = read(E35, "damaged_e35_never_panics") else {
+        return;
+    };
+    proptest!(seed_config(), |(
         cuts in prop::collection::vec((any::<usize>(), 0usize..200), 0..4),
         truncate in any::<usize>(),
-    ) {
-        let text = damage(&read(E35), &cuts, truncate);
+    )| {
+        let text = damage(&e35, &cuts, truncate);
         let _ = eds::parse(&text, "e35.eds");
         let _ = eds::parse_with(&text, "e35.eds", ParseOptions { strict: true });
-    }
+    });
+}
 
-    #[test]
-    fn damaged_ipos_never_panics(
+#[test]
+fn damaged_ipos_never_panics() {
+    let Some(ipos) = read(IPOS, "damaged_ipos_never_panics") else {
+        return;
+    };
+    proptest!(seed_config(), |(
         cuts in prop::collection::vec((any::<usize>(), 0usize..200), 0..4),
         truncate in any::<usize>(),
-    ) {
-        let text = damage(&read(IPOS), &cuts, truncate);
+    )| {
+        let text = damage(&ipos, &cuts, truncate);
         if let Ok(e) = eds::parse(&text, "ipos.eds") {
             for entry in e.objects.values() {
                 let _ = entry.value_bytes(127);
@@ -722,14 +771,20 @@ proptest! {
             }
             let _ = e.identity();
         }
-    }
+    });
+}
 
-    #[test]
-    fn line_deletions_never_panic(
+#[test]
+fn line_deletions_never_panic() {
+    const TEST: &str = "line_deletions_never_panic";
+    let (Some(e35), Some(ipos)) = (read(E35, TEST), read(IPOS, TEST)) else {
+        return;
+    };
+    proptest!(seed_config(), |(
         which in prop::bool::ANY,
         drops in prop::collection::vec(any::<prop::sample::Index>(), 1..30),
-    ) {
-        let text = read(if which { E35 } else { IPOS });
+    )| {
+        let text = if which { &e35 } else { &ipos };
         let mut lines: Vec<&str> = text.lines().collect();
         for d in drops {
             if lines.is_empty() {
@@ -738,14 +793,5 @@ proptest! {
             lines.remove(d.index(lines.len()));
         }
         let _ = eds::parse(&lines.join("\n"), "lines.eds");
-    }
-
-    #[test]
-    fn decode_never_panics(code in 0u16..0x300, bytes in prop::collection::vec(any::<u8>(), 0..12)) {
-        if let Some(dt) = DataType::from_code(code) {
-            if let Ok(v) = dt.decode(&bytes) {
-                let _ = dt.encode(&v);
-            }
-        }
-    }
+    });
 }

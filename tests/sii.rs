@@ -10,16 +10,19 @@ use fieldprobe::esi::sii::{
     SyncManager,
 };
 
-fn akd_raw() -> Vec<u8> {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/test-data/sii/kollmorgen-akd.hex"
-    );
-    std::fs::read(path).expect("read ../shared/test-data/sii/kollmorgen-akd.hex")
+#[path = "common/test_data.rs"]
+mod test_data;
+use test_data::test_data;
+
+/// The AKD dump as stored; `None`: absent, `test` skips (see `common/test_data.rs`).
+fn akd_raw(test: &str) -> Option<Vec<u8>> {
+    let path = test_data("sii/kollmorgen-akd.hex", test)?;
+    Some(std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
 }
 
-fn akd() -> Vec<u8> {
-    sii::load_image(&akd_raw()).expect("load AKD image")
+/// The AKD image, loaded; `None` as [`akd_raw`].
+fn akd(test: &str) -> Option<Vec<u8>> {
+    Some(sii::load_image(&akd_raw(test)?).expect("load AKD image"))
 }
 
 fn raw16(b: &[u8], at: usize) -> u16 {
@@ -44,14 +47,18 @@ fn walk_chain(b: &[u8]) -> (Vec<(usize, u16)>, usize) {
 
 #[test]
 fn akd_file_is_raw_binary_and_loads_unchanged() {
-    let raw = akd_raw();
+    let Some(raw) = akd_raw("akd_file_is_raw_binary_and_loads_unchanged") else {
+        return;
+    };
     assert_eq!(raw.len(), 2048);
-    assert_eq!(akd(), raw);
+    assert_eq!(sii::load_image(&raw).expect("load AKD image"), raw);
 }
 
 #[test]
 fn akd_header_identity_from_raw_bytes() {
-    let b = akd();
+    let Some(b) = akd("akd_header_identity_from_raw_bytes") else {
+        return;
+    };
     let c = sii::decode(&b).expect("decode AKD");
     let h = &c.header;
     // Hand-read: 0x10 "6a00 0000", 0x14 "444b 4100" ("DKA"), 0x18 "0200 0000", 0x1C "9300 8399".
@@ -95,7 +102,9 @@ fn akd_header_identity_from_raw_bytes() {
 
 #[test]
 fn akd_header_crc_matches_crc8() {
-    let b = akd();
+    let Some(b) = akd("akd_header_crc_matches_crc8") else {
+        return;
+    };
     // Stored checksum: low byte of word 7 (byte 14) = 0x10, high byte 0.
     assert_eq!(b[14], 0x10);
     assert_eq!(b[15], 0x00);
@@ -109,7 +118,9 @@ fn akd_header_crc_matches_crc8() {
 
 #[test]
 fn akd_category_chain_and_strings() {
-    let b = akd();
+    let Some(b) = akd("akd_category_chain_and_strings") else {
+        return;
+    };
     let c = sii::decode(&b).unwrap();
     let (chain, end) = walk_chain(&b);
     // Hand-read: 0x80 vendor 0x0800 (10 words), 0x98 vendor 0x0801 (6 words), 0xA8 Strings
@@ -170,7 +181,9 @@ fn akd_category_chain_and_strings() {
 
 #[test]
 fn akd_general_fmmu_sm() {
-    let b = akd();
+    let Some(b) = akd("akd_general_fmmu_sm") else {
+        return;
+    };
     let c = sii::decode(&b).unwrap();
     // General data at 0x28E: "0205 0104 010d 0103 0001 0005 0000 0300 1100".
     let g = c.general().expect("General");
@@ -228,7 +241,9 @@ fn akd_general_fmmu_sm() {
 
 #[test]
 fn akd_pdos_and_dc() {
-    let b = akd();
+    let Some(b) = akd("akd_pdos_and_dc") else {
+        return;
+    };
     let c = sii::decode(&b).unwrap();
     // TxPDO data at 0x2E4: "001a 01ff 0008 0000" + entry "4160 0009 0610 0000".
     assert_eq!(raw16(&b, 0x2E4), 0x1A00);
@@ -320,7 +335,9 @@ fn akd_pdos_and_dc() {
 
 #[test]
 fn akd_reencodes_byte_exact() {
-    let b = akd();
+    let Some(b) = akd("akd_reencodes_byte_exact") else {
+        return;
+    };
     let c = sii::decode(&b).unwrap();
     let enc = sii::encode(&c).unwrap();
     // Everything up to and including the End marker at 0x694.
@@ -575,7 +592,9 @@ fn encode_rejects_undefined_flag_bits_and_oversize() {
 
 #[test]
 fn decode_errors_name_offset_and_category() {
-    let b = akd();
+    let Some(b) = akd("decode_errors_name_offset_and_category") else {
+        return;
+    };
     assert_eq!(sii::decode(&b[..100]), Err(SiiError::TooShort { len: 100 }));
 
     let mut bad_crc = b.clone();
@@ -662,7 +681,9 @@ fn decode_errors_name_offset_and_category() {
 
 #[test]
 fn truncations_never_panic() {
-    let b = akd();
+    let Some(b) = akd("truncations_never_panic") else {
+        return;
+    };
     for len in 0..=b.len() {
         let r1 = sii::decode(&b[..len]);
         let r2 = sii::decode_ignoring_checksum(&b[..len]);
@@ -676,7 +697,9 @@ fn truncations_never_panic() {
 
 #[test]
 fn random_corruptions_never_panic() {
-    let b = akd();
+    let Some(b) = akd("random_corruptions_never_panic") else {
+        return;
+    };
     let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
     let mut next = move || {
         state ^= state << 13;
@@ -731,7 +754,9 @@ fn to_intel_hex(b: &[u8]) -> String {
 
 #[test]
 fn intel_hex_and_hex_dump_readers() {
-    let b = akd();
+    let Some(b) = akd("intel_hex_and_hex_dump_readers") else {
+        return;
+    };
     let ihex = to_intel_hex(&b);
     assert_eq!(sii::parse_intel_hex(&ihex).unwrap(), b);
     assert_eq!(sii::load_image(ihex.as_bytes()).unwrap(), b);
@@ -805,20 +830,25 @@ fn add_string_interns() {
     assert_eq!(sii::decode(&b).unwrap(), c);
 }
 
-proptest::proptest! {
-    #[test]
-    fn arbitrary_category_bytes_never_panic(
-        tail in proptest::collection::vec(proptest::num::u8::ANY, 0..600)
-    ) {
-        let mut img = akd()[..0x80].to_vec();
+/// The AKD header followed by arbitrary category bytes (skips as a whole without the dump).
+#[test]
+fn arbitrary_category_bytes_never_panic() {
+    let Some(b) = akd("arbitrary_category_bytes_never_panic") else {
+        return;
+    };
+    let header = &b[..0x80];
+    proptest::proptest!(|(tail in proptest::collection::vec(proptest::num::u8::ANY, 0..600))| {
+        let mut img = header.to_vec();
         img.extend_from_slice(&tail);
         if let Ok(c) = sii::decode(&img) {
             if let Ok(enc) = sii::encode(&c) {
                 proptest::prop_assert_eq!(sii::decode(&enc).unwrap(), c);
             }
         }
-    }
+    });
+}
 
+proptest::proptest! {
     #[test]
     fn arbitrary_text_never_panics_hex_readers(text in "[:0-9A-Fa-f \\n]{0,200}") {
         let _ = sii::parse_intel_hex(&text);
