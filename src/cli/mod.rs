@@ -202,7 +202,10 @@ impl LinkArgs {
     /// Refuse the real-time options and the cycle log on a link that runs on virtual time, and
     /// apply the real-time options (before the link opens, so its start-up runs with them too).
     /// Errors name the option and the reason; the caller exits 2.
-    pub fn apply_rt(&self, choice: &fieldprobe::machine::LinkChoice) -> Result<Vec<String>, String> {
+    pub fn apply_rt(
+        &self,
+        choice: &fieldprobe::machine::LinkChoice,
+    ) -> Result<Vec<String>, String> {
         let rt = self.rt();
         let wants = !rt.is_empty() || self.cycle_log.is_some();
         if wants && !choice.leaves_process() {

@@ -58,12 +58,12 @@ use crate::bus::ethercat::soe::SoeClient;
 use crate::drive::catalogue::{DriveDefinition, Profile};
 use crate::drive::model::DriveModel;
 use crate::esi;
+use crate::rt::{CycleClock, CycleRecord};
 use crate::sim::esc::device::emulated_drive;
 use crate::sim::esc::segment::Segment;
 use crate::sim::esc::{Esc, EscConfig, NullApp};
 use crate::sim::plant::Plant;
 use crate::sim::world::World;
-use crate::rt::{CycleClock, CycleRecord};
 use crate::units::Nanos;
 
 /// SubDevices a link can hold.
@@ -465,8 +465,14 @@ impl EthercatLink {
         };
         let mut shortest: Option<u64> = None;
         for a in addrs {
-            let div = drive(&mut self.wire, ethercrab::Command::fprd(a, 0x0400).receive::<u16>(md));
-            let time = drive(&mut self.wire, ethercrab::Command::fprd(a, 0x0420).receive::<u16>(md));
+            let div = drive(
+                &mut self.wire,
+                ethercrab::Command::fprd(a, 0x0400).receive::<u16>(md),
+            );
+            let time = drive(
+                &mut self.wire,
+                ethercrab::Command::fprd(a, 0x0420).receive::<u16>(md),
+            );
             if let (Ok(div), Ok(time)) = (div, time) {
                 let ns = (u64::from(div) + 2) * 40 * u64::from(time);
                 if ns > 0 {
@@ -496,7 +502,10 @@ impl EthercatLink {
             };
             let r = drive(&mut self.wire, g.tx_rx_dc(md)).map_err(ec_err("OP transition"))?;
             if let Some(c) = self.clock.as_mut() {
-                c.align(wake.woke.saturating_add(r.extra.next_cycle_wait.as_nanos() as u64));
+                c.align(
+                    wake.woke
+                        .saturating_add(r.extra.next_cycle_wait.as_nanos() as u64),
+                );
             }
             if r.all_op() {
                 return Ok(());
@@ -594,7 +603,11 @@ impl EthercatLink {
         let sent = crate::rt::monotonic_ns();
         let result = self.cycle_frame(now);
         let done = crate::rt::monotonic_ns();
-        let dc_diff = if result.is_ok() { self.dc_watch() } else { None };
+        let dc_diff = if result.is_ok() {
+            self.dc_watch()
+        } else {
+            None
+        };
         if let Some(clock) = self.clock.as_mut() {
             if let Ok(Some(wait)) = &result {
                 clock.align(sent.saturating_add(wait.as_nanos() as u64));
