@@ -664,7 +664,7 @@ impl EthercatLink {
     /// Every [`DC_WATCH_EVERY`] cycles: one DC device's system-time difference (0x092C: bit 31
     /// sign, bits 0..30 magnitude in ns), round-robin. `None` in the other cycles or without DC.
     fn dc_watch(&mut self) -> Option<u32> {
-        if self.dc_devices.is_empty() || self.exchanges % DC_WATCH_EVERY != 0 {
+        if self.dc_devices.is_empty() || !self.exchanges.is_multiple_of(DC_WATCH_EVERY) {
             return None;
         }
         let addr = self.dc_devices[self.dc_next % self.dc_devices.len()];
