@@ -1,0 +1,98 @@
+//! Issue 13: the real-time options of `fieldprobe run` take effect or are a clear error (exit 2)
+//! naming the option and the reason — never a silent fallback; and they, like `--cycle-log`, are
+//! refused on the links that run on virtual time.
+
+use std::process::Command;
+
+fn run(args: &[&str]) -> (Option<i32>, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["run", "examples/nc/hello.nc"])
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn real_time_options_are_refused_on_virtual_time_links() {
+    for link in ["sim", "ethercat-emu", "canopen-emu"] {
+        for opt in [
+            vec!["--rt-priority", "50"],
+            vec!["--cpu", "0"],
+            vec!["--mlock"],
+            vec!["--cycle-log", "/tmp/fieldprobe-never-written.csv"],
+        ] {
+            let mut args = vec!["--link", link];
+            args.extend(&opt);
+            let (code, err) = run(&args);
+            assert_eq!(code, Some(2), "{link} {opt:?}: {err}");
+            assert!(
+                err.contains(opt[0])
+                    && err.contains("only for links that leave the process")
+                    && err.contains(&format!("--link {link} runs on virtual time")),
+                "{link} {opt:?}: {err}"
+            );
+        }
+    }
+    assert!(!std::path::Path::new("/tmp/fieldprobe-never-written.csv").exists());
+}
+
+#[test]
+fn impossible_real_time_options_name_the_reason() {
+    // On a link that leaves the process the options are applied before it opens: a CPU that
+    // does not exist and a priority outside SCHED_FIFO's range are errors with the reason.
+    let (code, err) = run(&["--link", "ethercat:fp-no-such-if", "--cpu", "100000"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--cpu 100000: no such CPU"), "{err}");
+    let (code, err) = run(&["--link", "ethercat:fp-no-such-if", "--rt-priority", "0"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("--rt-priority 0: SCHED_FIFO priorities are 1 ..= 99"),
+        "{err}"
+    );
+    // A permitted set of options gets past them to the link, which then names the interface.
+    let (code, err) = run(&["--link", "ethercat:fp-no-such-if", "--cpu", "0"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("fp-no-such-if") && !err.contains("--cpu"),
+        "{err}"
+    );
+}
+
+#[test]
+fn refused_by_the_system_says_what_would_permit_it() {
+    // In an unprivileged user namespace the process has no CAP_SYS_NICE / CAP_IPC_LOCK on the
+    // host: SCHED_FIFO and mlockall (with a 0 memlock limit) are refused — with the reason.
+    let probe = Command::new("unshare").args(["-r", "true"]).status();
+    if !probe.is_ok_and(|s| s.success()) {
+        eprintln!("SKIP refused_by_the_system_says_what_would_permit_it: no unprivileged user namespaces (unshare -r)");
+        return;
+    }
+    let bin = env!("CARGO_BIN_EXE_fieldprobe");
+    for (opt, want) in [
+        (
+            "--rt-priority 50",
+            "--rt-priority 50: not permitted: SCHED_FIFO needs CAP_SYS_NICE",
+        ),
+        (
+            "--mlock",
+            "--mlock: Operation not permitted (needs CAP_IPC_LOCK",
+        ),
+    ] {
+        let o = Command::new("unshare")
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["-r", "sh", "-c"])
+            .arg(format!(
+                "ulimit -l 0; ulimit -r 0 2>/dev/null; exec {bin} run examples/nc/hello.nc --link ethercat:fp-no-such-if {opt}"
+            ))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{opt}: {err}");
+        assert!(err.contains(want), "{opt}: {err}");
+    }
+}
