@@ -48,7 +48,10 @@ for P in $PERIODS; do
     timeout $((SECONDS_RUN * 4 + 30)) $BIN sim ethercat --iface v1 $DEV --seconds $((SECONDS_RUN * 4 + 20)) \
         2>"$TMP/emu.log" &
     EMU=$!
-    sleep 0.5
+    i=0
+    while ! grep -q "listening on" "$TMP/emu.log" 2>/dev/null && [ $i -lt 100 ]; do
+        sleep 0.1; i=$((i + 1))
+    done
     LOOPS=$((SECONDS_RUN * 1000000 / P))
     CT_PRIO=80; [ -z "$PRIO" ] && CT_PRIO=0
     cyclictest -m -q -p "$CT_PRIO" -i "$P" -l "$LOOPS" > "$TMP/ct.txt" 2>&1 &
@@ -60,6 +63,6 @@ for P in $PERIODS; do
     wait "$EMU" 2>/dev/null || true
     echo "== period $P µs, 8 axes, ${SECONDS_RUN} s"
     grep '^cycle:' "$TMP/run.log" || { echo "run failed:"; tail -3 "$TMP/run.log"; }
-    grep -E 'error' "$TMP/run.log" | head -2 || true
+    grep -E '^error' "$TMP/run.log" | head -2 || true
     echo "cyclictest (same period and priority): $(grep -E 'Min:' "$TMP/ct.txt" | sed 's/.*Min:/Min:/')"
 done

@@ -73,6 +73,35 @@ impl RtOptions {
         self.priority.is_none() && self.cpu.is_none() && !self.lock_memory
     }
 
+    /// Refuse what no system could take: a priority outside SCHED_FIFO's 1 ..= 99, a CPU this
+    /// machine does not have.
+    ///
+    /// # Errors
+    /// The first such option, with the reason.
+    pub fn check(&self) -> Result<(), RtError> {
+        if let Some(p) = self.priority {
+            if !(1..=99).contains(&p) {
+                return Err(RtError::Priority {
+                    priority: p,
+                    reason: "SCHED_FIFO priorities are 1 ..= 99".into(),
+                });
+            }
+        }
+        if let Some(cpu) = self.cpu {
+            let online = std::thread::available_parallelism().map_or(1, |n| n.get());
+            if cpu >= online {
+                return Err(RtError::Cpu {
+                    cpu,
+                    reason: format!(
+                        "no such CPU (this system has {online}: 0 ..= {})",
+                        online - 1
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Apply every option to the calling thread / process; returns what took effect, in words.
     ///
     /// # Errors

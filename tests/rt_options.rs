@@ -63,36 +63,40 @@ fn impossible_real_time_options_name_the_reason() {
     );
 }
 
+#[path = "common/veth.rs"]
+mod veth;
+
 #[test]
 fn refused_by_the_system_says_what_would_permit_it() {
-    // In an unprivileged user namespace the process has no CAP_SYS_NICE / CAP_IPC_LOCK on the
-    // host: SCHED_FIFO and mlockall (with a 0 memlock limit) are refused — with the reason.
-    let probe = Command::new("unshare").args(["-r", "true"]).status();
-    if !probe.is_ok_and(|s| s.success()) {
-        eprintln!("SKIP refused_by_the_system_says_what_would_permit_it: no unprivileged user namespaces (unshare -r)");
-        return;
-    }
-    let bin = env!("CARGO_BIN_EXE_fieldprobe");
-    for (opt, want) in [
+    // The options are applied once the link is open (the start-up runs without them). In an
+    // unprivileged user namespace (`scripts/netns.sh`: veth pair, `fieldprobe sim ethercat` on
+    // v1) the process has no CAP_SYS_NICE / CAP_IPC_LOCK on the host: SCHED_FIFO, and mlockall
+    // with a 0 memlock limit, are refused — with the reason, exit 2, before any cycle runs.
+    for (opt, prelude, want) in [
         (
             "--rt-priority 50",
+            "",
             "--rt-priority 50: not permitted: SCHED_FIFO needs CAP_SYS_NICE",
         ),
         (
             "--mlock",
+            "ulimit -l 0; ",
             "--mlock: Operation not permitted (needs CAP_IPC_LOCK",
         ),
     ] {
-        let o = Command::new("unshare")
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .args(["-r", "sh", "-c"])
-            .arg(format!(
-                "ulimit -l 0; ulimit -r 0 2>/dev/null; exec {bin} run examples/nc/hello.nc --link ethercat:fp-no-such-if {opt}"
-            ))
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(2), "{opt}: {err}");
-        assert!(err.contains(want), "{opt}: {err}");
+        let Some((code, stdout, stderr)) = veth::netns::meas1_against_sim(
+            "refused_by_the_system_says_what_would_permit_it",
+            veth::veth_probe,
+            &["scripts/netns.sh"],
+            prelude,
+            "ethercat --iface v1 --device esi/fieldprobe-ek1100.xml \
+             --device esi/fieldprobe-cia402-servo.xml:3",
+            &format!("ethercat:v0 {opt}"),
+        ) else {
+            return;
+        };
+        assert_eq!(code, Some(2), "{opt}: {stdout}{stderr}");
+        assert!(stderr.contains(want), "{opt}: {stderr}");
+        assert!(stdout.is_empty(), "{opt}: no cycle ran: {stdout}");
     }
 }

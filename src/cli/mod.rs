@@ -200,12 +200,10 @@ impl LinkArgs {
     }
 
     /// Refuse the real-time options and the cycle log on a link that runs on virtual time, and
-    /// apply the real-time options (before the link opens, so its start-up runs with them too).
-    /// Errors name the option and the reason; the caller exits 2.
-    pub fn apply_rt(
-        &self,
-        choice: &fieldprobe::machine::LinkChoice,
-    ) -> Result<Vec<String>, String> {
+    /// options no system could take (priority out of 1 ..= 99, a CPU that does not exist).
+    /// Errors name the option and the reason; the caller exits 2. The options are applied once
+    /// the link is open ([`fieldprobe::rt::RtOptions::apply`]).
+    pub fn check_rt(&self, choice: &fieldprobe::machine::LinkChoice) -> Result<(), String> {
         let rt = self.rt();
         let wants = !rt.is_empty() || self.cycle_log.is_some();
         if wants && !choice.leaves_process() {
@@ -228,7 +226,7 @@ impl LinkArgs {
                 choice.link
             ));
         }
-        rt.apply().map_err(|e| e.to_string())
+        rt.check().map_err(|e| e.to_string())
     }
 }
 

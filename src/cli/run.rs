@@ -65,7 +65,14 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
     };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
     let choice = a.link.choice(&cfg);
-    match a.link.apply_rt(&choice) {
+    if let Err(e) = a.link.check_rt(&choice) {
+        eprintln!("fieldprobe: {e}");
+        return Ok(EXIT_BAD_INPUT);
+    }
+    let mut machine = Machine::with_link(&cfg, &choice)?;
+    // The cyclic phase runs with the real-time options; the start-up (SII, mailbox, PDO
+    // mapping) ran without them, as the masters' start-up threads do.
+    match a.link.rt().apply() {
         Ok(applied) => {
             for what in applied {
                 tracing::info!("real-time: {what}");
@@ -76,7 +83,6 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
             return Ok(EXIT_BAD_INPUT);
         }
     }
-    let mut machine = Machine::with_link(&cfg, &choice)?;
     for p in &a.probe_at {
         let (ax, pos) = parse_axis_pos("--probe-at", p)?;
         machine
