@@ -46,6 +46,9 @@ use crate::units::Nanos;
 /// Cycle time [`emulated_servo`] uses for the model's `now`/`dt` (1 ms).
 pub const DEFAULT_CYCLE: Duration = Duration::from_millis(1);
 
+/// CiA 402 controlword *quick stop* (bit 1 set, bit 2 clear), the outputs' safe state.
+const CONTROLWORD_QUICK_STOP: u16 = 0x0002;
+
 /// Why an emulated servo could not be built.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ServoError {
@@ -266,6 +269,21 @@ impl EscApplication for ServoApp {
             ) {
                 dst.copy_from_slice(src);
             }
+        }
+    }
+
+    /// Safe state of the outputs when the device leaves OP: a CiA 402 drive gets the controlword
+    /// *quick stop* (0x0002; CiA 402 0x6007 "abort connection option code" 3: OPERATION ENABLED
+    /// → QUICK STOP ACTIVE, which the model holds at the actual position) and keeps its other
+    /// set-points; every other drive gets an all-zero output image (SERCOS: control word 0 =
+    /// drive off). The model goes on stepping with these until the master writes outputs in OP
+    /// again.
+    fn outputs_invalid(&mut self) {
+        match self.model_rx.find(0x6040, 0).map(|e| e.offset) {
+            Some(at) if at + 2 <= self.outputs.len() => {
+                self.outputs[at..at + 2].copy_from_slice(&CONTROLWORD_QUICK_STOP.to_le_bytes());
+            }
+            _ => self.outputs.fill(0),
         }
     }
 
