@@ -649,3 +649,78 @@ fn serve_loop_wakes_for_every_sync0_between_frames() {
     assert_eq!(seg.esc(0).unwrap().al_state(), AlState::SafeOp);
     assert_eq!(clock.get(), 200 * MS);
 }
+
+// ------------------------------------------------------------------ robustness
+
+/// Random register writes (SYNC0 activation with any start and cycle time, any watchdog
+/// divider and time, offsets, AL requests) and process data at random times, with the loop's
+/// calls in between: nothing panics, and every `handle_timeout` call stays bounded.
+#[test]
+fn random_timing_registers_never_panic_or_run_away() {
+    let mut x = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let mut pulses = 0;
+    for round in 0..20 {
+        let mut seg = op_segment(next() % 1_000_000, next(), 0x64, 0);
+        let mut now = 0u64;
+        for _ in 0..400 {
+            let r = next();
+            // Mostly small steps, sometimes a long silence.
+            now = now.saturating_add(match r % 8 {
+                0 => (r >> 8) % 10_000_000_000,
+                _ => (r >> 8) % 3_000_000,
+            });
+            let ado = [
+                reg::DC_SYNC_ACTIVATION,
+                reg::DC_START_TIME,
+                reg::DC_SYNC0_CYCLE,
+                reg::DC_SYSTEM_TIME_OFFSET,
+                reg::WD_DIVIDER,
+                reg::WD_TIME_PD,
+                reg::AL_CONTROL,
+                reg::DC_SYSTEM_TIME,
+            ][((r >> 40) % 8) as usize];
+            let mut data = next().to_le_bytes();
+            let len = [1usize, 2, 4, 8][((r >> 50) % 4) as usize];
+            // Bias towards SYNC0 that runs: activation with SYNC0 (often with the plausibility
+            // check), short cycle times.
+            if ado == reg::DC_SYNC_ACTIVATION && r & 0x7 != 0 {
+                data[0] = 0x03 | (data[0] & 0x20);
+            }
+            if ado == reg::DC_SYNC0_CYCLE && r & 0x7 != 0 {
+                data[..4].copy_from_slice(&(40_000 + (r >> 20) % 2_000_000).to_le_bytes()[..4]);
+            }
+            let cmd = if r & 0x8000 != 0 {
+                Command::Frmw
+            } else {
+                Command::Fpwr
+            };
+            let mut b = FrameBuilder::new([0xFF; 6], [0x10; 6]);
+            b.push_command(cmd, 0, physical_address(STATION, ado), &data[..len])
+                .unwrap();
+            b.push_command(Command::Lrw, 1, 0, &[r as u8, 0, 0, 0])
+                .unwrap();
+            let mut f = b.build();
+            seg.process_frame(&mut f, now).unwrap();
+            let steps_before = seg.syncs();
+            seg.handle_timeout(now);
+            // At most the SYNC0 backlog per call (one device).
+            assert!(seg.syncs() - steps_before <= 1001, "round {round}");
+            pulses += seg.syncs() - steps_before;
+            if let Some(t) = seg.poll_timeout(now) {
+                if t <= now.saturating_add(5_000_000) {
+                    seg.handle_timeout(t);
+                    now = now.max(t);
+                }
+            }
+        }
+        let _ = seg.take_events();
+    }
+    println!("{pulses} SYNC0 world steps");
+    assert!(pulses > 1000, "SYNC0 ran: {pulses} steps");
+}
