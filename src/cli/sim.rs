@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--drive POS=DRIVE]...
-//!                         [--probe-at POS=MM]... [--seconds N]
+//!                         [--probe-at POS=MM]... [--lockstep] [--seconds N]
 //! ```
 //! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; the
 //! first device of each file is used; ring positions count from 0 nearest the master), with the
@@ -27,11 +27,23 @@
 //! * any other device with process data echoes its inverted outputs into its inputs;
 //! * a device without process data has no application.
 //!
-//! The servos' drive models live in a [`World`] (probe surfaces, see [`fieldprobe::sim::plant`])
-//! stepped once per process-data cycle: after every frame that writes process data (LWR/LRW),
-//! with the model time advancing by the servo cycle (1 ms,
-//! [`DEFAULT_CYCLE`](fieldprobe::sim::esc::device::DEFAULT_CYCLE)) per step, whatever the
-//! master's wall-clock cycle. `--probe-at POS=MM` puts a probe surface at MM (axis units of that
+//! The servos' drive models live in a [`World`] (probe surfaces, see [`fieldprobe::sim::plant`]).
+//! The emulator keeps its own clock like real devices
+//! ([`Stepping::OwnClock`](fieldprobe::sim::esc::segment::Stepping), CLOCK_MONOTONIC): each
+//! device's DC system time is that clock + the offset the master wrote (0x0920); a device whose
+//! master activates SYNC0 (0x0981, start time 0x0990, cycle 0x09A0) gets its pulses on that
+//! clock, and the world steps once per SYNC0 with the outputs present at that instant (several
+//! frames in one period: the last one counts; none: the set-points are held and the device
+//! counts a sync error). While no servo has a SYNC0 (a master without DC), the world steps after
+//! every frame that writes process data (LWR/LRW), the model time advancing by the servo cycle
+//! (1 ms, [`DEFAULT_CYCLE`](fieldprobe::sim::esc::device::DEFAULT_CYCLE)) per step, as an
+//! SM-synchronous drive does. The sync-manager watchdog (0x0400 / 0x0420, default 100 ms) drops
+//! a device in OP that gets no process data to SAFE-OP with AL status code 0x001B. Every such
+//! event (SYNC0 activation, a start time in the past, watchdog expiry) is printed on stderr with
+//! the device's ring position and name. `--lockstep` keeps the old behaviour: the world steps
+//! after every process-data frame and neither SYNC0 nor the watchdog runs on the clock.
+//!
+//! `--probe-at POS=MM` puts a probe surface at MM (axis units of that
 //! servo's drive scaling, converted to increments with `increments_per_unit` and `offset`) on
 //! the servo at ring position POS, wired to that servo's touch probe input 1: the input pulses
 //! when the actual position crosses the surface (either direction), so a touch probe armed in
@@ -49,7 +61,7 @@ use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
     device::{emulated_servo, DEFAULT_CYCLE},
     raw,
-    segment::Segment,
+    segment::{Segment, Stepping},
     EchoApp, Esc, EscApplication, EscConfig, NullApp,
 };
 use fieldprobe::sim::plant::{Plant, ProbeSurface};
@@ -99,6 +111,11 @@ struct EthercatArgs {
     /// crosses it). Repeatable.
     #[arg(long = "probe-at", value_name = "POS=MM")]
     probes: Vec<String>,
+    /// Step the drive models after every frame that writes process data (model time + 1 ms
+    /// each), as before the emulator had its own clock: no SYNC0 and no sync-manager watchdog
+    /// on the clock. For tests whose master does not keep a cycle.
+    #[arg(long)]
+    lockstep: bool,
     /// Stop after this many seconds (default: run until killed).
     #[arg(long, value_name = "N")]
     seconds: Option<f64>,
@@ -248,6 +265,8 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
         );
     }
     let mut escs = Vec::new();
+    // Type name per ring position, for the event lines.
+    let mut names: Vec<String> = Vec::new();
     // Devices hosting a model, in ring order (index = world device): (position, what).
     let mut hosted: Vec<(usize, Hosted)> = Vec::new();
     for spec in &a.devices {
@@ -260,6 +279,12 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
                 hosted.push((pos, what));
             }
             escs.push(esc);
+            names.push(
+                file.devices
+                    .first()
+                    .map(|d| d.type_name.clone())
+                    .unwrap_or_default(),
+            );
         }
     }
     if let Some((pos, drive)) = drives.range(escs.len()..).next() {
@@ -311,18 +336,47 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
     let mut segment = Segment::new(escs, HOP_DELAY_NS);
     if !hosted.is_empty() {
         segment.set_world(World::new(plant), Nanos(DEFAULT_CYCLE.as_nanos() as u64));
-        segment.set_auto_sync(true);
     }
+    segment.set_stepping(if a.lockstep {
+        Stepping::PerFrame
+    } else {
+        Stepping::OwnClock
+    });
     eprintln!(
-        "fieldprobe sim ethercat: {} device(s) on {}",
+        "fieldprobe sim ethercat: {} device(s) on {}, {}",
         segment.len(),
-        a.iface
+        a.iface,
+        if a.lockstep {
+            "lockstep (models step after every process-data frame)"
+        } else {
+            "own clock (SYNC0 and sync-manager watchdogs on CLOCK_MONOTONIC)"
+        }
     );
     let mut port = raw::RawPort::open(&a.iface)?;
     eprintln!("fieldprobe sim ethercat: listening on {}", port.iface());
     let stop = AtomicBool::new(false);
-    let stats = port.serve(&mut segment, &stop, deadline)?;
-    eprintln!("fieldprobe sim ethercat: done, {stats:?}");
+    let stats = port.serve_with_events(&mut segment, &stop, deadline, |e| {
+        let name = names.get(e.position).map_or("", String::as_str);
+        eprintln!(
+            "fieldprobe sim ethercat: {:.3} s: device {} ({name}): {}",
+            e.at_ns as f64 / 1e9,
+            e.position,
+            e.event
+        );
+    })?;
+    let sync_errors: Vec<String> = (0..segment.len())
+        .filter_map(|p| segment.esc(p).map(|e| (p, e.sync_errors())))
+        .filter(|(_, n)| *n > 0)
+        .map(|(p, n)| format!("device {p}: {n}"))
+        .collect();
+    eprintln!(
+        "fieldprobe sim ethercat: done, {stats:?}, sync errors: {}",
+        if sync_errors.is_empty() {
+            "none".to_string()
+        } else {
+            sync_errors.join(", ")
+        }
+    );
     Ok(EXIT_OK)
 }
 

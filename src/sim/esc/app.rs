@@ -38,6 +38,11 @@ pub trait EscApplication: Send {
         let _ = (sm, data);
     }
 
+    /// The outputs are no longer valid: the device left OP (the master asked for a lower state,
+    /// or the sync-manager watchdog expired). Put what the application acts on into its safe
+    /// state; [`Self::outputs_written`] brings new outputs in OP again.
+    fn outputs_invalid(&mut self) {}
+
     /// The master is about to read input SM `sm` (SAFE-OP and OP): fill `buf`.
     fn inputs(&mut self, sm: u8, buf: &mut [u8]) {
         let _ = (sm, buf);

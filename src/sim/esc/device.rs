@@ -1,5 +1,6 @@
 //! Emulated EtherCAT servo: an [`Esc`] built from an ESI device description with a CiA 402
-//! drive model ([`Ds402Model`]) behind a CoE mailbox server ([`CoeServer`]).
+//! drive model ([`Ds402Model`](crate::drive::model::ds402::Ds402Model)) behind a CoE mailbox
+//! server ([`CoeServer`]).
 //!
 //! * SII: [`sii_from_device`] of the ESI device, padded ([`sii::encode_padded`]); the ESC
 //!   configuration is [`EscConfig::from_sii`].
@@ -11,15 +12,24 @@
 //!   reads 0x1C12/0x1C13:0.., then each PDO's :0.. with expedited uploads; notes §2.4). All of
 //!   them are ≤ 4 bytes, so the server answers them expedited.
 //! * Process data: the SM2 output image is kept when the master writes it (OP only, see
-//!   [`Esc`]); every read of the SM3 input image is one exchange: the model runs
-//!   `begin_step(now, dt, outputs)` then `finish_step(inputs)`. With a single LRW per cycle
-//!   the inputs are read before that datagram's outputs are written, so the model sees the
-//!   outputs of the previous cycle (like a real drive sampling at SYNC).
-//! * Time: the emulator has no clock of its own here. Exchange `k` (counting from 1) covers the
-//!   cycle ending at `now = k · cycle`, `dt = cycle`, where `cycle` is the configured cycle time
+//!   [`Esc`]; several writes before the next step: the last one counts). In a segment with a
+//!   world ([`Segment::set_world`](super::segment::Segment::set_world)) the segment steps the
+//!   model — at SYNC0, or per process-data frame (see [`super::segment::Stepping`]) — and a read
+//!   of the SM3 input image returns what the last step wrote. Alone (free-running), every read
+//!   of the input image is one exchange: the model runs `begin_step(now, dt, outputs)` then
+//!   `finish_step(inputs)`; with a single LRW per cycle the inputs are read before that
+//!   datagram's outputs are written, so the model sees the outputs of the previous cycle (like
+//!   a real drive sampling at SYNC).
+//! * Time when free-running: exchange `k` (counting from 1) covers the cycle ending at
+//!   `now = k · cycle`, `dt = cycle`, where `cycle` is the configured cycle time
 //!   ([`DEFAULT_CYCLE`] for [`emulated_servo`], or the argument of
-//!   [`emulated_servo_with_cycle`]). Model time therefore advances by one cycle per process-data
-//!   exchange, independent of the master's wall clock.
+//!   [`emulated_servo_with_cycle`]), independent of the master's wall clock.
+//! * Leaving OP (the master asks for a lower state, or the sync-manager watchdog expires) puts
+//!   the outputs the model acts on into their safe state
+//!   ([`EscApplication::outputs_invalid`]): a CiA 402 drive gets the controlword *quick stop*
+//!   (as with 0x6007 "abort connection option code" 3) and stops where it is, in QUICK STOP
+//!   ACTIVE, until the master enables operation again in OP; other families get a zero output
+//!   image.
 //!
 //! The drive definition's PDO layout must hold the same entries as the ESI's default mapping
 //! (index, sub-index, bit length, gaps excluded; the order may differ) with the same image
@@ -45,6 +55,9 @@ use crate::units::Nanos;
 
 /// Cycle time [`emulated_servo`] uses for the model's `now`/`dt` (1 ms).
 pub const DEFAULT_CYCLE: Duration = Duration::from_millis(1);
+
+/// CiA 402 controlword *quick stop* (bit 1 set, bit 2 clear), the outputs' safe state.
+const CONTROLWORD_QUICK_STOP: u16 = 0x0002;
 
 /// Why an emulated servo could not be built.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -266,6 +279,21 @@ impl EscApplication for ServoApp {
             ) {
                 dst.copy_from_slice(src);
             }
+        }
+    }
+
+    /// Safe state of the outputs when the device leaves OP: a CiA 402 drive gets the controlword
+    /// *quick stop* (0x0002; CiA 402 0x6007 "abort connection option code" 3: OPERATION ENABLED
+    /// → QUICK STOP ACTIVE, which the model holds at the actual position) and keeps its other
+    /// set-points; every other drive gets an all-zero output image (SERCOS: control word 0 =
+    /// drive off). The model goes on stepping with these until the master writes outputs in OP
+    /// again.
+    fn outputs_invalid(&mut self) {
+        match self.model_rx.find(0x6040, 0).map(|e| e.offset) {
+            Some(at) if at + 2 <= self.outputs.len() => {
+                self.outputs[at..at + 2].copy_from_slice(&CONTROLWORD_QUICK_STOP.to_le_bytes());
+            }
+            _ => self.outputs.fill(0),
         }
     }
 

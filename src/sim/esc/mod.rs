@@ -24,11 +24,22 @@
 //! DC control loop only records the difference (0x092C) and does not slew the local clock;
 //! DL control loop/forwarding bits and the physical read/write offset (0x0108) are stored but
 //! have no effect;
-//! SYNC0 is exposed as [`Esc::next_sync0`] (no pulse output), latch units are register storage
-//! only, the PDI watchdog is not modelled (the process-data watchdog is, via [`Esc::tick`]).
+//! latch units are register storage only, the PDI watchdog is not modelled.
+//!
+//! Time-driven behaviour (sans-IO: the caller passes the time and asks for the next deadline):
+//! * SYNC0 ([`dc::Sync0Unit`]): writing 0x0981 arms it from 0x0990 / 0x09A0;
+//!   [`Esc::sync0_due_at`] says when the next pulse is due on the caller's clock,
+//!   [`Esc::fire_sync0`] generates it and counts a sync error when no process data reached the
+//!   device in OP since the previous pulse ([`Esc::sync_errors`]).
+//! * Sync-manager (process-data) watchdog: [`Esc::watchdog_deadline`] and [`Esc::tick`] (0x0400,
+//!   0x0420, 0x0440, 0x0442; expiry in OP → SAFE-OP with AL status code 0x001B and the
+//!   application's outputs in their safe state, [`EscApplication::outputs_invalid`]).
+//! * What happened is reported as [`EscEvent`]s ([`Esc::take_events`]).
 
 pub mod app;
+mod clock;
 pub mod coe;
+pub mod dc;
 pub mod device;
 pub mod raw;
 pub mod segment;
@@ -38,6 +49,7 @@ pub mod types;
 use std::collections::VecDeque;
 
 pub use app::{EchoApp, EscApplication, NullApp, ProcessDataSizes};
+pub use clock::EscEvent;
 pub use types::{reg, Address, AlState, AlStatusCode, Command};
 
 /// Standard mailbox configuration (SII words 0x0018..0x001B).
@@ -223,8 +235,15 @@ pub struct Esc {
     port_linked: [bool; 4],
     port_return_ns: [u64; 4],
     local_clock_offset_ns: u64,
-    /// Simulation time of the last output SM write (process-data watchdog trigger).
+    /// Simulation time of the last output SM write or of the OP entry (process-data watchdog).
     last_output_ns: Option<u64>,
+    sync0: dc::Sync0Unit,
+    /// Process data reached an output SM in OP since the previous SYNC0.
+    outputs_since_sync0: bool,
+    /// The device was in OP at the previous SYNC0.
+    op_at_last_sync0: bool,
+    sync_errors: u64,
+    events: Vec<EscEvent>,
 }
 
 impl std::fmt::Debug for Esc {
@@ -260,6 +279,11 @@ impl Esc {
             port_return_ns: [0; 4],
             local_clock_offset_ns: 0,
             last_output_ns: None,
+            sync0: dc::Sync0Unit::default(),
+            outputs_since_sync0: false,
+            op_at_last_sync0: false,
+            sync_errors: 0,
+            events: Vec::new(),
             cfg,
         };
         esc.power_on();
@@ -470,47 +494,6 @@ impl Esc {
     pub fn pd_watchdog_ns(&self) -> u64 {
         let div = u64::from(self.peek_u16(reg::WD_DIVIDER)) + 2;
         u64::from(self.peek_u16(reg::WD_TIME_PD)) * div * 40
-    }
-
-    /// Advance time without traffic: runs the process-data watchdog. If an output SM with the
-    /// watchdog trigger (control bit 6) is active in OP and was not written for
-    /// [`Self::pd_watchdog_ns`], the device drops to SAFE-OP with AL status code 0x001B, clears
-    /// 0x0440 bit 0 and increments 0x0442.
-    pub fn tick(&mut self, now_ns: u64) {
-        let wd = self.pd_watchdog_ns();
-        if wd == 0 || self.state != AlState::Op {
-            return;
-        }
-        let guarded = (0..self.sm_count()).any(|n| {
-            self.active_sm(n)
-                .is_some_and(|sm| !sm.is_mailbox() && sm.ecat_writes() && sm.control & 0x40 != 0)
-        });
-        if !guarded {
-            return;
-        }
-        let last = *self.last_output_ns.get_or_insert(now_ns);
-        if now_ns.saturating_sub(last) > wd {
-            self.mem[usize::from(reg::WD_STATUS_PD)] &= !0x01;
-            let c = usize::from(reg::WD_COUNTER_PD);
-            self.mem[c] = self.mem[c].saturating_add(1);
-            self.last_output_ns = None;
-            self.raise_al_error(AlState::SafeOp, AlStatusCode::SYNC_MANAGER_WATCHDOG);
-        }
-    }
-
-    /// Next SYNC0 event (system time, ns) at or after the system time of `now_ns`, if the
-    /// cyclic unit is activated with SYNC0 (0x0981 bits 0 and 1) and a cycle time is set.
-    pub fn next_sync0(&self, now_ns: u64) -> Option<u64> {
-        if !self.cfg.dc || self.peek_u8(reg::DC_SYNC_ACTIVATION) & 0x03 != 0x03 {
-            return None;
-        }
-        let start = self.peek_u64(reg::DC_START_TIME);
-        let cycle = u64::from(self.peek_u32(reg::DC_SYNC0_CYCLE));
-        let t = self.system_time(now_ns);
-        if t <= start || cycle == 0 {
-            return Some(start);
-        }
-        Some(start + (t - start).div_ceil(cycle) * cycle)
     }
 
     // ---------------------------------------------------------------- datagram processing
@@ -810,6 +793,12 @@ impl Esc {
             let t = self.system_time(now);
             self.put(reg::DC_SYSTEM_TIME, &t.to_le_bytes());
         }
+        if self.cfg.dc && range_overlaps(start, len, reg::DC_START_TIME, 8) {
+            // Read back: the system time of the next SYNC0 pulse (while SYNC0 runs).
+            if let Some(next) = self.sync0.next_pulse() {
+                self.put(reg::DC_START_TIME, &next.to_le_bytes());
+            }
+        }
         if matches!(self.state, AlState::SafeOp | AlState::Op) {
             for n in 0..self.sm_count() {
                 let Some(sm) = self.active_sm(n) else {
@@ -852,7 +841,12 @@ impl Esc {
             (a >= start && a < start + len).then(|| inc[a - start])
         };
         if range_overlaps(start, len, reg::AL_CONTROL, 2) {
+            let before = self.state;
             self.al_control_written();
+            if self.state == AlState::Op && before != AlState::Op {
+                // The process-data watchdog counts from the OP entry.
+                self.last_output_ns = Some(now);
+            }
         }
         if range_overlaps(start, len, reg::RX_ERROR_COUNTER, 12) {
             self.mem[0x0300..0x030C].fill(0);
@@ -928,6 +922,7 @@ impl Esc {
                 if self.state != AlState::Op {
                     continue;
                 }
+                self.outputs_since_sync0 = true;
                 let out = self.mem[sm.start..sm.end()].to_vec();
                 self.app.outputs_written(n as u8, &out);
             }
@@ -957,13 +952,7 @@ impl Esc {
                 self.put(reg::DC_SPEED_COUNTER_DIFF, &[0, 0]);
             }
             if range_overlaps(start, len, reg::DC_SYNC_ACTIVATION, 1) {
-                let act = self.mem[usize::from(reg::DC_SYNC_ACTIVATION)];
-                let status = if act & 0x01 != 0 {
-                    (act & 0x06) >> 1
-                } else {
-                    0
-                };
-                self.mem[usize::from(reg::DC_ACTIVATION_STATUS)] = status;
+                self.sync_activation_written(now);
             }
         }
     }
@@ -1074,6 +1063,9 @@ impl Esc {
     }
 
     fn enter_state(&mut self, s: AlState) {
+        if self.state == AlState::Op && s != AlState::Op {
+            self.app.outputs_invalid();
+        }
         self.state = s;
         let a = usize::from(reg::AL_STATUS);
         self.mem[a] = s.bits() | (self.mem[a] & 0x10);
@@ -1141,8 +1133,32 @@ impl Esc {
             .check_transition(from, req)
             .and_then(|()| self.app.state_change(from, req))
         {
-            Ok(()) => self.enter_state(req),
+            Ok(()) => {
+                self.enter_state(req);
+                if req == AlState::SafeOp && from == AlState::PreOp {
+                    self.log_process_data_sms();
+                }
+            }
             Err(code) => self.set_error(code),
+        }
+    }
+
+    /// Debug log of the process-data SMs the master configured (control byte: bit 6 = watchdog
+    /// trigger) when the device enters SAFE-OP.
+    fn log_process_data_sms(&self) {
+        for n in 0..self.sm_count() {
+            if let Some(sm) = self.active_sm(n).filter(|sm| !sm.is_mailbox()) {
+                tracing::debug!(
+                    station = self.station_address(),
+                    sm = n,
+                    start = sm.start,
+                    len = sm.len,
+                    control = sm.control,
+                    outputs = sm.ecat_writes(),
+                    watchdog_trigger = sm.control & 0x40 != 0,
+                    "process-data sync manager at SAFE-OP"
+                );
+            }
         }
     }
 

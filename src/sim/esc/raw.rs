@@ -7,23 +7,78 @@
 //! ignored, and so are frames whose source MAC already has the U/L bit set — our own replies,
 //! which an ETH_P_ALL socket sees as outgoing traffic, or frames processed by another segment.
 //! Every other frame goes through [`Segment::process_frame`] and is sent back on the same
-//! interface. Receives wait at most [`POLL_INTERVAL`], so [`serve`] notices `stop` / the
-//! deadline promptly.
+//! interface.
+//!
+//! # Time
+//!
+//! The segment runs on the serve loop's clock ([`Clock`]; on an interface [`MonotonicClock`],
+//! CLOCK_MONOTONIC since the loop started): every frame is processed at the clock's `now`
+//! (the DC system time 0x0910 of each device = that time + its 0x0920 offset), and in
+//! [`Stepping::OwnClock`](super::segment::Stepping::OwnClock) the loop also wakes for the
+//! devices' SYNC0 pulses and watchdog deadlines ([`Segment::poll_timeout`],
+//! [`Segment::handle_timeout`]) between frames. A receiver thread hands the frames to the loop
+//! through a bounded queue, so the loop can wait for "a frame or the next deadline" with
+//! sub-millisecond resolution. The loop itself ([`serve_loop`]) is generic over the clock and
+//! the frame transport ([`FrameIo`]), so tests run it on virtual time. Waits are at most
+//! [`POLL_INTERVAL`], so `stop` / the deadline are noticed promptly.
 //!
 //! Needs CAP_NET_RAW (e.g. root inside an unprivileged `unshare -rn` namespace).
 
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use pnet_datalink::{Channel, ChannelType, Config, NetworkInterface};
 
-use super::segment::Segment;
+use super::segment::{Segment, SegmentEvent};
 
 /// EtherType of EtherCAT frames.
 pub const ETHERTYPE_ETHERCAT: u16 = 0x88A4;
 
 /// Longest wait for a frame before `stop` / the deadline is checked again.
 pub const POLL_INTERVAL: Duration = Duration::from_millis(50);
+
+/// Frames the receiver thread may queue for the serve loop (then it waits: the kernel's socket
+/// buffer takes the rest, and drops what does not fit, like a full NIC ring).
+const FRAME_QUEUE: usize = 64;
+
+/// A monotonic clock in ns since an arbitrary origin: the time base of [`serve_loop`].
+pub trait Clock {
+    /// The present, ns.
+    fn now_ns(&self) -> u64;
+}
+
+/// CLOCK_MONOTONIC (`std::time::Instant`), ns since the clock was made: the emulator's own
+/// clock on an interface.
+#[derive(Debug, Clone, Copy)]
+pub struct MonotonicClock(Instant);
+
+impl MonotonicClock {
+    /// A clock reading 0 now.
+    pub fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    /// Clock time of `instant` (0 if it lies before the origin).
+    pub fn at(&self, instant: Instant) -> u64 {
+        u64::try_from(instant.saturating_duration_since(self.0).as_nanos()).unwrap_or(u64::MAX)
+    }
+}
+
+impl Clock for MonotonicClock {
+    fn now_ns(&self) -> u64 {
+        self.at(Instant::now())
+    }
+}
+
+/// The frame transport of [`serve_loop`]: Ethernet frames in and out.
+pub trait FrameIo {
+    /// The next received Ethernet frame (any EtherType), waiting at most `timeout`; `Ok(None)`
+    /// if none came.
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, RawError>;
+    /// Send one Ethernet frame.
+    fn send(&mut self, frame: &[u8]) -> Result<(), RawError>;
+}
 
 /// Failure to serve on an interface; every variant names the interface.
 #[derive(Debug, thiserror::Error)]
@@ -183,84 +238,182 @@ impl RawPort {
         (frame.len() >= 14 && frame[12..14] == [0x88, 0xA4]).then(|| frame.to_vec())
     }
 
-    /// Serve `segment` until `stop` is set or `deadline` passes (whichever first).
-    ///
-    /// Simulation time given to [`Segment::process_frame`] is the time since the call.
-    /// Fails if a receive or send fails for another reason than the receive timeout.
+    /// Serve `segment` until `stop` is set or `deadline` passes (whichever first); the
+    /// segment's events are logged only (see [`Self::serve_with_events`]).
     pub fn serve(
         &mut self,
         segment: &mut Segment,
         stop: &AtomicBool,
         deadline: Option<Instant>,
     ) -> Result<ServeStats, RawError> {
-        let iface = self.iface.as_str();
+        self.serve_with_events(segment, stop, deadline, |_| {})
+    }
+
+    /// Serve `segment` on this interface with [`serve_loop`] on a [`MonotonicClock`] started
+    /// now, until `stop` is set or `deadline` passes; `on_event` gets every [`SegmentEvent`]
+    /// (SYNC0 activation, watchdog expiry, …) as it is noticed.
+    ///
+    /// Fails if a receive or send fails for another reason than the receive timeout.
+    pub fn serve_with_events(
+        &mut self,
+        segment: &mut Segment,
+        stop: &AtomicBool,
+        deadline: Option<Instant>,
+        on_event: impl FnMut(&SegmentEvent),
+    ) -> Result<ServeStats, RawError> {
         tracing::info!(
-            iface,
+            iface = self.iface.as_str(),
             devices = segment.len(),
+            stepping = ?segment.stepping(),
             "serving emulated EtherCAT segment"
         );
-        let t0 = Instant::now();
-        let mut stats = ServeStats::default();
-        let mut buf = Vec::with_capacity(1600);
-        loop {
-            if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
-                return Ok(stats);
-            }
-            match self.rx.next() {
-                Ok(frame) => {
-                    if !is_ethercat(frame) {
-                        stats.skipped_other += 1;
-                        continue;
-                    }
-                    if already_processed(frame) {
-                        stats.skipped_processed += 1;
-                        continue;
-                    }
-                    buf.clear();
-                    buf.extend_from_slice(frame);
-                }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::TimedOut
-                            | std::io::ErrorKind::WouldBlock
-                            | std::io::ErrorKind::Interrupted
-                    ) =>
-                {
-                    continue;
-                }
-                Err(source) => {
-                    return Err(RawError::Receive {
-                        iface: iface.to_string(),
-                        source,
-                    })
-                }
-            }
-            let now = t0.elapsed().as_nanos() as u64;
-            match segment.process_frame(&mut buf, now) {
-                Ok(true) => {}
-                Ok(false) => continue, // dropped on purpose (fault knob)
-                Err(e) => {
-                    tracing::debug!(iface, error = %e, "invalid EtherCAT frame dropped");
-                    stats.invalid += 1;
-                    continue;
+        let clock = MonotonicClock::start();
+        let deadline_ns = deadline.map(|d| clock.at(d));
+        let done = AtomicBool::new(false);
+        let iface = self.iface.as_str();
+        let rx = &mut self.rx;
+        let tx = &mut self.tx;
+        std::thread::scope(|scope| {
+            let (frames_tx, frames_rx) = mpsc::sync_channel(FRAME_QUEUE);
+            let done_ref = &done;
+            scope.spawn(move || receive_frames(rx, &frames_tx, done_ref));
+            let mut io = QueuedIo {
+                iface,
+                frames: frames_rx,
+                tx,
+            };
+            let r = serve_loop(&mut io, &clock, segment, stop, deadline_ns, on_event);
+            done.store(true, Ordering::Relaxed);
+            drop(io); // the receiver thread's next hand-over fails and it ends
+            r
+        })
+    }
+}
+
+/// The receiver thread: every frame from `rx` into `frames` until `done` is set or the loop
+/// went away; a receive error is handed over and ends the thread.
+fn receive_frames(
+    rx: &mut Box<dyn pnet_datalink::DataLinkReceiver>,
+    frames: &mpsc::SyncSender<std::io::Result<Vec<u8>>>,
+    done: &AtomicBool,
+) {
+    while !done.load(Ordering::Relaxed) {
+        match rx.next() {
+            Ok(frame) => {
+                if frames.send(Ok(frame.to_vec())).is_err() {
+                    return;
                 }
             }
-            match self.tx.send_to(&buf, None) {
-                Some(Ok(())) => stats.answered += 1,
-                Some(Err(source)) => {
-                    return Err(RawError::Send {
-                        iface: iface.to_string(),
-                        source,
-                    })
-                }
-                None => {
-                    return Err(RawError::Send {
-                        iface: iface.to_string(),
-                        source: std::io::Error::other("send_to not supported by the channel"),
-                    })
-                }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::Interrupted
+                ) => {}
+            Err(e) => {
+                let _ = frames.send(Err(e));
+                return;
             }
+        }
+    }
+}
+
+/// [`FrameIo`] of an interface: frames from the receiver thread's queue, sent directly.
+struct QueuedIo<'a> {
+    iface: &'a str,
+    frames: mpsc::Receiver<std::io::Result<Vec<u8>>>,
+    tx: &'a mut Box<dyn pnet_datalink::DataLinkSender>,
+}
+
+impl FrameIo for QueuedIo<'_> {
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, RawError> {
+        match self.frames.recv_timeout(timeout) {
+            Ok(Ok(frame)) => Ok(Some(frame)),
+            Ok(Err(source)) => Err(RawError::Receive {
+                iface: self.iface.to_string(),
+                source,
+            }),
+            Err(mpsc::RecvTimeoutError::Timeout) => Ok(None),
+            Err(mpsc::RecvTimeoutError::Disconnected) => Err(RawError::Receive {
+                iface: self.iface.to_string(),
+                source: std::io::Error::other("the receiver thread ended"),
+            }),
+        }
+    }
+
+    fn send(&mut self, frame: &[u8]) -> Result<(), RawError> {
+        let error = |source| RawError::Send {
+            iface: self.iface.to_string(),
+            source,
+        };
+        match self.tx.send_to(frame, None) {
+            Some(Ok(())) => Ok(()),
+            Some(Err(source)) => Err(error(source)),
+            None => Err(error(std::io::Error::other(
+                "send_to not supported by the channel",
+            ))),
+        }
+    }
+}
+
+/// Serve `segment` over `io` on `clock` until `stop` is set or the clock reaches
+/// `deadline_ns`: wait for a frame or the segment's next deadline
+/// ([`Segment::poll_timeout`], at most [`POLL_INTERVAL`]), run what is due
+/// ([`Segment::handle_timeout`]), process an EtherCAT frame at the clock's `now` and send it
+/// back. Frames of other EtherTypes, frames whose source MAC already has the U/L bit set and
+/// frames the segment rejects are not answered (counted in [`ServeStats`]). `on_event` gets the
+/// segment's events.
+pub fn serve_loop(
+    io: &mut impl FrameIo,
+    clock: &impl Clock,
+    segment: &mut Segment,
+    stop: &AtomicBool,
+    deadline_ns: Option<u64>,
+    mut on_event: impl FnMut(&SegmentEvent),
+) -> Result<ServeStats, RawError> {
+    let poll_ns = u64::try_from(POLL_INTERVAL.as_nanos()).unwrap_or(u64::MAX);
+    let mut stats = ServeStats::default();
+    loop {
+        let now = clock.now_ns();
+        if stop.load(Ordering::Relaxed) || deadline_ns.is_some_and(|d| now >= d) {
+            return Ok(stats);
+        }
+        segment.handle_timeout(now);
+        for e in segment.take_events() {
+            on_event(&e);
+        }
+        let mut wait = poll_ns;
+        if let Some(t) = segment.poll_timeout(now) {
+            wait = wait.min(t.saturating_sub(now));
+        }
+        if let Some(d) = deadline_ns {
+            wait = wait.min(d.saturating_sub(now));
+        }
+        let Some(mut frame) = io.recv(Duration::from_nanos(wait))? else {
+            continue;
+        };
+        if !is_ethercat(&frame) {
+            stats.skipped_other += 1;
+            continue;
+        }
+        if already_processed(&frame) {
+            stats.skipped_processed += 1;
+            continue;
+        }
+        match segment.process_frame(&mut frame, clock.now_ns()) {
+            Ok(true) => {}
+            Ok(false) => continue, // dropped on purpose (fault knob)
+            Err(e) => {
+                tracing::debug!(error = %e, "invalid EtherCAT frame dropped");
+                stats.invalid += 1;
+                continue;
+            }
+        }
+        io.send(&frame)?;
+        stats.answered += 1;
+        for e in segment.take_events() {
+            on_event(&e);
         }
     }
 }

@@ -6,12 +6,74 @@
 //! the datagram IRQ field is ORed with the devices' event requests, and the source MAC gets its
 //! U/L bit set (`frame[6] |= 0x02`) like the first device does, so a master recognises the frame
 //! as returned (notes `ethercat.md` §1.1, §2.1).
+//!
+//! # Stepping the drive models ([`Stepping`])
+//!
+//! * [`Stepping::External`] (default): the caller runs SYNC0 with [`Segment::sync0`] — the
+//!   in-process link does after every exchange, on virtual time.
+//! * [`Stepping::PerFrame`] ("lockstep"): the world steps after every frame that writes process
+//!   data, model time advancing by the cycle per step.
+//! * [`Stepping::OwnClock`]: the segment keeps time like real devices do, on a clock the caller
+//!   owns (sans-IO: [`Segment::poll_timeout`] says when to call [`Segment::handle_timeout`], and
+//!   [`Segment::process_frame`] gets the same clock's `now`). Every device generates SYNC0 from
+//!   its own 0x0990 / 0x09A0 / 0x0981 in its DC system time ([`super::dc`]); when a device that
+//!   hosts a drive model has a SYNC0, the world steps once per SYNC0 with the outputs in the
+//!   devices' output SMs at that instant (several frames in one period: the last one counts;
+//!   none: the same outputs again, and a device in OP counts a sync error,
+//!   [`Esc::sync_errors`]). While no hosted device has a SYNC0 (a master without DC, or before
+//!   the first pulse), the world steps per process-data frame as in `PerFrame` (SM-synchronous
+//!   drives). The sync-manager watchdogs run ([`Esc::tick`]).
+//!
+//! What the devices did by themselves (SYNC0 activation, watchdog expiry, …) is collected as
+//! [`SegmentEvent`]s ([`Segment::take_events`]) and logged with `tracing`.
 
-use super::{Esc, EscChain};
+use std::collections::VecDeque;
+
+use super::{Esc, EscChain, EscEvent};
 use crate::bus::ethercat::wire::{self, Command, WireError};
 use crate::drive::model::DriveModel;
 use crate::sim::world::{Port, World};
 use crate::units::Nanos;
+
+/// How the hosted drive models are stepped (see the module documentation).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Stepping {
+    /// By the caller, with [`Segment::sync0`].
+    #[default]
+    External,
+    /// After every frame that writes process data (LWR / LRW), model time + one cycle per step.
+    PerFrame,
+    /// At the devices' SYNC0 on the segment's own clock (per process-data frame while no
+    /// hosted device has a SYNC0), with the sync-manager watchdogs running.
+    OwnClock,
+}
+
+/// Something a device did by itself: [`EscEvent`] with the device's ring position and the
+/// segment's time when it was noticed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SegmentEvent {
+    /// Ring position of the device.
+    pub position: usize,
+    /// The segment's time (`now` of the call that collected it), ns.
+    pub at_ns: u64,
+    /// What happened.
+    pub event: EscEvent,
+}
+
+/// SYNC0 pulses of different devices closer than this (ns) are one SYNC0 of the segment: the
+/// world steps once for them (the devices' system times differ by their propagation delays).
+pub const SYNC0_GROUP_WINDOW_NS: u64 = 20_000;
+
+/// A device's SYNC0 pulses overdue by more than this many cycles are dropped (the emulator fell
+/// behind, e.g. it was stopped) and reported as [`EscEvent::Sync0Skipped`].
+pub const MAX_SYNC0_BACKLOG: u64 = 1000;
+
+/// At most this many SYNC0 / watchdog deadlines are handled per [`Segment::handle_timeout`].
+const MAX_DEADLINES_PER_CALL: usize = 4096;
+
+/// At most this many [`SegmentEvent`]s are kept for [`Segment::take_events`]; older ones are
+/// dropped.
+const MAX_SEGMENT_EVENTS: usize = 256;
 
 /// An emulated segment: devices in ring order plus a frame-level entry point.
 #[derive(Debug)]
@@ -24,9 +86,13 @@ pub struct Segment {
     pub datagrams: u64,
     world: Option<World>,
     cycle: Nanos,
-    auto_sync: bool,
+    stepping: Stepping,
     sync_time: Nanos,
     syncs: u64,
+    /// Own clock: time of the previous SYNC0 that stepped the world.
+    last_world_sync0: Option<u64>,
+    events: VecDeque<SegmentEvent>,
+    events_dropped: u64,
     drop_frames: std::collections::BTreeSet<u64>,
     miscount: std::collections::BTreeSet<u64>,
     offered: u64,
@@ -46,9 +112,12 @@ impl Segment {
             datagrams: 0,
             world: None,
             cycle: Nanos::ZERO,
-            auto_sync: false,
+            stepping: Stepping::External,
             sync_time: Nanos::ZERO,
             syncs: 0,
+            last_world_sync0: None,
+            events: VecDeque::new(),
+            events_dropped: 0,
             drop_frames: std::collections::BTreeSet::new(),
             miscount: std::collections::BTreeSet::new(),
             offered: 0,
@@ -77,11 +146,26 @@ impl Segment {
         self.world.as_mut()
     }
 
-    /// Step the world after every frame that wrote process data (a logical write: LWR / LRW),
-    /// with the segment's own time advancing by the cycle time per step. For masters on a
-    /// network interface, which bring their own cycle; in-process links call [`Self::sync0`].
+    /// `true`: [`Stepping::PerFrame`] — step the world after every frame that wrote process
+    /// data (a logical write: LWR / LRW), with the model time advancing by the cycle time per
+    /// step. `false`: [`Stepping::External`].
     pub fn set_auto_sync(&mut self, on: bool) {
-        self.auto_sync = on;
+        self.set_stepping(if on {
+            Stepping::PerFrame
+        } else {
+            Stepping::External
+        });
+    }
+
+    /// How the world is stepped from now on.
+    pub fn set_stepping(&mut self, stepping: Stepping) {
+        self.stepping = stepping;
+        self.last_world_sync0 = None;
+    }
+
+    /// How the world is stepped.
+    pub fn stepping(&self) -> Stepping {
+        self.stepping
     }
 
     /// Return the `n`-th frame (0-based count of offered frames) with the working counter of
@@ -112,6 +196,12 @@ impl Segment {
     /// Device-initiated mailbox messages (e.g. an EMCY for a new fault) are queued afterwards.
     /// Without a world, nothing happens.
     pub fn sync0(&mut self, now: Nanos) {
+        let cycle = self.cycle;
+        self.step_world(now, cycle);
+    }
+
+    /// One world step at model time `now` over the cycle `[now − cycle, now]`.
+    fn step_world(&mut self, now: Nanos, cycle: Nanos) {
         let Some(world) = self.world.as_mut() else {
             return;
         };
@@ -121,7 +211,7 @@ impl Segment {
             .iter_mut()
             .filter_map(|e| e.app_mut().port())
             .collect();
-        world.step(now, self.cycle, &mut ports);
+        world.step(now, cycle, &mut ports);
         drop(ports);
         for esc in &mut self.chain.escs {
             esc.poll_app_mailbox();
@@ -188,12 +278,18 @@ impl Segment {
     ///
     /// Returns `Ok(false)` for a frame dropped on purpose ([`Self::drop_frame_at`]): the caller
     /// must not hand it back to the master.
+    ///
+    /// [`Stepping::OwnClock`]: SYNC0 pulses and watchdog expiries due at `now_ns` happen before
+    /// the frame ([`Self::handle_timeout`]); the frame then steps the world only while no
+    /// hosted device has a SYNC0. [`Stepping::PerFrame`]: a frame with a logical write steps it.
     pub fn process_frame(&mut self, frame: &mut [u8], now_ns: u64) -> Result<bool, WireError> {
         let n = self.offered;
         self.offered += 1;
         if self.drop_frames.contains(&n) {
             return Ok(false);
         }
+        // Own clock: what fell due before the frame arrived happens first.
+        self.handle_timeout(now_ns);
         let chain = &mut self.chain;
         let miscount = self.miscount.contains(&n);
         let mut logical_write = false;
@@ -215,11 +311,165 @@ impl Segment {
         wire::mark_processed(frame);
         self.frames += 1;
         self.datagrams += count as u64;
-        if logical_write && self.auto_sync {
+        let per_frame = match self.stepping {
+            Stepping::External => false,
+            Stepping::PerFrame => true,
+            Stepping::OwnClock => !self.hosted_sync0_scheduled(),
+        };
+        if logical_write && per_frame {
             let t = self.sync_time.saturating_add(self.cycle);
             self.sync0(t);
         }
+        self.collect_events(now_ns);
         Ok(true)
+    }
+
+    // ------------------------------------------------------------------ own clock
+
+    /// Does a device hosting a drive model have a SYNC0 scheduled?
+    fn hosted_sync0_scheduled(&self) -> bool {
+        self.world.is_some()
+            && self
+                .chain
+                .escs
+                .iter()
+                .any(|e| e.app().model().is_some() && e.sync0_unit().next_pulse().is_some())
+    }
+
+    /// [`Stepping::OwnClock`]: the next time (on the caller's clock, ns) at which
+    /// [`Self::handle_timeout`] has something to do — the earliest SYNC0 pulse or
+    /// sync-manager watchdog expiry of any device; `None` if there is none (or another
+    /// stepping). May lie before `now` if something is overdue.
+    pub fn poll_timeout(&self, now: u64) -> Option<u64> {
+        if self.stepping != Stepping::OwnClock {
+            return None;
+        }
+        self.chain
+            .escs
+            .iter()
+            .flat_map(|e| [e.sync0_due_at(now), e.watchdog_deadline()])
+            .flatten()
+            .min()
+    }
+
+    /// [`Stepping::OwnClock`]: run every SYNC0 pulse and watchdog expiry due at or before
+    /// `now`, in time order. At a SYNC0 every device whose pulse is due within
+    /// [`SYNC0_GROUP_WINDOW_NS`] generates it ([`Esc::fire_sync0`]: the sync-error check) and,
+    /// if one of them hosts a model, the world steps once, over the time since the previous
+    /// such step (one cycle for the first). Nothing happens in another stepping.
+    pub fn handle_timeout(&mut self, now: u64) {
+        if self.stepping != Stepping::OwnClock {
+            return;
+        }
+        for e in &mut self.chain.escs {
+            e.skip_overdue_sync0(now, MAX_SYNC0_BACKLOG);
+        }
+        for _ in 0..MAX_DEADLINES_PER_CALL {
+            let pulse = self
+                .chain
+                .escs
+                .iter()
+                .filter_map(|e| e.sync0_due_at(now))
+                .min();
+            let watchdog = self
+                .chain
+                .escs
+                .iter()
+                .filter_map(Esc::watchdog_deadline)
+                .min();
+            match (pulse, watchdog) {
+                (_, Some(w)) if w <= now && pulse.is_none_or(|p| w <= p) => {
+                    for e in &mut self.chain.escs {
+                        if e.watchdog_deadline().is_some_and(|d| d <= w) {
+                            e.tick(w);
+                        }
+                    }
+                }
+                (Some(p), _) if p <= now => self.sync0_pulse(p, now),
+                _ => break,
+            }
+        }
+        self.collect_events(now);
+    }
+
+    /// The devices' SYNC0 pulses due at `t` (within the group window) on the caller's clock.
+    fn sync0_pulse(&mut self, t: u64, now: u64) {
+        let limit = t.saturating_add(SYNC0_GROUP_WINDOW_NS);
+        let mut step_cycle: Option<u64> = None;
+        for (position, e) in self.chain.escs.iter_mut().enumerate() {
+            if e.sync0_due_at(now).is_none_or(|d| d > limit) {
+                continue;
+            }
+            let cycle = e.sync0_unit().cycle();
+            if e.fire_sync0() == Some(true) {
+                tracing::debug!(
+                    position,
+                    sync_errors = e.sync_errors(),
+                    "SYNC0 without new process data: the outputs are held (sync error)"
+                );
+            }
+            if e.app().model().is_some() && step_cycle.is_none() {
+                step_cycle = Some(cycle);
+            }
+        }
+        let Some(cycle) = step_cycle else {
+            return;
+        };
+        if self.world.is_none() {
+            return;
+        }
+        let nominal = if cycle > 0 {
+            cycle
+        } else {
+            self.cycle.0.max(1)
+        };
+        let dt = match self.last_world_sync0 {
+            Some(prev) if t > prev && t - prev <= 4 * nominal => t - prev,
+            _ => nominal,
+        };
+        self.last_world_sync0 = Some(t);
+        let model_now = self.sync_time.saturating_add(Nanos(dt));
+        self.step_world(model_now, Nanos(dt));
+    }
+
+    /// Move the devices' events into the segment's queue (and the log).
+    fn collect_events(&mut self, now: u64) {
+        for (position, e) in self.chain.escs.iter_mut().enumerate() {
+            for event in e.take_events() {
+                if self.stepping == Stepping::OwnClock {
+                    match event {
+                        EscEvent::WatchdogExpired { .. }
+                        | EscEvent::Sync0Skipped { .. }
+                        | EscEvent::Sync0(
+                            super::dc::Activation::StartMissed { .. }
+                            | super::dc::Activation::CycleTooShort { .. },
+                        ) => tracing::warn!(position, "{event}"),
+                        EscEvent::Sync0(_) => tracing::info!(position, "{event}"),
+                    }
+                } else {
+                    tracing::debug!(position, "{event}");
+                }
+                if self.events.len() >= MAX_SEGMENT_EVENTS {
+                    self.events.pop_front();
+                    self.events_dropped += 1;
+                }
+                self.events.push_back(SegmentEvent {
+                    position,
+                    at_ns: now,
+                    event,
+                });
+            }
+        }
+    }
+
+    /// The events collected since the last call (the latest 256).
+    pub fn take_events(&mut self) -> Vec<SegmentEvent> {
+        self.events.drain(..).collect()
+    }
+
+    /// Events dropped because [`Self::take_events`] was not called often enough.
+    pub fn events_dropped(&self) -> u64 {
+        self.events_dropped
     }
 }
 
