@@ -319,7 +319,15 @@ impl CycleClock {
             }
         }
         sleep_until(deadline);
-        let woke = monotonic_ns();
+        let mut woke = monotonic_ns();
+        // Woken (or resumed after a SIGSTOP) more than half a period late: the slots in
+        // between had no frame; this one goes out in the slot it falls into.
+        if woke > deadline + self.period / 2 {
+            let late = (woke - deadline + self.period / 2) / self.period;
+            missed += late;
+            deadline += late * self.period;
+            woke = woke.max(deadline);
+        }
         self.next = Some(deadline + self.period);
         self.stats.overruns += missed;
         Wake {

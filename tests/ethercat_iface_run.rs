@@ -4,12 +4,9 @@
 //! ends of a veth pair inside a private user + network namespace (`scripts/netns.sh`), which
 //! vanishes with its processes. The run prints the seed's meas1 values (seed 004 §5).
 //!
-//! The emulator runs with `--lockstep` (its models step after every process-data frame): our
-//! master does not pace its cycle yet — it sends its frames back to back, many per SYNC0
-//! period — and a drive stepping at its SYNC0 on the emulator's own clock would fall behind the
-//! set-points (900016 at the first block). Remove `--lockstep` once `fieldprobe run --link
-//! ethercat:IF` keeps its cycle aligned to SYNC0 (and writes a DC start time far enough ahead:
-//! with 1 ms, the servos' activation comes after it and they get no SYNC0, docs/ethercat.md).
+//! Both run on their own clocks as on a real bus: the master paces its cycle half a period
+//! after SYNC0, the emulated drives step at their SYNC0 on the emulator's clock (the timing
+//! itself is checked in `tests/ethercat_rt.rs`).
 //!
 //! Prints `SKIP` and passes only where unprivileged namespaces / `unshare` / `ip` are missing.
 //! Every process is bounded by `timeout` (harness: `tests/common/veth.rs`, `netns.rs`).
@@ -25,7 +22,7 @@ fn meas1_over_a_veth_pair_prints_the_seed_values() {
         &["scripts/netns.sh"],
         "",
         "ethercat --iface v1 --device esi/fieldprobe-ek1100.xml \
-         --device esi/fieldprobe-cia402-servo.xml:3 --probe-at 3=100 --lockstep",
+         --device esi/fieldprobe-cia402-servo.xml:3 --probe-at 3=100",
         "ethercat:v0",
     ) else {
         return;

@@ -32,6 +32,10 @@ const ESI_FILES: [&str; 2] = [
 /// privileges with setgroups(), which an unprivileged user namespace forbids, so the namespace
 /// here is a network namespace only: `unshare -n`); else re-run the test inside a fresh one.
 fn outer(test_name: &str, what: &str) {
+    // One namespace at a time: three masters, emulators and captures at once on a 2-core
+    // machine would measure the contention, not the cycle.
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     if Command::new("tcpdump")
         .arg("--version")
         .stdout(Stdio::null())
@@ -194,7 +198,15 @@ fn paced_run(cycle_us: u64) {
             .args(["run", "examples/nc/seed004/meas1.nc", "--link"])
             .arg(format!("ethercat:{MASTER_IF}"))
             .args(["--json", "--set"])
-            .arg(format!("cycle_time_us={cycle_us}")),
+            .arg(format!("cycle_time_us={cycle_us}"))
+            // A 250 µs master runs with real-time priority, as any would (the test runs as
+            // root in a network namespace of its own, so SCHED_FIFO is permitted); 1 ms runs
+            // without, as a default user would.
+            .args(if cycle_us < 1000 {
+                &["--rt-priority", "50"][..]
+            } else {
+                &[][..]
+            }),
         Duration::from_secs(120),
     );
     let wall = t0.elapsed();
@@ -261,5 +273,97 @@ fn paced_cycle_at_250_us_one_frame_per_period() {
     match veth::inner_env(INNER_ENV) {
         Some(_) => paced_run(250),
         None => outer("paced_cycle_at_250_us_one_frame_per_period", "250"),
+    }
+}
+
+/// Inside the namespace: meas1 at 1 ms, the master stopped for 300 ms during the measuring
+/// block (before the contact).
+fn stalled_master() {
+    let _pair = VethPair::create();
+    let (emu, emu_log) = start_emulator(&ESI_FILES, "120", &["--probe-at".into(), "3=100".into()]);
+    // meas1's first two blocks with a line printed when the measuring block starts: G100 Z20
+    // from Z 200 at F2000 reaches the probe at 100 after 3 s; the master is stopped 1 s in.
+    let dir = tempfile::tempdir().unwrap();
+    let program = dir.path().join("stall.nc");
+    std::fs::write(
+        &program,
+        "%stall\nN05 #MEAS MODE[1]\nN10 G01 G90 Z200 F2000\nN15 #MSG SYN[\"G100\"]\n\
+         N20 G100 Z20 F2000\nN30 #MSG SYN[\"V.A.MESS.Z=%f\", V.A.MESS.Z]\nN40 M30\n",
+    )
+    .unwrap();
+    let mut master = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .arg("run")
+        .arg(&program)
+        .arg("--link")
+        .arg(format!("ethercat:{MASTER_IF}"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn the master");
+    let out = master.stdout.take().expect("stdout");
+    let (line_tx, line_rx) = std::sync::mpsc::channel::<String>();
+    let stdout_reader = std::thread::spawn(move || {
+        use std::io::BufRead;
+        let mut all = String::new();
+        for l in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+            let _ = line_tx.send(l.clone());
+            all.push_str(&l);
+            all.push('\n');
+        }
+        all
+    });
+    let err = master.stderr.take().expect("stderr");
+    let stderr_reader = std::thread::spawn(move || {
+        use std::io::Read;
+        let mut s = String::new();
+        let mut err = err;
+        let _ = err.read_to_string(&mut s);
+        s
+    });
+    let started = line_rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("the measuring block started");
+    assert_eq!(started, "G100");
+    std::thread::sleep(Duration::from_millis(1000));
+    let pid = master.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-STOP", &pid])
+        .status()
+        .unwrap()
+        .success());
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(Command::new("kill")
+        .args(["-CONT", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let status = veth::netns::wait_bounded(&mut master, Duration::from_secs(60));
+    let (stdout, stderr) = (stdout_reader.join().unwrap(), stderr_reader.join().unwrap());
+    drop(emu);
+    let emu_log = emu_log.join().unwrap_or_default().join("\n");
+    eprintln!("master stderr:\n{stderr}\nemulator:\n{emu_log}");
+    assert_eq!(status.and_then(|s| s.code()), Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.lines().any(|l| l.starts_with("error 900012:")
+            && l.contains("the master missed")
+            && l.ends_with("(N20)")),
+        "{stderr}"
+    );
+    // Nothing from the measuring block was published: only the line before it came.
+    assert_eq!(stdout, "G100\n");
+    // The devices noticed: their sync-manager watchdog dropped them to SAFE-OP.
+    assert!(
+        emu_log.contains("watchdog") && emu_log.contains("SAFE-OP"),
+        "{emu_log}"
+    );
+    println!("INNER OK");
+}
+
+#[test]
+fn a_master_stopped_for_300_ms_ends_with_900012() {
+    match veth::inner_env(INNER_ENV) {
+        Some(_) => stalled_master(),
+        None => outer("a_master_stopped_for_300_ms_ends_with_900012", "stall"),
     }
 }

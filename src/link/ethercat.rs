@@ -376,8 +376,9 @@ impl EthercatLink {
                 .await
                 .map_err(ec_err("PDO configuration"))?;
             let group = if any_dc && !emulated {
-                // As in the field: SYNC0 at the cycle period, starting well in the future (at
-                // least 10 ms or 10 periods after the activation is written), the master's
+                // As in the field: SYNC0 at the cycle period, starting well in the future (100 ms
+                // after the activation is written, as ethercrab's examples, SOEM and IgH do: the
+                // write reaches every device before it), the master's
                 // frame half a period after SYNC0 (ethercrab aligns its cycle with
                 // `CycleInfo::next_cycle_wait`); OP is requested and reached while the paced
                 // process-data cycle already runs, so no sync-manager watchdog expires.
@@ -385,7 +386,7 @@ impl EthercatLink {
                     .configure_dc_sync(
                         md,
                         DcConfiguration {
-                            start_delay: (cycle * 10).max(Duration::from_millis(10)),
+                            start_delay: Duration::from_millis(100),
                             sync0_period: cycle,
                             sync0_shift: cycle / 2,
                         },
@@ -414,11 +415,14 @@ impl EthercatLink {
             };
             Ok::<_, LinkError>((group, axes))
         })?;
+        // The DC devices whose clocks follow the reference (ethercrab takes the first DC device
+        // as the reference clock; its own 0x092C is never updated by the FRMW it sources).
         let dc_devices = match &group {
             Group::Dc(g) => g
                 .iter(md)
                 .filter(|sd| sd.dc_support().any())
                 .map(|sd| sd.configured_address())
+                .skip(1)
                 .collect(),
             Group::NoDc(_) => Vec::new(),
         };
