@@ -216,6 +216,23 @@ pub trait Link: Send {
         None
     }
 
+    /// Write one CSV row per cycle ([`crate::rt::CycleStats::log_to`]) to `out` (`name` for
+    /// error messages); only a paced link has cycles to log.
+    ///
+    /// # Errors
+    /// The link runs on virtual time (in-process links), with the reason in words.
+    fn set_cycle_log(
+        &mut self,
+        name: &str,
+        out: Box<dyn std::io::Write + Send>,
+    ) -> Result<(), String> {
+        let _ = out;
+        Err(format!(
+            "{name}: this link runs on virtual time; a cycle log needs a link that leaves the \
+             process"
+        ))
+    }
+
     /// Flush the per-cycle log (`--cycle-log`), if one is written.
     ///
     /// # Errors
