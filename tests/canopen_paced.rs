@@ -42,6 +42,20 @@ fn start_up_writes_cycle_period_and_synchronous_window_to_every_node() {
         assert_eq!(n.read_object(0x1006, 0), Ok(4000u32.to_le_bytes().to_vec()));
         assert_eq!(n.read_object(0x1007, 0), Ok(2000u32.to_le_bytes().to_vec()));
     }
+    // The nodes watch their SYNC on the link's virtual time: one SYNC per exchange, however
+    // long the wall clock takes, never a time-out.
+    let d = def();
+    let mut images = vec![ProcessImage::new(d.rxpdo.len(), d.txpdo.len()); 3];
+    for k in 1..=100u64 {
+        link.exchange(Nanos(k * 4_000_000), &mut images).unwrap();
+        if k == 50 {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    for n in link.segment().unwrap().nodes() {
+        assert_eq!(n.sync_timeouts(), 0);
+        assert_eq!(n.rpdos_outside_window(), 0);
+    }
     // canopen-emu runs on virtual time: no paced cycle, no statistics, no cycle log.
     assert_eq!(link.cycle_summary(), None);
     let e = link

@@ -594,6 +594,7 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         received += frames.len() as u64;
         let now = Nanos(t0.elapsed().as_nanos() as u64);
         // TPDOs leave at the SYNC, before the models step (`run_with`).
+        let busy = Instant::now();
         let mut failed = None;
         segment.run_with(&frames, now, &mut |f| {
             if failed.is_some() {
@@ -606,6 +607,10 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         });
         if let Some(e) = failed {
             anyhow::bail!(e);
+        }
+        let busy = busy.elapsed();
+        if busy > Duration::from_millis(1) {
+            tracing::debug!(target: "fieldprobe::sim::canopen", "{} frames took {} µs", frames.len(), busy.as_micros());
         }
     }
     let timeouts: u64 = segment.nodes().iter().map(|n| n.sync_timeouts()).sum();

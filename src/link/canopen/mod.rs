@@ -36,6 +36,9 @@
 //! file, CiA 402 table, else 4 bytes). Aborts keep the CiA 301 code.
 
 pub mod paced;
+mod session;
+
+pub use session::{CanSession, NodeInfo};
 
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
@@ -50,11 +53,10 @@ use crate::bus::canopen::pdo::{pack_layout, Direction, Pdo, MAX_PDOS};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::model::DriveModel;
-use crate::rt::{monotonic_ns, CycleRecord};
 use crate::sim::canopen::{CanopenSegment, EmulatedNode};
 use crate::sim::plant::Plant;
 use crate::units::Nanos;
-use paced::{cycle_period_us, stall, sync_window_us, Pacing};
+use paced::{cycle_period_us, sync_window_us, Pacing};
 use std::sync::Arc;
 
 /// A node is lost when its last heartbeat is older than this many periods.
@@ -705,87 +707,6 @@ impl CanopenLink {
         r.map_err(sdo_failure(node, index, sub))
     }
 
-    /// One paced cycle (see [`paced`]): sleep to the deadline, take what arrived, SYNC,
-    /// collect the TPDOs within the synchronous window, record the cycle; a stall is reported
-    /// after the exchange.
-    fn paced_cycle(
-        &mut self,
-        pacing: &mut Pacing,
-        n: u64,
-        now: Nanos,
-        images: &mut [ProcessImage],
-    ) -> Result<(), LinkError> {
-        // How long the machine kept the link between two exchanges (diagnostics).
-        let away_us = pacing
-            .returned
-            .map_or(0, |r| monotonic_ns().saturating_sub(r) / 1000);
-        let mut stale = Vec::new();
-        let (wake, sent, gap) = pacing.sync(&mut self.bus, &mut |bus| {
-            stale = bus.receive_all(Duration::ZERO)?;
-            Ok(())
-        })?;
-        // Heartbeats and EMCY count; a TPDO that came before this SYNC belongs to an earlier
-        // one and is dropped.
-        let stale = self.note(stale, now);
-        // Wait within the synchronous window; past it (the master itself was held up) take
-        // only what is queued already; past the next deadline at most a few more frames (a
-        // flood cannot hold the cycle).
-        let window_end = sent + pacing.window_ns();
-        let hard_end = sent + pacing.period().0;
-        let mut seen = vec![false; self.tpdo_cobs.len()];
-        let mut missing = seen.len();
-        let mut got = Vec::new();
-        let mut done = sent;
-        let mut overtime = 4 * seen.len() + 16;
-        while missing > 0 {
-            let t = monotonic_ns();
-            if t >= hard_end {
-                if overtime == 0 {
-                    break;
-                }
-                overtime -= 1;
-            }
-            let wait = Duration::from_nanos(window_end.saturating_sub(t));
-            let Some(f) = self.bus.recv(wait)? else {
-                break;
-            };
-            if !f.extended && !f.rtr && !f.error {
-                if let Some(k) = self.tpdo_cobs.iter().position(|&c| c == f.id) {
-                    done = monotonic_ns();
-                    if !seen[k] {
-                        seen[k] = true;
-                        missing -= 1;
-                    }
-                }
-            }
-            // Bounded: the bus delivers at most what fits in the window.
-            got.push(f);
-        }
-        let result = stale
-            .and_then(|_| self.note(got, now))
-            .and_then(|got| self.finish_exchange(n, now, got, images));
-        if wake.missed > 0 || result.is_err() {
-            tracing::debug!(target: "fieldprobe::link::canopen", exchange = n,
-                missed = wake.missed, late_us = wake.woke.saturating_sub(wake.deadline) / 1000,
-                gap_us = gap.unwrap_or(0) / 1000, tpdos_missing = missing, away_us,
-                "paced cycle: {}", result.as_ref().err().map_or("ok".to_string(), |e| e.to_string()));
-        }
-        pacing.stats_mut().record(CycleRecord {
-            deadline: wake.deadline,
-            sent,
-            done,
-            missed: wake.missed,
-            lost: result.is_err(),
-            dc_diff: None,
-        });
-        pacing.returned = Some(monotonic_ns());
-        if let Some(e) = stall(&wake, pacing.period(), gap).or_else(|| pacing.take_pending_stall())
-        {
-            return Err(e);
-        }
-        result
-    }
-
     /// The end of an exchange: the fault knob, the heartbeat consumer, and the TPDOs (`got`,
     /// the frames after SYNC) copied into the input images when every expected one came.
     fn finish_exchange(
@@ -1015,202 +936,5 @@ impl Link for CanopenLink {
             }
             None => Err(paced::NO_CYCLE_LOG.into()),
         }
-    }
-}
-
-/// One node as [`CanSession::scan`] finds it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct NodeInfo {
-    /// Node id.
-    pub id: u8,
-    /// State from its last heartbeat / boot-up, if one was seen.
-    pub state: Option<NmtState>,
-    /// 0x1000 device type.
-    pub device_type: u32,
-    /// 0x1018:1 … 3 vendor, product code, revision (None where the node refused).
-    pub identity: [Option<u32>; 3],
-    /// 0x1008 device name, if the node has one.
-    pub name: Option<String>,
-}
-
-/// A CAN bus for commissioning commands (`can scan`, `can dump`, `sdo … --node`): no NMT
-/// commands, no PDO configuration; SDO by node id.
-pub struct CanSession {
-    bus: Transport,
-    t0: Instant,
-    states: std::collections::BTreeMap<u8, NmtState>,
-}
-
-impl std::fmt::Debug for CanSession {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("CanSession")
-            .field("bus", &self.bus.describe())
-            .finish_non_exhaustive()
-    }
-}
-
-impl CanSession {
-    /// Open `link` (`canopen-emu`: the emulated nodes of `drives` at node ids `ids`;
-    /// `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
-    pub fn open(
-        link: &str,
-        drives: &[Arc<DriveDefinition>],
-        ids: &[u8],
-        candump: Option<&std::path::Path>,
-    ) -> Result<Self, LinkError> {
-        check_ids(ids)?;
-        let bus = Transport::open(link, drives, ids, Nanos::from_micros(1000), candump)?;
-        let mut s = CanSession {
-            bus,
-            t0: Instant::now(),
-            states: Default::default(),
-        };
-        // Emulated nodes boot at once (boot-up message, pre-operational).
-        s.bus.run_nodes(Nanos::ZERO);
-        let frames = s.bus.receive_all(Duration::ZERO)?;
-        s.note(&frames);
-        Ok(s)
-    }
-
-    fn wall(&self) -> Nanos {
-        Nanos(self.t0.elapsed().as_nanos() as u64)
-    }
-
-    fn note(&mut self, frames: &[CanFrame]) {
-        for f in frames {
-            if let Some((n, s)) = nmt::parse_heartbeat(f) {
-                self.states.insert(n, s);
-            }
-        }
-    }
-
-    /// Every frame on the bus for `duration` (emulated nodes run meanwhile), in order.
-    pub fn listen(
-        &mut self,
-        duration: Duration,
-        each: &mut dyn FnMut(&CanFrame),
-    ) -> Result<(), LinkError> {
-        let end = Instant::now() + duration;
-        while Instant::now() < end {
-            let now = self.wall();
-            self.bus.run_nodes(now);
-            let frames = self.bus.receive_all(Duration::from_millis(10))?;
-            self.note(&frames);
-            for f in &frames {
-                each(f);
-            }
-            if self.bus.emulated.is_some() {
-                std::thread::sleep(Duration::from_millis(1));
-            }
-        }
-        Ok(())
-    }
-
-    /// SDO upload from `node`.
-    pub fn sdo_upload(&mut self, node: u8, index: u16, sub: u8) -> Result<Vec<u8>, LinkError> {
-        self.transfer(node, index, sub, None)
-    }
-
-    /// SDO download to `node`.
-    pub fn sdo_download(
-        &mut self,
-        node: u8,
-        index: u16,
-        sub: u8,
-        data: &[u8],
-    ) -> Result<(), LinkError> {
-        self.transfer(node, index, sub, Some(data)).map(|_| ())
-    }
-
-    fn transfer(
-        &mut self,
-        node: u8,
-        index: u16,
-        sub: u8,
-        data: Option<&[u8]>,
-    ) -> Result<Vec<u8>, LinkError> {
-        if !(1..=127).contains(&node) {
-            return Err(other(format!("node {node}: allowed 1 … 127")));
-        }
-        let mut client = SdoClient::new(node);
-        let wall = self.wall();
-        let first = match data {
-            None => client.upload(index, sub, wall),
-            Some(d) => client.download(index, sub, d, wall),
-        };
-        let t0 = self.t0;
-        let mut seen = Vec::new();
-        let r = self.bus.sdo(&mut client, first, t0, wall, None, &mut |f| {
-            seen.extend(f);
-            Ok(())
-        });
-        self.note(&seen);
-        r.map_err(sdo_failure(node, index, sub))
-    }
-
-    /// Find the nodes: an SDO upload of 0x1000 to every node id 1 … 127 at once (nodes in
-    /// pre-operational or operational answer), then 0x1018:1 … 3 and 0x1008 from each.
-    pub fn scan(&mut self) -> Result<Vec<NodeInfo>, LinkError> {
-        let wall = self.wall();
-        let mut clients: Vec<SdoClient> = (1..=127u8).map(SdoClient::new).collect();
-        for c in &mut clients {
-            c.set_timeout(Nanos::from_micros(300_000));
-            for f in c.upload(0x1000, 0, wall) {
-                self.bus.send(&f)?;
-            }
-        }
-        let end = Instant::now() + Duration::from_millis(400);
-        while Instant::now() < end && clients.iter().any(|c| c.busy()) {
-            let now = self.wall();
-            self.bus.run_nodes(now);
-            let frames = self.bus.receive_all(Duration::from_millis(10))?;
-            self.note(&frames);
-            for f in &frames {
-                if let Some(c) =
-                    f.id.checked_sub(u32::from(crate::bus::canopen::sdo::SDO_TX_BASE))
-                        .filter(|n| (1..=127).contains(n))
-                        .and_then(|n| clients.get_mut(n as usize - 1))
-                {
-                    for r in c.handle(f, now) {
-                        self.bus.send(&r)?;
-                    }
-                }
-            }
-            for c in &mut clients {
-                for r in c.poll(now) {
-                    self.bus.send(&r)?;
-                }
-            }
-        }
-        let found: Vec<(u8, u32)> = clients
-            .iter_mut()
-            .filter_map(|c| match c.take_result() {
-                Some(Ok(b)) => Some((c.node(), decode_le(&b, false) as u32)),
-                _ => None,
-            })
-            .collect();
-        let mut out = Vec::new();
-        for (id, device_type) in found {
-            let mut identity = [None; 3];
-            for (k, slot) in identity.iter_mut().enumerate() {
-                *slot = self
-                    .sdo_upload(id, 0x1018, (k + 1) as u8)
-                    .ok()
-                    .map(|b| decode_le(&b, false) as u32);
-            }
-            let name = self.sdo_upload(id, 0x1008, 0).ok().map(|b| {
-                String::from_utf8_lossy(&b)
-                    .trim_end_matches('\0')
-                    .to_string()
-            });
-            out.push(NodeInfo {
-                id,
-                state: self.states.get(&id).copied(),
-                device_type,
-                identity,
-                name,
-            });
-        }
-        Ok(out)
     }
 }

@@ -41,9 +41,11 @@
 
 use std::io::Write;
 
+use std::time::Duration;
+
 use super::Transport;
 use crate::bus::canopen::nmt;
-use crate::link::LinkError;
+use crate::link::{LinkError, ProcessImage};
 use crate::rt::{monotonic_ns, CycleClock, CycleRecord, CycleStats, Wake};
 use crate::units::Nanos;
 
@@ -204,6 +206,89 @@ impl Pacing {
 /// Why `canopen-emu` has no cycle log.
 pub(super) const NO_CYCLE_LOG: &str = "--cycle-log: canopen-emu runs on virtual time (no \
      wall-clock cycle to log); the paced CAN links are canopen-udp[:GROUP:PORT] and socketcan:IF";
+
+impl super::CanopenLink {
+    /// One paced cycle (see [`paced`]): sleep to the deadline, take what arrived, SYNC,
+    /// collect the TPDOs within the synchronous window, record the cycle; a stall is reported
+    /// after the exchange.
+    pub(super) fn paced_cycle(
+        &mut self,
+        pacing: &mut Pacing,
+        n: u64,
+        now: Nanos,
+        images: &mut [ProcessImage],
+    ) -> Result<(), LinkError> {
+        // How long the machine kept the link between two exchanges (diagnostics).
+        let away_us = pacing
+            .returned
+            .map_or(0, |r| monotonic_ns().saturating_sub(r) / 1000);
+        let mut stale = Vec::new();
+        let (wake, sent, gap) = pacing.sync(&mut self.bus, &mut |bus| {
+            stale = bus.receive_all(Duration::ZERO)?;
+            Ok(())
+        })?;
+        // Heartbeats and EMCY count; a TPDO that came before this SYNC belongs to an earlier
+        // one and is dropped.
+        let stale = self.note(stale, now);
+        // Wait within the synchronous window; past it (the master itself was held up) take
+        // only what is queued already; past the next deadline at most a few more frames (a
+        // flood cannot hold the cycle).
+        let window_end = sent + pacing.window_ns();
+        let hard_end = sent + pacing.period().0;
+        let mut seen = vec![false; self.tpdo_cobs.len()];
+        let mut missing = seen.len();
+        let mut got = Vec::new();
+        let mut done = sent;
+        let mut overtime = 4 * seen.len() + 16;
+        while missing > 0 {
+            let t = monotonic_ns();
+            if t >= hard_end {
+                if overtime == 0 {
+                    break;
+                }
+                overtime -= 1;
+            }
+            let wait = Duration::from_nanos(window_end.saturating_sub(t));
+            let Some(f) = self.bus.recv(wait)? else {
+                break;
+            };
+            if !f.extended && !f.rtr && !f.error {
+                if let Some(k) = self.tpdo_cobs.iter().position(|&c| c == f.id) {
+                    done = monotonic_ns();
+                    if !seen[k] {
+                        seen[k] = true;
+                        missing -= 1;
+                    }
+                }
+            }
+            // Bounded: the bus delivers at most what fits in the window.
+            got.push(f);
+        }
+        let result = stale
+            .and_then(|_| self.note(got, now))
+            .and_then(|got| self.finish_exchange(n, now, got, images));
+        if wake.missed > 0 || result.is_err() {
+            tracing::debug!(target: "fieldprobe::link::canopen", exchange = n,
+                missed = wake.missed, late_us = wake.woke.saturating_sub(wake.deadline) / 1000,
+                gap_us = gap.unwrap_or(0) / 1000, tpdos_missing = missing, away_us,
+                "paced cycle: {}", result.as_ref().err().map_or("ok".to_string(), |e| e.to_string()));
+        }
+        pacing.stats_mut().record(CycleRecord {
+            deadline: wake.deadline,
+            sent,
+            done,
+            missed: wake.missed,
+            lost: result.is_err(),
+            dc_diff: None,
+        });
+        pacing.returned = Some(monotonic_ns());
+        if let Some(e) = stall(&wake, pacing.period(), gap).or_else(|| pacing.take_pending_stall())
+        {
+            return Err(e);
+        }
+        result
+    }
+}
 
 #[cfg(test)]
 mod tests {
