@@ -397,8 +397,16 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
 /// Loop: receive with a short timeout, hand the frames with `now` = wall-clock time since the
 /// start to [`CanopenSegment::run`], send what it returns; `run` is also called without frames
 /// at least every millisecond, so boot-up and heartbeats go out on time on a quiet bus. Every
-/// SYNC steps the drive models once by [`SYNC_MODEL_CYCLE`] of model time, whatever the
-/// master's SYNC period (as `sim ethercat` steps once per process-data frame).
+/// SYNC steps the drive models once by the communication cycle period 0x1006 the master wrote
+/// (fieldprobe's master writes the machine cycle), or by [`SYNC_MODEL_CYCLE`] of model time
+/// while 0x1006 is 0 (a master that does not write it; as `sim ethercat` steps once per
+/// process-data frame).
+///
+/// The nodes keep their own clock like real devices: with 0x1006 ≠ 0 a node whose SYNC stays
+/// away for more than five periods sends EMCY 0x8100 and its drive faults (see
+/// [`fieldprobe::sim::canopen`] "SYNC timing"); RPDOs later than 0x1007 after a SYNC are
+/// counted. Both numbers are printed when the command ends (after `--seconds`, or on SIGTERM /
+/// SIGINT, which end it the same way with exit 0).
 ///
 /// `--probe-at ID=MM` puts a probe surface at MM (axis units of the drive's scaling, converted
 /// with `increments_per_unit` and `offset`) wired to touch probe input 1 of node ID.
@@ -431,6 +439,46 @@ pub struct CanopenArgs {
     /// Stop after this many seconds (default: run until killed).
     #[arg(long, value_name = "N")]
     seconds: Option<f64>,
+}
+
+/// SIGTERM / SIGINT, taken through a signalfd (no handler, no unsafe code): the loop polls it
+/// and ends like `--seconds` does.
+#[cfg(target_os = "linux")]
+struct StopSignals(nix::sys::signalfd::SignalFd);
+
+#[cfg(target_os = "linux")]
+impl StopSignals {
+    /// Block SIGTERM and SIGINT in this thread (threads started later inherit it) and open a
+    /// signalfd for them; `None` (the signals keep their default action) if that fails.
+    fn new() -> Option<Self> {
+        use nix::sys::signal::{SigSet, Signal};
+        use nix::sys::signalfd::{SfdFlags, SignalFd};
+        let mut mask = SigSet::empty();
+        mask.add(Signal::SIGTERM);
+        mask.add(Signal::SIGINT);
+        let fd =
+            SignalFd::with_flags(&mask, SfdFlags::SFD_NONBLOCK | SfdFlags::SFD_CLOEXEC).ok()?;
+        mask.thread_block().ok()?;
+        Some(StopSignals(fd))
+    }
+
+    /// One of them arrived.
+    fn received(&self) -> bool {
+        matches!(self.0.read_signal(), Ok(Some(_)))
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+struct StopSignals;
+
+#[cfg(not(target_os = "linux"))]
+impl StopSignals {
+    fn new() -> Option<Self> {
+        None
+    }
+    fn received(&self) -> bool {
+        false
+    }
 }
 
 /// Model time one SYNC advances the drive models by (the EtherCAT emulator's servo cycle).
@@ -574,12 +622,15 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
              wired to its touch probe input 1"
         );
     }
+    let stop = StopSignals::new();
     let mut bus = open_can_bus(&a.bus, bus_spec)?;
     eprintln!("fieldprobe sim canopen: listening on {}", bus.describe());
     let t0 = Instant::now();
     let (mut received, mut sent) = (0u64, 0u64);
     let mut frames = Vec::with_capacity(CAN_BATCH);
-    while deadline.is_none_or(|d| Instant::now() < d) {
+    while deadline.is_none_or(|d| Instant::now() < d)
+        && !stop.as_ref().is_some_and(|s| s.received())
+    {
         frames.clear();
         let mut wait = CAN_POLL;
         while frames.len() < CAN_BATCH {
@@ -596,12 +647,35 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         }
         received += frames.len() as u64;
         let now = Nanos(t0.elapsed().as_nanos() as u64);
-        for f in segment.run(&frames, now) {
-            bus.send(&f)
-                .map_err(|e| anyhow::anyhow!("bus {}: send {f:?}: {e}", bus.describe()))?;
-            sent += 1;
+        // TPDOs leave at the SYNC, before the models step (`run_with`).
+        let busy = Instant::now();
+        let mut failed = None;
+        segment.run_with(&frames, now, &mut |f| {
+            if failed.is_some() {
+                return;
+            }
+            match bus.send(&f) {
+                Ok(()) => sent += 1,
+                Err(e) => failed = Some(format!("bus {}: send {f:?}: {e}", bus.describe())),
+            }
+        });
+        if let Some(e) = failed {
+            anyhow::bail!(e);
+        }
+        let busy = busy.elapsed();
+        if busy > Duration::from_millis(1) {
+            tracing::debug!(target: "fieldprobe::sim::canopen", "{} frames took {} µs", frames.len(), busy.as_micros());
         }
     }
-    eprintln!("fieldprobe sim canopen: done, {received} frames received, {sent} sent");
+    let timeouts: u64 = segment.nodes().iter().map(|n| n.sync_timeouts()).sum();
+    let late: u64 = segment
+        .nodes()
+        .iter()
+        .map(|n| n.rpdos_outside_window())
+        .sum();
+    eprintln!(
+        "fieldprobe sim canopen: done, {received} frames received, {sent} sent, {timeouts} SYNC \
+         time-outs, {late} RPDOs outside the synchronous window"
+    );
     Ok(EXIT_OK)
 }

@@ -17,7 +17,33 @@
 //! node's model once with the stored outputs (one [`World::step`], the same step
 //! [`SimLink`](crate::link::sim::SimLink) makes). So a master that sends its RPDOs, then SYNC,
 //! then reads the TPDOs sees the actual values one cycle after they were sampled, as over
-//! `--link sim` and EtherCAT.
+//! `--link sim` and EtherCAT. One step covers 0x1006 (when the master wrote it) or the
+//! segment's cycle.
+//!
+//! # SYNC timing (CiA 301 0x1006, 0x1007)
+//!
+//! Every node has 0x1006 communication cycle period and 0x1007 synchronous window length (µs,
+//! UNSIGNED32, default 0 = not used; read-write in every NMT state; with an EDS only if the EDS
+//! has them). NMT reset node / reset communication sets them back to their defaults, as CiA 301
+//! says of the communication objects.
+//!
+//! **SYNC watch.** When 0x1006 ≠ 0, an operational node watches the SYNC on its own clock (the
+//! `now` of [`EmulatedNode::poll`]), from the first SYNC after NMT start: no SYNC for longer than
+//! [`SYNC_TIMEOUT_PERIODS`] × 0x1006 sends EMCY [`SYNC_TIMEOUT_EMCY`] (0x8100 "communication",
+//! error register 0x11 = generic + communication; the code CANopenNode reports for its SYNC
+//! time-out, CiA 301 table 21) once per outage, and the CiA 402 drive faults (0x603F = 0x8100):
+//! it stops following its set-points (FAULT REACTION ACTIVE, then FAULT; the position holds) and
+//! stays in FAULT until the usual fault reset (controlword bit 7 rising edge), after the SYNC
+//! came back. CANopenNode times out at 1.5 × 0x1006; five periods here match fieldprobe's
+//! master, which rides through up to three missed deadlines by default (a SYNC gap under 4.5
+//! periods) and reports a longer stall as error 900012 ([`crate::link::canopen::paced`]), so
+//! the emulated drives stop exactly when the master gives up. On `canopen-emu` the nodes' `now`
+//! is the machine's virtual time and a SYNC comes with every exchange, so the watch never fires
+//! there.
+//!
+//! **Synchronous window.** When 0x1007 ≠ 0, RPDOs that arrive later than 0x1007 after the last
+//! SYNC are counted ([`EmulatedNode::rpdos_outside_window`]) and still used (CiA 301 allows
+//! discarding them; counting keeps the emulator's runs comparable).
 
 use crate::bus::can::CanFrame;
 use std::collections::BTreeMap;
@@ -38,6 +64,13 @@ pub const VENDOR_ID: u32 = 0x0000_0FB0;
 pub const PRODUCT_CODE: u32 = 0x0002_0402;
 /// Default producer heartbeat time (0x1017), ms.
 pub const DEFAULT_HEARTBEAT_MS: u16 = 100;
+/// The SYNC watch fires after more than this many communication cycle periods (0x1006)
+/// without a SYNC.
+pub const SYNC_TIMEOUT_PERIODS: u64 = 5;
+/// EMCY error code of a SYNC time-out: 0x8100 "communication" (CiA 301 table 21).
+pub const SYNC_TIMEOUT_EMCY: u16 = 0x8100;
+/// Error register (0x1001) sent with a SYNC time-out: bit 0 generic, bit 4 communication.
+const SYNC_TIMEOUT_REGISTER: u8 = 0x11;
 /// Capacity (bytes) of a VISIBLE_STRING / OCTET_STRING / UNICODE_STRING / DOMAIN object built
 /// from an EDS entry whose default is shorter ([`EmulatedNode::from_eds`]).
 pub const EDS_STRING_CAPACITY: usize = 256;
@@ -92,6 +125,17 @@ pub struct EmulatedNode {
     syncs: u64,
     sdo_muted: bool,
     fixed_len: BTreeMap<(u16, u8), usize>,
+    /// The SYNC watch: when the last SYNC came (operational, armed by the first SYNC).
+    last_sync: Option<Nanos>,
+    /// The watch fired and no SYNC came since.
+    sync_lost: bool,
+    sync_timeouts: u64,
+    rpdos_outside_window: u64,
+    /// An EMCY for this model error code was sent already (the SYNC watch sends it before the
+    /// model faults).
+    emcy_sent_for: Option<u16>,
+    /// 0x1006 / 0x1007 as built (restored by NMT reset communication).
+    sync_defaults: Vec<(u16, Vec<u8>)>,
 }
 
 fn u32_entry(index: u16, sub: u8, v: u32) -> ObjectEntry {
@@ -218,6 +262,9 @@ impl EmulatedNode {
                 access: Access::Rw,
                 ..ObjectEntry::constant(0x1017, 0, DataType::U16, i64::from(DEFAULT_HEARTBEAT_MS))
             },
+            // CiA 301 communication cycle period and synchronous window length, µs (0 = none).
+            u32_entry(0x1006, 0, 0),
+            u32_entry(0x1007, 0, 0),
         ]);
         Self::build(id, def, entries, BTreeMap::new())
     }
@@ -342,10 +389,15 @@ impl EmulatedNode {
         entries.extend(pdo_entries(Direction::Rx, id, &rx));
         entries.extend(pdo_entries(Direction::Tx, id, &tx));
         let (rx_len, tx_len) = (model.rx_len(), model.tx_len());
+        let od = CoeServer::new(model, entries, 0);
+        let sync_defaults = [0x1006u16, 0x1007]
+            .into_iter()
+            .filter_map(|i| od.read(i, 0).ok().map(|b| (i, b)))
+            .collect();
         Ok(EmulatedNode {
             id,
             state: NmtState::BootUp,
-            od: CoeServer::new(model, entries, 0),
+            od,
             sdo: SdoServer::new(id),
             model_rx: def.rxpdo.clone(),
             model_tx: def.txpdo.clone(),
@@ -360,7 +412,68 @@ impl EmulatedNode {
             syncs: 0,
             sdo_muted: false,
             fixed_len,
+            last_sync: None,
+            sync_lost: false,
+            sync_timeouts: 0,
+            rpdos_outside_window: 0,
+            emcy_sent_for: None,
+            sync_defaults,
         })
+    }
+
+    /// A UNSIGNED32 object of the dictionary (0 when absent or refused).
+    fn read_u32(&self, index: u16) -> u32 {
+        self.od.read(index, 0).map_or(0, |b| {
+            let mut a = [0u8; 4];
+            let n = b.len().min(4);
+            a[..n].copy_from_slice(&b[..n]);
+            u32::from_le_bytes(a)
+        })
+    }
+
+    /// 0x1006 communication cycle period in µs, if set (≠ 0).
+    pub fn cycle_period_us(&self) -> Option<u32> {
+        Some(self.read_u32(0x1006)).filter(|&us| us != 0)
+    }
+
+    /// SYNC time-outs so far (each sent EMCY [`SYNC_TIMEOUT_EMCY`] and faulted the drive).
+    pub fn sync_timeouts(&self) -> u64 {
+        self.sync_timeouts
+    }
+
+    /// RPDOs that arrived later than 0x1007 after the last SYNC (0x1007 ≠ 0).
+    pub fn rpdos_outside_window(&self) -> u64 {
+        self.rpdos_outside_window
+    }
+
+    /// A SYNC reached the node at `now`.
+    fn on_sync(&mut self, now: Nanos) {
+        if self.state == NmtState::Operational {
+            self.last_sync = Some(now);
+            self.sync_lost = false;
+        }
+    }
+
+    /// The SYNC watch (module documentation), at `now`.
+    fn watch_sync(&mut self, now: Nanos) {
+        if self.state != NmtState::Operational || self.sync_lost {
+            return;
+        }
+        let (Some(last), Some(us)) = (self.last_sync, self.cycle_period_us()) else {
+            return;
+        };
+        let limit = u64::from(us) * 1000 * SYNC_TIMEOUT_PERIODS;
+        if now.0.saturating_sub(last.0) <= limit {
+            return;
+        }
+        self.sync_lost = true;
+        self.sync_timeouts += 1;
+        tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
+            "no SYNC for {} µs (0x1006 = {us} µs): EMCY 0x8100, drive fault",
+            now.0.saturating_sub(last.0) / 1000);
+        self.emcy_with(SYNC_TIMEOUT_EMCY, SYNC_TIMEOUT_REGISTER);
+        self.emcy_sent_for = Some(SYNC_TIMEOUT_EMCY);
+        self.od.model_mut().inject_fault(SYNC_TIMEOUT_EMCY);
     }
 
     /// Read `index:sub` from the object dictionary as an SDO upload would (bytes, or the
@@ -489,12 +602,22 @@ impl EmulatedNode {
             NmtCommand::ResetNode | NmtCommand::ResetCommunication => {
                 self.state = NmtState::BootUp;
                 self.boot_pending = true;
+                for (index, data) in self.sync_defaults.clone() {
+                    let _ = self.od.write(index, 0, &data);
+                }
             }
         }
+        // The SYNC watch arms again with the first SYNC in OPERATIONAL.
+        self.last_sync = None;
+        self.sync_lost = false;
     }
 
     fn emcy(&mut self, code: u16) {
         let register = if code == 0 { 0 } else { 0x01 };
+        self.emcy_with(code, register);
+    }
+
+    fn emcy_with(&mut self, code: u16, register: u8) {
         self.outgoing.push(
             Emcy {
                 node: self.id,
@@ -538,12 +661,18 @@ impl EmulatedNode {
                 if !p.unpack(f.payload(), &mut self.outputs) {
                     self.emcy(0x8210); // PDO not processed due to length error
                 }
+                let window = self.read_u32(0x1007);
+                if let Some(t) = self.last_sync {
+                    if window != 0 && now.0.saturating_sub(t.0) > u64::from(window) * 1000 {
+                        self.rpdos_outside_window += 1;
+                    }
+                }
             }
         }
     }
 
     /// Time-driven work at `now`: boot-up message, heartbeat, SDO server timeout, EMCY for a new
-    /// model fault.
+    /// model fault, the SYNC watch.
     pub fn poll(&mut self, now: Nanos) {
         if self.boot_pending {
             self.boot_pending = false;
@@ -571,8 +700,11 @@ impl EmulatedNode {
         let e = self.od.model().last_error_code();
         if e != self.last_error {
             self.last_error = e;
-            self.emcy(e);
+            if self.emcy_sent_for.take() != Some(e) {
+                self.emcy(e);
+            }
         }
+        self.watch_sync(now);
     }
 
     /// The TPDOs of the last SYNC step (operational only).
@@ -632,39 +764,56 @@ impl CanopenSegment {
         &mut self.world
     }
 
-    /// Feed the frames the nodes received, run SYNC when one came (world step, then TPDOs),
+    /// Feed the frames the nodes received, run SYNC when one came (TPDOs, then world step),
     /// do the time-driven work at `now`, and return every frame the nodes send, in order.
     pub fn run(&mut self, received: &[CanFrame], now: Nanos) -> Vec<CanFrame> {
         let mut out = Vec::new();
+        self.run_with(received, now, &mut |f| out.push(f));
+        out
+    }
+
+    /// [`run`](Self::run), handing every frame to `send` as soon as a node produces it: the
+    /// TPDOs of a SYNC go before the drive models step, as a device sends the values it sampled
+    /// at the SYNC and computes afterwards (`fieldprobe sim canopen` on a real bus). The frames
+    /// and their order are those `run` returns.
+    pub fn run_with(&mut self, received: &[CanFrame], now: Nanos, send: &mut dyn FnMut(CanFrame)) {
         for f in received {
             if !f.extended && !f.rtr && !f.error && f.id == u32::from(nmt::SYNC_COB) {
-                self.sync(now);
+                for n in &mut self.nodes {
+                    n.syncs += u64::from(n.state == NmtState::Operational);
+                    n.on_sync(now);
+                    n.send_tpdos();
+                    n.take_outgoing().into_iter().for_each(&mut *send);
+                }
+                self.step_models(now);
             } else {
                 for n in &mut self.nodes {
                     n.handle(f, now);
                 }
             }
             for n in &mut self.nodes {
-                out.extend(n.take_outgoing());
+                n.take_outgoing().into_iter().for_each(&mut *send);
             }
         }
         for n in &mut self.nodes {
             n.poll(now);
-            out.extend(n.take_outgoing());
+            n.take_outgoing().into_iter().for_each(&mut *send);
         }
-        out
     }
 
-    /// SYNC: every operational node sends its TPDOs with what its drive sampled at the
-    /// previous SYNC, then every model steps once with the RPDOs received before this SYNC
-    /// (CiA 301 synchronous PDOs: received data take effect at the next SYNC, transmitted data
-    /// are sampled at the SYNC). A master that sends its RPDOs, then SYNC, then reads the TPDOs
+    /// SYNC (after every operational node sent its TPDOs with what its drive sampled at the
+    /// previous SYNC): every model steps once with the RPDOs received before this SYNC (CiA 301
+    /// synchronous PDOs: received data take effect at the next SYNC, transmitted data are
+    /// sampled at the SYNC). A master that sends its RPDOs, then SYNC, then reads the TPDOs
     /// thus sees the actual values one cycle after they were sampled, as on a real bus.
-    fn sync(&mut self, now: Nanos) {
-        for n in &mut self.nodes {
-            n.syncs += u64::from(n.state == NmtState::Operational);
-            n.send_tpdos();
-        }
+    fn step_models(&mut self, now: Nanos) {
+        // The period the master configured (0x1006), else the segment's cycle.
+        let cycle = self
+            .nodes
+            .iter()
+            .filter(|n| n.state == NmtState::Operational)
+            .find_map(EmulatedNode::cycle_period_us)
+            .map_or(self.cycle, |us| Nanos::from_micros(u64::from(us)));
         let mut ports: Vec<Port<'_>> = self
             .nodes
             .iter_mut()
@@ -674,7 +823,7 @@ impl CanopenSegment {
                 inputs: &mut n.inputs,
             })
             .collect();
-        self.world.step(now, self.cycle, &mut ports);
+        self.world.step(now, cycle, &mut ports);
     }
 }
 

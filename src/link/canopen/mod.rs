@@ -10,28 +10,43 @@
 //! NMT reset communication → boot-up of every axis node (bounded wait) → per node: SDO reads of
 //! 0x1000 and 0x1018 (identity), the drive file's process data packed into ≤ 4 RPDOs / TPDOs of
 //! ≤ 8 bytes ([`pack_layout`]) and written by the CiA 301 remap procedure, unused PDOs disabled,
-//! producer heartbeat 0x1017 set → NMT start.
+//! producer heartbeat 0x1017 set, 0x1006 communication cycle period (µs = machine cycle) and
+//! 0x1007 synchronous window length (µs = half the cycle, [`paced::sync_window_us`]) → NMT
+//! start. A node without 0x1006 / 0x1007 (abort 0x0602_0000, e.g. an EDS that lacks 0x1007)
+//! is a warning; any other refusal of them is a start-up error naming node and object.
 //!
 //! # One exchange at `now`
 //!
 //! Every axis's RPDOs, then SYNC; the nodes step at SYNC and answer with their TPDOs, which are
 //! copied into the input images only when every expected TPDO came. A missing TPDO, a node whose
 //! heartbeat is older than [`HEARTBEAT_TIMEOUT_FACTOR`] × its period, or a boot-up of an
-//! operational node is [`LinkError::Lost`] (the channel reports 900012 and stops the axes).
-//! EMCY messages are collected ([`CanopenLink::take_emergencies`]).
+//! operational node is [`LinkError::Lost`] (the channel rides through up to `max_lost_cycles`
+//! of them, one more is 900012). EMCY messages are collected
+//! ([`CanopenLink::take_emergencies`]).
+//!
+//! `canopen-emu` runs on the virtual time `now` the machine gives: the nodes take the RPDOs at
+//! the time of the previous exchange (right after its SYNC), the SYNC and their TPDOs at `now`;
+//! nothing waits. The links that leave the process (`canopen-udp`, `socketcan:IF`) run the
+//! same order on the wall clock, one SYNC per machine cycle on absolute deadlines: see
+//! [`paced`] (timing, synchronous window, stall rule, cycle statistics).
 //!
 //! # Acyclic access
 //!
 //! SDO upload / download with our sans-IO client ([`SdoClient`]); sizes as for EtherCAT (drive
 //! file, CiA 402 table, else 4 bytes). Aborts keep the CiA 301 code.
 
+pub mod paced;
+mod session;
+
+pub use session::{CanSession, NodeInfo};
+
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
 use crate::bus::can::{
-    CanBus, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus, VirtualCan,
-    VirtualEndpoint,
+    CanBus, CanError, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus,
+    VirtualCan, VirtualEndpoint,
 };
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{pack_layout, Direction, Pdo, MAX_PDOS};
@@ -41,12 +56,15 @@ use crate::drive::model::DriveModel;
 use crate::sim::canopen::{CanopenSegment, EmulatedNode};
 use crate::sim::plant::Plant;
 use crate::units::Nanos;
+use paced::{cycle_period_us, sync_window_us, Pacing};
 use std::sync::Arc;
 
 /// A node is lost when its last heartbeat is older than this many periods.
 pub const HEARTBEAT_TIMEOUT_FACTOR: u64 = 3;
 /// Producer heartbeat period the master configures (0x1017), ms.
 pub const HEARTBEAT_MS: u16 = 100;
+/// CiA 301 SDO abort code "object does not exist in the object dictionary".
+const ABORT_NO_OBJECT: u32 = 0x0602_0000;
 
 /// One axis's node.
 #[derive(Debug)]
@@ -69,8 +87,15 @@ pub struct CanopenLink {
     emergencies: Vec<Emcy>,
     t0: Instant,
     now: Nanos,
-    /// How long to wait for TPDOs / SDO answers on an external bus.
-    pub response_timeout: Duration,
+    /// Virtual time of the previous exchange (`canopen-emu`: when the nodes take the RPDOs).
+    prev_now: Nanos,
+    /// The machine cycle (0x1006, and the SYNC period of a paced link).
+    cycle: Nanos,
+    /// COB-IDs of every expected TPDO.
+    tpdo_cobs: Vec<u32>,
+    /// The SYNC producer on the wall clock (links that leave the process); `None` on
+    /// `canopen-emu`.
+    pacing: Option<Pacing>,
 }
 
 impl std::fmt::Debug for CanopenLink {
@@ -131,16 +156,51 @@ impl Transport {
         } else {
             wait
         };
-        while let Some(f) = self
-            .bus
-            .recv(timeout)
-            .map_err(|e| other(format!("CAN receive on {}: {e}", self.bus.describe())))?
-        {
-            self.log(&f);
-            v.push(f);
+        loop {
+            match self.recv(timeout)? {
+                Some(f) => v.push(f),
+                None => return Ok(v),
+            }
             timeout = Duration::ZERO;
         }
-        Ok(v)
+    }
+
+    /// One frame (at most `wait`), logged; a datagram another program got wrong is dropped
+    /// with a warning, not an error of the link.
+    ///
+    /// The wait polls the bus (no blocking receive with a timeout) every [`RECV_POLL`]: a
+    /// socket receive timeout (SO_RCVTIMEO) counts in jiffies and overshoots a sub-millisecond
+    /// wait by 4–12 ms (measured here at HZ = 250), which would break the cycle's bounds.
+    fn recv(&mut self, wait: Duration) -> Result<Option<CanFrame>, LinkError> {
+        let end = Instant::now() + wait;
+        loop {
+            match self.bus.recv(Duration::ZERO) {
+                Ok(Some(f)) => {
+                    self.log(&f);
+                    return Ok(Some(f));
+                }
+                Ok(None) => {
+                    let now = Instant::now();
+                    if now >= end {
+                        return Ok(None);
+                    }
+                    std::thread::sleep(RECV_POLL.min(end - now));
+                }
+                Err(CanError::Malformed(why)) => {
+                    tracing::warn!(target: "fieldprobe::link::canopen", "dropped frame: {why}");
+                    if Instant::now() >= end {
+                        // A flood of them does not hold the caller beyond its bound.
+                        return Ok(None);
+                    }
+                }
+                Err(e) => {
+                    return Err(other(format!(
+                        "CAN receive on {}: {e}",
+                        self.bus.describe()
+                    )))
+                }
+            }
+        }
     }
 
     /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives` at node ids
@@ -199,12 +259,16 @@ impl Transport {
 
     /// One SDO transfer with `client`, starting with `first`; frames that are not for the
     /// client go to `other_frames`. Bounded by four client timeouts of wall-clock time.
+    ///
+    /// On a paced link (`pacing`) the SYNC keeps running on its grid while the transfer waits
+    /// ([`Pacing::keep_alive`]).
     fn sdo(
         &mut self,
         client: &mut SdoClient,
         first: Vec<CanFrame>,
         t0: Instant,
         now: Nanos,
+        mut pacing: Option<&mut Pacing>,
         other_frames: &mut dyn FnMut(Vec<CanFrame>) -> Result<(), LinkError>,
     ) -> Result<Vec<u8>, (Option<SdoError>, String)> {
         let wall = || Nanos(t0.elapsed().as_nanos() as u64);
@@ -223,9 +287,11 @@ impl Transport {
                 return Err((None, "no answer".into()));
             }
             self.run_nodes(now);
-            let frames = self
-                .receive_all(Duration::from_millis(5))
-                .map_err(|e| (None, e.to_string()))?;
+            let wait = pacing
+                .as_ref()
+                .and_then(|p| p.until_due())
+                .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL));
+            let frames = self.receive_all(wait).map_err(|e| (None, e.to_string()))?;
             let mut replies = Vec::new();
             let mut rest = Vec::new();
             let response =
@@ -242,6 +308,9 @@ impl Transport {
             for f in &replies {
                 self.send(f).map_err(|e| (None, e.to_string()))?;
             }
+            if let Some(p) = pacing.as_deref_mut() {
+                p.keep_alive(self).map_err(|e| (None, e.to_string()))?;
+            }
         }
     }
 
@@ -254,6 +323,12 @@ impl Transport {
         }
     }
 }
+
+/// Sleep between two polls of the bus while waiting for a frame.
+const RECV_POLL: Duration = Duration::from_micros(50);
+
+/// Longest wait for one SDO answer poll.
+const SDO_POLL: Duration = Duration::from_millis(5);
 
 fn open_candump(
     path: &std::path::Path,
@@ -320,7 +395,26 @@ impl CanopenLink {
     ) -> Result<Self, LinkError> {
         let ids = default_ids(drives.len())?;
         let bus = Transport::open("canopen-emu", drives, &ids, cycle, candump)?;
-        CanopenLink::start(bus, drives, &ids)
+        CanopenLink::start(bus, drives, &ids, cycle)
+    }
+
+    /// `canopen-emu` with the given emulated nodes (e.g. object dictionaries from an EDS,
+    /// [`EmulatedNode::from_eds`]): node *i* serves `drives[i]` at its own node id; brought to
+    /// operational on virtual time like [`emulated`](Self::emulated).
+    pub fn with_nodes(
+        nodes: Vec<EmulatedNode>,
+        drives: &[Arc<DriveDefinition>],
+        cycle: Nanos,
+    ) -> Result<Self, LinkError> {
+        let ids: Vec<u8> = nodes.iter().map(EmulatedNode::id).collect();
+        check_ids(&ids)?;
+        let hub = VirtualCan::new();
+        let bus = Transport {
+            bus: Box::new(hub.endpoint()),
+            emulated: Some((CanopenSegment::new(nodes, cycle), hub.endpoint())),
+            candump: None,
+        };
+        CanopenLink::start(bus, drives, &ids, cycle)
     }
 
     /// A master for `drives` at node ids `ids` (one per drive, distinct, 1 … 127) on the CAN
@@ -335,14 +429,16 @@ impl CanopenLink {
     ) -> Result<Self, LinkError> {
         check_ids(ids)?;
         let bus = Transport::open(link, drives, ids, cycle, candump)?;
-        CanopenLink::start(bus, drives, ids)
+        CanopenLink::start(bus, drives, ids, cycle)
     }
 
-    /// A master on `bus` for nodes `ids` (one per drive), brought to operational.
+    /// A master on `bus` for nodes `ids` (one per drive), brought to operational; its cycle
+    /// is paced on the wall clock with period `cycle` ([`paced`]).
     pub fn open(
         bus: Box<dyn CanBus>,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
+        cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
         let iface = bus.describe().replace(' ', "_");
@@ -354,6 +450,7 @@ impl CanopenLink {
             },
             drives,
             ids,
+            cycle,
         )
     }
 
@@ -361,6 +458,7 @@ impl CanopenLink {
         bus: Transport,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
+        cycle: Nanos,
     ) -> Result<Self, LinkError> {
         if drives.len() != ids.len() {
             return Err(other(format!(
@@ -396,8 +494,19 @@ impl CanopenLink {
             emergencies: Vec::new(),
             t0: Instant::now(),
             now: Nanos::ZERO,
-            response_timeout: Duration::from_millis(500),
+            prev_now: Nanos::ZERO,
+            cycle,
+            tpdo_cobs: Vec::new(),
+            pacing: None,
         };
+        link.tpdo_cobs = link
+            .axes
+            .iter()
+            .flat_map(|a| a.tx.iter().map(|p| u32::from(p.cob)))
+            .collect();
+        if link.bus.emulated.is_none() {
+            link.pacing = Some(Pacing::new(cycle));
+        }
         link.boot()?;
         Ok(link)
     }
@@ -508,6 +617,7 @@ impl CanopenLink {
             for (index, sub, data) in writes {
                 self.sdo_transfer(i, index, sub, Some(&data))?;
             }
+            self.write_sync_timing(i)?;
         }
         self.send(&NmtCommand::Start.frame(0))?;
         self.run_nodes(self.now);
@@ -517,6 +627,48 @@ impl CanopenLink {
         for a in &mut self.axes {
             a.state = Some(NmtState::Operational);
             a.last_heartbeat = Some(hb_start);
+        }
+        Ok(())
+    }
+
+    /// Start-up: 0x1006 communication cycle period and 0x1007 synchronous window length
+    /// (CiA 301) of axis `i`'s node. A node without the object (abort 0x0602_0000) runs
+    /// without it: a warning. Any other refusal is an error naming node and object.
+    fn write_sync_timing(&mut self, i: usize) -> Result<(), LinkError> {
+        let node = self.axes[i].node;
+        let objects = [
+            (
+                0x1006u16,
+                "communication cycle period",
+                cycle_period_us(self.cycle),
+            ),
+            (
+                0x1007,
+                "synchronous window length",
+                sync_window_us(self.cycle),
+            ),
+        ];
+        for (index, what, us) in objects {
+            match self.sdo_transfer(i, index, 0, Some(&us.to_le_bytes())) {
+                Ok(_) => {
+                    tracing::debug!(target: "fieldprobe::link::canopen", node, "{index:#06x} {what} = {us} µs");
+                }
+                Err(LinkError::Abort {
+                    code: ABORT_NO_OBJECT,
+                    ..
+                }) => {
+                    tracing::warn!(target: "fieldprobe::link::canopen", node,
+                        "node {node} has no {index:#06x} {what} (SDO abort 0x06020000); it runs without it");
+                }
+                Err(LinkError::Abort { code, .. }) => {
+                    return Err(other(format!(
+                        "node {node}: start-up: writing {index:#06x}:00 {what} = {us} µs refused, \
+                         abort code {code:#010x} ({})",
+                        crate::bus::ethercat::mailbox::abort_text(code)
+                    )))
+                }
+                Err(e) => return Err(e),
+            }
         }
         Ok(())
     }
@@ -539,13 +691,90 @@ impl CanopenLink {
         let now = self.now;
         let t0 = self.t0;
         let mut seen = Vec::new();
-        let r = self.bus.sdo(&mut client, first, t0, now, &mut |frames| {
-            seen.extend(frames);
-            Ok(())
-        });
+        let r = self.bus.sdo(
+            &mut client,
+            first,
+            t0,
+            now,
+            self.pacing.as_mut(),
+            &mut |frames| {
+                seen.extend(frames);
+                Ok(())
+            },
+        );
         self.axes[i].sdo = client;
         self.note(seen, now)?;
         r.map_err(sdo_failure(node, index, sub))
+    }
+
+    /// The end of an exchange: the fault knob, the heartbeat consumer, and the TPDOs (`got`,
+    /// the frames after SYNC) copied into the input images when every expected one came.
+    fn finish_exchange(
+        &mut self,
+        n: u64,
+        now: Nanos,
+        mut got: Vec<CanFrame>,
+        images: &mut [ProcessImage],
+    ) -> Result<(), LinkError> {
+        if self.lose.contains(&n) {
+            // Fault knob: this cycle's TPDOs never arrive.
+            got.retain(|f| !self.tpdo_cobs.contains(&f.id));
+        }
+        // Heartbeat consumer.
+        let hb_now = self.heartbeat_clock(now);
+        for ax in &self.axes {
+            let limit = u64::from(HEARTBEAT_MS) * 1_000_000 * HEARTBEAT_TIMEOUT_FACTOR;
+            if let Some(t) = ax.last_heartbeat {
+                if hb_now.0.saturating_sub(t.0) > limit {
+                    return Err(LinkError::Lost {
+                        at: now,
+                        reason: format!(
+                            "node {} heartbeat lost (none for {} ms, period {HEARTBEAT_MS} ms)",
+                            ax.node,
+                            hb_now.0.saturating_sub(t.0) / 1_000_000
+                        ),
+                    });
+                }
+            }
+        }
+        let mut staged: Vec<Vec<u8>> = images.iter().map(|i| i.inputs.clone()).collect();
+        for (ax, inputs) in self.axes.iter().zip(staged.iter_mut()) {
+            for p in &ax.tx {
+                let f = got
+                    .iter()
+                    .rev()
+                    .find(|f| !f.extended && !f.rtr && f.id == u32::from(p.cob));
+                match f {
+                    Some(f) if p.unpack(f.payload(), inputs) => {}
+                    Some(f) => {
+                        return Err(LinkError::Lost {
+                            at: now,
+                            reason: format!(
+                                "node {}: TPDO {} has {} bytes, expected {}",
+                                ax.node,
+                                p.number + 1,
+                                f.len,
+                                p.len()
+                            ),
+                        })
+                    }
+                    None => {
+                        return Err(LinkError::Lost {
+                            at: now,
+                            reason: format!(
+                                "node {}: TPDO {} missing after SYNC",
+                                ax.node,
+                                p.number + 1
+                            ),
+                        })
+                    }
+                }
+            }
+        }
+        for (img, inputs) in images.iter_mut().zip(staged) {
+            img.inputs = inputs;
+        }
+        Ok(())
     }
 
     /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus (dropped before
@@ -605,98 +834,29 @@ impl Link for CanopenLink {
                 rpdos.push(f);
             }
         }
+        // The set-points computed from the previous exchange go out at once: inside the
+        // synchronous window that followed the previous SYNC.
         for f in &rpdos {
             self.send(f)?;
         }
-        self.send(&nmt::sync())?;
-        self.run_nodes(now);
-        // TPDOs of this SYNC: all of them, or the cycle is lost.
-        let expected: usize = self.axes.iter().map(|a| a.tx.len()).sum();
-        let mut got: Vec<CanFrame> = Vec::new();
-        let deadline = Instant::now() + self.response_timeout;
-        loop {
-            let frames = self.receive_all(Duration::from_millis(2))?;
-            let frames = self.note(frames, now)?;
-            got.extend(frames);
-            let tpdos = got
-                .iter()
-                .filter(|f| {
-                    self.axes
-                        .iter()
-                        .any(|a| a.tx.iter().any(|p| u32::from(p.cob) == f.id))
-                })
-                .count();
-            if tpdos >= expected || self.bus.emulated.is_some() {
-                break;
+        match self.pacing.take() {
+            Some(mut pacing) => {
+                let r = self.paced_cycle(&mut pacing, n, now, images);
+                self.pacing = Some(pacing);
+                r
             }
-            if Instant::now() > deadline {
-                break;
+            None => {
+                // Virtual time: the nodes take the RPDOs right after the previous SYNC, then
+                // SYNC and their TPDOs at `now`; they have answered when `run_nodes` returns.
+                self.run_nodes(self.prev_now);
+                self.prev_now = now;
+                self.send(&nmt::sync())?;
+                self.run_nodes(now);
+                let frames = self.receive_all(Duration::ZERO)?;
+                let got = self.note(frames, now)?;
+                self.finish_exchange(n, now, got, images)
             }
         }
-        if self.lose.contains(&n) {
-            // Fault knob: this cycle's TPDOs never arrive.
-            got.retain(|f| {
-                !self
-                    .axes
-                    .iter()
-                    .any(|a| a.tx.iter().any(|p| u32::from(p.cob) == f.id))
-            });
-        }
-        // Heartbeat consumer.
-        let hb_now = self.heartbeat_clock(now);
-        for ax in &self.axes {
-            let limit = u64::from(HEARTBEAT_MS) * 1_000_000 * HEARTBEAT_TIMEOUT_FACTOR;
-            if let Some(t) = ax.last_heartbeat {
-                if hb_now.0.saturating_sub(t.0) > limit {
-                    return Err(LinkError::Lost {
-                        at: now,
-                        reason: format!(
-                            "node {} heartbeat lost (none for {} ms, period {HEARTBEAT_MS} ms)",
-                            ax.node,
-                            hb_now.0.saturating_sub(t.0) / 1_000_000
-                        ),
-                    });
-                }
-            }
-        }
-        let mut staged: Vec<Vec<u8>> = images.iter().map(|i| i.inputs.clone()).collect();
-        for (ax, inputs) in self.axes.iter().zip(staged.iter_mut()) {
-            for p in &ax.tx {
-                let f = got
-                    .iter()
-                    .rev()
-                    .find(|f| !f.extended && !f.rtr && f.id == u32::from(p.cob));
-                match f {
-                    Some(f) if p.unpack(f.payload(), inputs) => {}
-                    Some(f) => {
-                        return Err(LinkError::Lost {
-                            at: now,
-                            reason: format!(
-                                "node {}: TPDO {} has {} bytes, expected {}",
-                                ax.node,
-                                p.number + 1,
-                                f.len,
-                                p.len()
-                            ),
-                        })
-                    }
-                    None => {
-                        return Err(LinkError::Lost {
-                            at: now,
-                            reason: format!(
-                                "node {}: TPDO {} missing after SYNC",
-                                ax.node,
-                                p.number + 1
-                            ),
-                        })
-                    }
-                }
-            }
-        }
-        for (img, inputs) in images.iter_mut().zip(staged) {
-            img.inputs = inputs;
-        }
-        Ok(())
     }
 
     fn read_object(&mut self, device: usize, index: u16, sub: u8) -> Result<i64, LinkError> {
@@ -752,201 +912,29 @@ impl Link for CanopenLink {
     fn exchanges(&self) -> u64 {
         self.exchanges
     }
-}
 
-/// One node as [`CanSession::scan`] finds it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct NodeInfo {
-    /// Node id.
-    pub id: u8,
-    /// State from its last heartbeat / boot-up, if one was seen.
-    pub state: Option<NmtState>,
-    /// 0x1000 device type.
-    pub device_type: u32,
-    /// 0x1018:1 … 3 vendor, product code, revision (None where the node refused).
-    pub identity: [Option<u32>; 3],
-    /// 0x1008 device name, if the node has one.
-    pub name: Option<String>,
-}
-
-/// A CAN bus for commissioning commands (`can scan`, `can dump`, `sdo … --node`): no NMT
-/// commands, no PDO configuration; SDO by node id.
-pub struct CanSession {
-    bus: Transport,
-    t0: Instant,
-    states: std::collections::BTreeMap<u8, NmtState>,
-}
-
-impl std::fmt::Debug for CanSession {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("CanSession")
-            .field("bus", &self.bus.describe())
-            .finish_non_exhaustive()
-    }
-}
-
-impl CanSession {
-    /// Open `link` (`canopen-emu`: the emulated nodes of `drives` at node ids `ids`;
-    /// `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
-    pub fn open(
-        link: &str,
-        drives: &[Arc<DriveDefinition>],
-        ids: &[u8],
-        candump: Option<&std::path::Path>,
-    ) -> Result<Self, LinkError> {
-        check_ids(ids)?;
-        let bus = Transport::open(link, drives, ids, Nanos::from_micros(1000), candump)?;
-        let mut s = CanSession {
-            bus,
-            t0: Instant::now(),
-            states: Default::default(),
-        };
-        // Emulated nodes boot at once (boot-up message, pre-operational).
-        s.bus.run_nodes(Nanos::ZERO);
-        let frames = s.bus.receive_all(Duration::ZERO)?;
-        s.note(&frames);
-        Ok(s)
+    fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {
+        self.pacing.as_ref().map(|p| p.stats().summary())
     }
 
-    fn wall(&self) -> Nanos {
-        Nanos(self.t0.elapsed().as_nanos() as u64)
-    }
-
-    fn note(&mut self, frames: &[CanFrame]) {
-        for f in frames {
-            if let Some((n, s)) = nmt::parse_heartbeat(f) {
-                self.states.insert(n, s);
-            }
+    fn finish_cycle_log(&mut self) -> Result<(), String> {
+        match self.pacing.as_mut() {
+            Some(p) => p.stats_mut().finish_log(),
+            None => Ok(()),
         }
     }
 
-    /// Every frame on the bus for `duration` (emulated nodes run meanwhile), in order.
-    pub fn listen(
+    fn set_cycle_log(
         &mut self,
-        duration: Duration,
-        each: &mut dyn FnMut(&CanFrame),
+        name: &str,
+        out: Box<dyn std::io::Write + Send>,
     ) -> Result<(), LinkError> {
-        let end = Instant::now() + duration;
-        while Instant::now() < end {
-            let now = self.wall();
-            self.bus.run_nodes(now);
-            let frames = self.bus.receive_all(Duration::from_millis(10))?;
-            self.note(&frames);
-            for f in &frames {
-                each(f);
+        match self.pacing.as_mut() {
+            Some(p) => {
+                p.log_to(name, out);
+                Ok(())
             }
-            if self.bus.emulated.is_some() {
-                std::thread::sleep(Duration::from_millis(1));
-            }
+            None => Err(LinkError::Other(paced::NO_CYCLE_LOG.into())),
         }
-        Ok(())
-    }
-
-    /// SDO upload from `node`.
-    pub fn sdo_upload(&mut self, node: u8, index: u16, sub: u8) -> Result<Vec<u8>, LinkError> {
-        self.transfer(node, index, sub, None)
-    }
-
-    /// SDO download to `node`.
-    pub fn sdo_download(
-        &mut self,
-        node: u8,
-        index: u16,
-        sub: u8,
-        data: &[u8],
-    ) -> Result<(), LinkError> {
-        self.transfer(node, index, sub, Some(data)).map(|_| ())
-    }
-
-    fn transfer(
-        &mut self,
-        node: u8,
-        index: u16,
-        sub: u8,
-        data: Option<&[u8]>,
-    ) -> Result<Vec<u8>, LinkError> {
-        if !(1..=127).contains(&node) {
-            return Err(other(format!("node {node}: allowed 1 … 127")));
-        }
-        let mut client = SdoClient::new(node);
-        let wall = self.wall();
-        let first = match data {
-            None => client.upload(index, sub, wall),
-            Some(d) => client.download(index, sub, d, wall),
-        };
-        let t0 = self.t0;
-        let mut seen = Vec::new();
-        let r = self.bus.sdo(&mut client, first, t0, wall, &mut |f| {
-            seen.extend(f);
-            Ok(())
-        });
-        self.note(&seen);
-        r.map_err(sdo_failure(node, index, sub))
-    }
-
-    /// Find the nodes: an SDO upload of 0x1000 to every node id 1 … 127 at once (nodes in
-    /// pre-operational or operational answer), then 0x1018:1 … 3 and 0x1008 from each.
-    pub fn scan(&mut self) -> Result<Vec<NodeInfo>, LinkError> {
-        let wall = self.wall();
-        let mut clients: Vec<SdoClient> = (1..=127u8).map(SdoClient::new).collect();
-        for c in &mut clients {
-            c.set_timeout(Nanos::from_micros(300_000));
-            for f in c.upload(0x1000, 0, wall) {
-                self.bus.send(&f)?;
-            }
-        }
-        let end = Instant::now() + Duration::from_millis(400);
-        while Instant::now() < end && clients.iter().any(|c| c.busy()) {
-            let now = self.wall();
-            self.bus.run_nodes(now);
-            let frames = self.bus.receive_all(Duration::from_millis(10))?;
-            self.note(&frames);
-            for f in &frames {
-                if let Some(c) =
-                    f.id.checked_sub(u32::from(crate::bus::canopen::sdo::SDO_TX_BASE))
-                        .filter(|n| (1..=127).contains(n))
-                        .and_then(|n| clients.get_mut(n as usize - 1))
-                {
-                    for r in c.handle(f, now) {
-                        self.bus.send(&r)?;
-                    }
-                }
-            }
-            for c in &mut clients {
-                for r in c.poll(now) {
-                    self.bus.send(&r)?;
-                }
-            }
-        }
-        let found: Vec<(u8, u32)> = clients
-            .iter_mut()
-            .filter_map(|c| match c.take_result() {
-                Some(Ok(b)) => Some((c.node(), decode_le(&b, false) as u32)),
-                _ => None,
-            })
-            .collect();
-        let mut out = Vec::new();
-        for (id, device_type) in found {
-            let mut identity = [None; 3];
-            for (k, slot) in identity.iter_mut().enumerate() {
-                *slot = self
-                    .sdo_upload(id, 0x1018, (k + 1) as u8)
-                    .ok()
-                    .map(|b| decode_le(&b, false) as u32);
-            }
-            let name = self.sdo_upload(id, 0x1008, 0).ok().map(|b| {
-                String::from_utf8_lossy(&b)
-                    .trim_end_matches('\0')
-                    .to_string()
-            });
-            out.push(NodeInfo {
-                id,
-                state: self.states.get(&id).copied(),
-                device_type,
-                identity,
-                name,
-            });
-        }
-        Ok(out)
     }
 }
