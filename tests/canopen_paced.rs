@@ -61,7 +61,7 @@ fn start_up_writes_cycle_period_and_synchronous_window_to_every_node() {
     let e = link
         .set_cycle_log("cycles.csv", Box::new(std::io::sink()))
         .unwrap_err();
-    assert!(e.contains("virtual time"), "{e}");
+    assert!(e.to_string().contains("virtual time"), "{e}");
 }
 
 fn ipos_text() -> Option<String> {
