@@ -100,3 +100,47 @@ fn refused_by_the_system_says_what_would_permit_it() {
         assert!(stdout.is_empty(), "{opt}: no cycle ran: {stdout}");
     }
 }
+
+#[test]
+fn the_emulators_take_the_same_options_and_refuse_impossible_ones() {
+    // `sim ethercat` / `sim canopen` play devices with their own hardware clock; on a shared
+    // machine their serve threads get the same knobs as the master. An impossible value is
+    // refused before any interface or bus is opened (the interface here does not exist), with
+    // the option and the reason, exit 2.
+    for (sub, args) in [
+        (
+            "ethercat",
+            &[
+                "--iface",
+                "fp-no-such-if",
+                "--device",
+                "esi/fieldprobe-cia402-servo.xml",
+            ][..],
+        ),
+        (
+            "canopen",
+            &["--bus", "socketcan:fp-no-such-if", "--node", "1"][..],
+        ),
+    ] {
+        for (opt, want) in [
+            (
+                &["--rt-priority", "100"][..],
+                "--rt-priority 100: SCHED_FIFO priorities are 1 ..= 99",
+            ),
+            (&["--cpu", "100000"][..], "--cpu 100000: no such CPU"),
+        ] {
+            let o = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+                .current_dir(env!("CARGO_MANIFEST_DIR"))
+                .args(["sim", sub])
+                .args(args)
+                .args(opt)
+                .args(["--seconds", "1"])
+                .output()
+                .expect("fieldprobe runs");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "sim {sub} {opt:?}: {err}");
+            assert!(err.contains(want), "sim {sub} {opt:?}: {err}");
+            assert!(!err.contains("listening"), "sim {sub} {opt:?}: {err}");
+        }
+    }
+}

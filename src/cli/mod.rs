@@ -159,17 +159,50 @@ pub struct LinkArgs {
     /// socketcan:IF).
     #[arg(long, value_name = "FILE.csv")]
     cycle_log: Option<std::path::PathBuf>,
-    /// Run the cyclic thread with SCHED_FIFO at this priority (1 ..= 99; needs CAP_SYS_NICE or
-    /// RLIMIT_RTPRIO). Links that leave the process only.
+    /// Real-time options of the cyclic thread.
+    #[command(flatten)]
+    rt: RtArgs,
+}
+
+/// `--rt-priority`, `--cpu`, `--mlock`: the real-time knobs of `run` (the cyclic thread of a
+/// link that leaves the process) and of `sim` (the emulator's threads on an interface or bus,
+/// which play devices with their own hardware clock).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RtArgs {
+    /// SCHED_FIFO at this priority (1 ..= 99; needs CAP_SYS_NICE or RLIMIT_RTPRIO). `run`:
+    /// links that leave the process only.
     #[arg(long, value_name = "N")]
     rt_priority: Option<u8>,
-    /// Pin the cyclic thread to this CPU. Links that leave the process only.
+    /// Pin to this CPU. `run`: links that leave the process only.
     #[arg(long, value_name = "N")]
     cpu: Option<usize>,
-    /// Lock all memory (mlockall) so no page fault delays a cycle. Links that leave the
+    /// Lock all memory (mlockall) so no page fault delays a cycle. `run`: links that leave the
     /// process only.
     #[arg(long)]
     mlock: bool,
+}
+
+impl RtArgs {
+    /// The options given.
+    pub fn options(&self) -> fieldprobe::rt::RtOptions {
+        fieldprobe::rt::RtOptions {
+            priority: self.rt_priority,
+            cpu: self.cpu,
+            lock_memory: self.mlock,
+        }
+    }
+
+    /// Check and apply them to the calling thread and the process (threads spawned later
+    /// inherit the scheduling policy and the affinity); `who` prefixes the messages. The
+    /// error text names the option and the reason (the caller exits 2).
+    pub fn check_and_apply(&self, who: &str) -> Result<(), String> {
+        let rt = self.options();
+        rt.check().map_err(|e| e.to_string())?;
+        for what in rt.apply().map_err(|e| e.to_string())? {
+            eprintln!("{who}: real-time: {what}");
+        }
+        Ok(())
+    }
 }
 
 impl LinkArgs {
@@ -192,11 +225,7 @@ impl LinkArgs {
 
     /// The real-time options given (`--rt-priority`, `--cpu`, `--mlock`).
     pub fn rt(&self) -> fieldprobe::rt::RtOptions {
-        fieldprobe::rt::RtOptions {
-            priority: self.rt_priority,
-            cpu: self.cpu,
-            lock_memory: self.mlock,
-        }
+        self.rt.options()
     }
 
     /// Refuse the real-time options and the cycle log on a link that runs on virtual time, and

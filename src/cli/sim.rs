@@ -4,6 +4,7 @@
 //! ```text
 //! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--drive POS=DRIVE]...
 //!                         [--probe-at POS=MM]... [--lockstep] [--seconds N]
+//!                         [--rt-priority N] [--cpu N] [--mlock]
 //! ```
 //! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; the
 //! first device of each file is used; ring positions count from 0 nearest the master), with the
@@ -49,9 +50,15 @@
 //! when the actual position crosses the surface (either direction), so a touch probe armed in
 //! 0x60B8 latches the surface position in 0x60BA/0x60BB.
 //!
+//! `--rt-priority N` / `--cpu N` / `--mlock` run the serve threads with SCHED_FIFO, on one CPU,
+//! with memory locked (as `run` does for the master): a real device answers in hardware, an
+//! emulator that shares a loaded machine with the master answers late without them (measured
+//! in docs/ethercat.md, "The paced cycle on an interface"). Refused with exit 2 where the
+//! system does not permit it.
+//!
 //! Exit 0; 2 on bad input (the message names the file, position or interface).
 
-use super::EXIT_OK;
+use super::{EXIT_BAD_INPUT, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::bus::can::{CanBus, CanError};
 use fieldprobe::bus::canopen::eds;
@@ -119,6 +126,10 @@ struct EthercatArgs {
     /// Stop after this many seconds (default: run until killed).
     #[arg(long, value_name = "N")]
     seconds: Option<f64>,
+    /// Real-time options of the serve threads (a device answers in hardware: on a loaded
+    /// machine an emulator without them answers late, and the master sees late frames).
+    #[command(flatten)]
+    rt: super::RtArgs,
 }
 
 /// Run the command; returns the exit code.
@@ -352,6 +363,10 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
             "own clock (SYNC0 and sync-manager watchdogs on CLOCK_MONOTONIC)"
         }
     );
+    if let Err(e) = a.rt.check_and_apply("fieldprobe sim ethercat") {
+        eprintln!("fieldprobe sim ethercat: {e}");
+        return Ok(EXIT_BAD_INPUT);
+    }
     let mut port = raw::RawPort::open(&a.iface)?;
     eprintln!("fieldprobe sim ethercat: listening on {}", port.iface());
     let stop = AtomicBool::new(false);
@@ -385,7 +400,7 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
 /// ```text
 /// fieldprobe sim canopen --bus udp[:GROUP:PORT]|socketcan:IF --node ID [--node ID]...
 ///                        [--eds FILE] [--drive DRIVE] [--probe-at ID=MM]...
-///                        [--heartbeat-ms MS] [--seconds N]
+///                        [--heartbeat-ms MS] [--seconds N] [--rt-priority N] [--cpu N] [--mlock]
 /// ```
 /// Serves one emulated CiA 402 node per `--node` ([`EmulatedNode`]: NMT slave, boot-up and
 /// heartbeat producer, SDO server with segmented and block transfers, SYNC-driven PDOs, EMCY)
@@ -439,6 +454,9 @@ pub struct CanopenArgs {
     /// Stop after this many seconds (default: run until killed).
     #[arg(long, value_name = "N")]
     seconds: Option<f64>,
+    /// Real-time options of the serve loop (see `sim ethercat`).
+    #[command(flatten)]
+    rt: super::RtArgs,
 }
 
 /// SIGTERM / SIGINT, taken through a signalfd (no handler, no unsafe code): the loop polls it
@@ -621,6 +639,10 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
             "fieldprobe sim canopen: probe surface at {mm} mm = {inc} increments of node {id}, \
              wired to its touch probe input 1"
         );
+    }
+    if let Err(e) = a.rt.check_and_apply("fieldprobe sim canopen") {
+        eprintln!("fieldprobe sim canopen: {e}");
+        return Ok(EXIT_BAD_INPUT);
     }
     let stop = StopSignals::new();
     let mut bus = open_can_bus(&a.bus, bus_spec)?;

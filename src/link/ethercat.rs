@@ -614,7 +614,7 @@ impl EthercatLink {
         };
         if let Some(clock) = self.clock.as_mut() {
             if let Ok(Some(wait)) = &result {
-                clock.align(sent.saturating_add(wait.as_nanos() as u64));
+                clock.track(sent.saturating_add(wait.as_nanos() as u64));
             }
             clock.stats_mut().record(CycleRecord {
                 deadline: wake.deadline,
