@@ -37,10 +37,27 @@ fn start_up_writes_cycle_period_and_synchronous_window_to_every_node() {
         assert_eq!(link.read_object(device, 0x1006, 0), Ok(4000), "{device}");
         assert_eq!(link.read_object(device, 0x1007, 0), Ok(2000), "{device}");
     }
-    // In the nodes' own dictionaries too (UNSIGNED32 little endian).
+    // In the nodes' own dictionaries too (UNSIGNED32 little endian), and the deadline
+    // monitoring of every RPDO in use: event-timer (0x1400 + k sub-index 5, UNSIGNED16 ms) =
+    // five cycles = 20 ms; the RPDOs not in use (COB-ID bit 31 set) keep 0.
     for n in link.segment().unwrap().nodes() {
         assert_eq!(n.read_object(0x1006, 0), Ok(4000u32.to_le_bytes().to_vec()));
         assert_eq!(n.read_object(0x1007, 0), Ok(2000u32.to_le_bytes().to_vec()));
+        let mut used = 0;
+        for k in 0..4u16 {
+            let cob = n.read_object(0x1400 + k, 1).unwrap();
+            let valid = cob[3] & 0x80 == 0;
+            let timer = n.read_object(0x1400 + k, 5).unwrap();
+            assert_eq!(
+                timer,
+                if valid { 20u16 } else { 0 }.to_le_bytes().to_vec(),
+                "node {} RPDO {}",
+                n.id(),
+                k + 1
+            );
+            used += usize::from(valid);
+        }
+        assert!(used >= 1, "node {}: no RPDO in use", n.id());
     }
     // The nodes watch their SYNC on the link's virtual time: one SYNC per exchange, however
     // long the wall clock takes, never a time-out.
@@ -54,6 +71,7 @@ fn start_up_writes_cycle_period_and_synchronous_window_to_every_node() {
     }
     for n in link.segment().unwrap().nodes() {
         assert_eq!(n.sync_timeouts(), 0);
+        assert_eq!(n.rpdo_timeouts(), 0);
         assert_eq!(n.rpdos_outside_window(), 0);
     }
     // canopen-emu runs on virtual time: no paced cycle, no statistics, no cycle log.

@@ -10,7 +10,8 @@
 //! OPERATION ENABLED 0x27, FAULT `& 0x4F == 0x08`), EMCY frame layout of CiA 301 (COB-ID
 //! 0x080 + node, error code LE, error register, 5 manufacturer bytes), code 0x8100
 //! "communication" with error register bits 0 (generic) and 4 (communication), and the
-//! documented SYNC time-out of five periods.
+//! documented SYNC time-out of five periods. The RPDO deadline monitoring is CiA 301's: the
+//! event-timer (0x1400 sub-index 5, ms) armed by the first RPDO, EMCY 0x8250 "RPDO time-out".
 
 use fieldprobe::bus::can::CanFrame;
 use fieldprobe::drive::catalogue;
@@ -318,4 +319,98 @@ fn a_drive_step_covers_the_configured_cycle_period() {
     configure(&mut seg, 0, 0);
     let v = ramp_velocity(&mut seg);
     assert!((v - 400_000).abs() <= 4_000, "velocity {v} increments/s");
+}
+
+/// One cycle with SYNC only (the master lost its set-points, or never sends them).
+fn sync_only(seg: &mut CanopenSegment, t: Nanos) -> Reply {
+    decode(&seg.run(&[frame(0x080, &[])], t))
+}
+
+#[test]
+fn rpdo_missing_beyond_its_event_timer_is_emcy_8250_and_a_drive_fault() {
+    let mut seg = segment(PERIOD_US);
+    configure(&mut seg, PERIOD_US as u32, PERIOD_US as u32 / 2);
+    // RPDO1 deadline monitoring: 20 ms (a PDO parameter: written in pre-operational).
+    seg.run(&[frame(0x000, &[0x80, NODE])], Nanos(0));
+    download(&mut seg, 0x1400, 5, 20, 2);
+    seg.run(&[frame(0x000, &[0x01, NODE])], Nanos(0));
+    let mut k = 0u64;
+    enable(&mut seg, &mut k, 0);
+    let mut p = 0;
+    for _ in 0..20 {
+        k += 1;
+        p = cycle(&mut seg, Nanos::from_micros(k * PERIOD_US), 0x0F, 800)
+            .tpdo
+            .unwrap()
+            .1;
+    }
+    assert_eq!(p, 800);
+    // From here the SYNC keeps coming every 4 ms, the RPDO does not. Time in 1 ms steps: no
+    // EMCY while the gap is ≤ 20 ms, one at the first step beyond.
+    let t_last = k * PERIOD_US;
+    let mut emcys = Vec::new();
+    let mut emcy_at = None;
+    let mut last = (0, 0);
+    for ms in 1..=60u64 {
+        let t = Nanos::from_micros(t_last + ms * 1000);
+        let r = if ms % 4 == 0 {
+            sync_only(&mut seg, t)
+        } else {
+            decode(&seg.run(&[], t))
+        };
+        if !r.emcy.is_empty() && emcy_at.is_none() {
+            emcy_at = Some(ms);
+        }
+        emcys.extend(r.emcy);
+        if let Some(tp) = r.tpdo {
+            last = tp;
+        }
+    }
+    // 081 [8] 50 82 11 …: EMCY 0x8250 RPDO time-out, error register generic + communication;
+    // exactly one per outage, and not 0x8100: the SYNC never stopped.
+    assert_eq!(emcys, vec![(0x8250, 0x11)]);
+    assert_eq!(emcy_at, Some(21), "first step with a gap over 20 ms");
+    assert_eq!(seg.nodes()[0].rpdo_timeouts(), 1);
+    assert_eq!(seg.nodes()[0].sync_timeouts(), 0);
+    assert_eq!(last.0 & 0x4F, 0x08, "FAULT: statusword {:#06x}", last.0);
+    assert_eq!(
+        seg.nodes()[0].read_object(0x603F, 0).unwrap()[..2],
+        0x8250u16.to_le_bytes()
+    );
+    // The RPDO comes back: the drive stays in FAULT (no new target followed) until a fault
+    // reset; no second EMCY for the same outage.
+    let mut k = (t_last + 60_000) / PERIOD_US;
+    for _ in 0..5 {
+        k += 1;
+        let r = cycle(&mut seg, Nanos::from_micros(k * PERIOD_US), 0x0F, 5000);
+        assert!(r.emcy.iter().all(|&(c, _)| c != 0x8250), "{:?}", r.emcy);
+        last = r.tpdo.unwrap();
+    }
+    assert_eq!(last.0 & 0x4F, 0x08, "still FAULT: {:#06x}", last.0);
+    assert_eq!(last.1, 800, "does not follow while faulted");
+}
+
+#[test]
+fn no_rpdo_monitoring_with_event_timer_0_and_reset_communication_restores_0() {
+    let mut seg = segment(PERIOD_US);
+    configure(&mut seg, PERIOD_US as u32, PERIOD_US as u32 / 2);
+    let mut k = 0u64;
+    enable(&mut seg, &mut k, 0);
+    // Event-timer 0 (the default): SYNC only for 200 ms, no RPDO time-out.
+    for ms in 1..=200u64 {
+        let t = Nanos::from_micros(k * PERIOD_US + ms * 1000);
+        let r = if ms % 4 == 0 {
+            sync_only(&mut seg, t)
+        } else {
+            decode(&seg.run(&[], t))
+        };
+        assert!(r.emcy.is_empty(), "{:?}", r.emcy);
+    }
+    assert_eq!(seg.nodes()[0].rpdo_timeouts(), 0);
+    // Set, then reset communication: back to 0 (CiA 301: the communication parameters).
+    seg.run(&[frame(0x000, &[0x80, NODE])], Nanos(0));
+    download(&mut seg, 0x1400, 5, 20, 2);
+    assert_eq!(seg.nodes()[0].read_object(0x1400, 5), Ok(vec![20, 0]));
+    seg.run(&[frame(0x000, &[0x82, NODE])], Nanos(0));
+    assert_eq!(seg.nodes()[0].read_object(0x1400, 5), Ok(vec![0, 0]));
 }

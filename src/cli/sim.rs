@@ -690,6 +690,7 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         }
     }
     let timeouts: u64 = segment.nodes().iter().map(|n| n.sync_timeouts()).sum();
+    let rpdo_timeouts: u64 = segment.nodes().iter().map(|n| n.rpdo_timeouts()).sum();
     let late: u64 = segment
         .nodes()
         .iter()
@@ -697,7 +698,7 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         .sum();
     eprintln!(
         "fieldprobe sim canopen: done, {received} frames received, {sent} sent, {timeouts} SYNC \
-         time-outs, {late} RPDOs outside the synchronous window"
+         time-outs, {rpdo_timeouts} RPDO time-outs, {late} RPDOs outside the synchronous window"
     );
     Ok(EXIT_OK)
 }

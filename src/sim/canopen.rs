@@ -44,6 +44,17 @@
 //! **Synchronous window.** When 0x1007 ≠ 0, RPDOs that arrive later than 0x1007 after the last
 //! SYNC are counted ([`EmulatedNode::rpdos_outside_window`]) and still used (CiA 301 allows
 //! discarding them; counting keeps the emulator's runs comparable).
+//!
+//! **RPDO deadline monitoring** (CiA 301: the event-timer, sub-index 5 of the RPDO
+//! communication parameter 0x1400 + k, UNSIGNED16 ms, 0 = off). From the first reception of an
+//! RPDO in OPERATIONAL, an RPDO that stays away for longer than its event-timer sends EMCY
+//! [`RPDO_TIMEOUT_EMCY`] (0x8250 "RPDO time-out", error register generic + communication) once
+//! per outage ([`EmulatedNode::rpdo_timeouts`]), and the drive faults like on a SYNC time-out —
+//! the communication error reaction of a CiA 402 drive (0x6007 abort connection option code
+//! "fault"). This is what catches a master that sends SYNC but no set-points. fieldprobe's
+//! master sets the event-timer to five cycles, rounded up to whole ms
+//! ([`crate::link::canopen::paced::rpdo_event_timer_ms`]). Reset communication sets it back
+//! to 0, as all communication parameters.
 
 use crate::bus::can::CanFrame;
 use std::collections::BTreeMap;
@@ -69,6 +80,8 @@ pub const DEFAULT_HEARTBEAT_MS: u16 = 100;
 pub const SYNC_TIMEOUT_PERIODS: u64 = 5;
 /// EMCY error code of a SYNC time-out: 0x8100 "communication" (CiA 301 table 21).
 pub const SYNC_TIMEOUT_EMCY: u16 = 0x8100;
+/// EMCY error code of an RPDO deadline time-out (CiA 301 "RPDO time-out").
+pub const RPDO_TIMEOUT_EMCY: u16 = 0x8250;
 /// Error register (0x1001) sent with a SYNC time-out: bit 0 generic, bit 4 communication.
 const SYNC_TIMEOUT_REGISTER: u8 = 0x11;
 /// Capacity (bytes) of a VISIBLE_STRING / OCTET_STRING / UNICODE_STRING / DOMAIN object built
@@ -131,17 +144,30 @@ pub struct EmulatedNode {
     sync_lost: bool,
     sync_timeouts: u64,
     rpdos_outside_window: u64,
+    /// RPDO deadline monitoring: when RPDO k last came (operational, armed by its first
+    /// reception), and whether its time-out fired since.
+    rpdo_seen: [Option<Nanos>; MAX_PDOS],
+    rpdo_lost: [bool; MAX_PDOS],
+    rpdo_timeouts: u64,
     /// An EMCY for this model error code was sent already (the SYNC watch sends it before the
     /// model faults).
     emcy_sent_for: Option<u16>,
-    /// 0x1006 / 0x1007 as built (restored by NMT reset communication).
-    sync_defaults: Vec<(u16, Vec<u8>)>,
+    /// 0x1006 / 0x1007 and the RPDO event-timers as built (restored by NMT reset
+    /// communication): (index, sub-index, value).
+    comm_defaults: Vec<(u16, u8, Vec<u8>)>,
 }
 
 fn u32_entry(index: u16, sub: u8, v: u32) -> ObjectEntry {
     ObjectEntry {
         access: Access::Rw,
         ..ObjectEntry::constant(index, sub, DataType::U32, i64::from(v))
+    }
+}
+
+fn u16_entry(index: u16, sub: u8, v: u16) -> ObjectEntry {
+    ObjectEntry {
+        access: Access::Rw,
+        ..ObjectEntry::constant(index, sub, DataType::U16, i64::from(v))
     }
 }
 
@@ -161,9 +187,13 @@ fn pdo_entries(direction: Direction, node: u8, pdos: &[Pdo]) -> Vec<ObjectEntry>
         let pdo = pdos.iter().find(|p| p.number == k);
         let cob =
             u32::from(direction.default_cob(k, node)) | if pdo.is_some() { 0 } else { 0x8000_0000 };
-        v.push(ObjectEntry::constant(comm, 0, DataType::U8, 2));
+        // Sub-indices 1 COB-ID, 2 transmission type, 3 inhibit time (100 µs), 5 event-timer
+        // (ms; for an RPDO the deadline monitoring); 4 is reserved (CiA 301).
+        v.push(ObjectEntry::constant(comm, 0, DataType::U8, 5));
         v.push(u32_entry(comm, 1, cob));
         v.push(u8_entry(comm, 2, 1));
+        v.push(u16_entry(comm, 3, 0));
+        v.push(u16_entry(comm, 5, 0));
         v.push(u8_entry(map, 0, pdo.map_or(0, |p| p.mapped.len() as u8)));
         for j in 0..8u8 {
             let m = pdo
@@ -390,9 +420,10 @@ impl EmulatedNode {
         entries.extend(pdo_entries(Direction::Tx, id, &tx));
         let (rx_len, tx_len) = (model.rx_len(), model.tx_len());
         let od = CoeServer::new(model, entries, 0);
-        let sync_defaults = [0x1006u16, 0x1007]
+        let comm_defaults = [(0x1006u16, 0u8), (0x1007, 0)]
             .into_iter()
-            .filter_map(|i| od.read(i, 0).ok().map(|b| (i, b)))
+            .chain((0..MAX_PDOS as u8).map(|k| (Direction::Rx.comm_index(k), 5)))
+            .filter_map(|(i, sub)| od.read(i, sub).ok().map(|b| (i, sub, b)))
             .collect();
         Ok(EmulatedNode {
             id,
@@ -416,8 +447,11 @@ impl EmulatedNode {
             sync_lost: false,
             sync_timeouts: 0,
             rpdos_outside_window: 0,
+            rpdo_seen: [None; MAX_PDOS],
+            rpdo_lost: [false; MAX_PDOS],
+            rpdo_timeouts: 0,
             emcy_sent_for: None,
-            sync_defaults,
+            comm_defaults,
         })
     }
 
@@ -439,6 +473,12 @@ impl EmulatedNode {
     /// SYNC time-outs so far (each sent EMCY [`SYNC_TIMEOUT_EMCY`] and faulted the drive).
     pub fn sync_timeouts(&self) -> u64 {
         self.sync_timeouts
+    }
+
+    /// RPDO deadline time-outs so far (each sent EMCY [`RPDO_TIMEOUT_EMCY`] and faulted the
+    /// drive).
+    pub fn rpdo_timeouts(&self) -> u64 {
+        self.rpdo_timeouts
     }
 
     /// RPDOs that arrived later than 0x1007 after the last SYNC (0x1007 ≠ 0).
@@ -602,14 +642,17 @@ impl EmulatedNode {
             NmtCommand::ResetNode | NmtCommand::ResetCommunication => {
                 self.state = NmtState::BootUp;
                 self.boot_pending = true;
-                for (index, data) in self.sync_defaults.clone() {
-                    let _ = self.od.write(index, 0, &data);
+                for (index, sub, data) in self.comm_defaults.clone() {
+                    let _ = self.od.write(index, sub, &data);
                 }
             }
         }
-        // The SYNC watch arms again with the first SYNC in OPERATIONAL.
+        // The SYNC watch arms again with the first SYNC in OPERATIONAL, the RPDO deadline
+        // monitoring with each RPDO's first reception.
         self.last_sync = None;
         self.sync_lost = false;
+        self.rpdo_seen = [None; MAX_PDOS];
+        self.rpdo_lost = [false; MAX_PDOS];
     }
 
     fn emcy(&mut self, code: u16) {
@@ -658,8 +701,12 @@ impl EmulatedNode {
         }
         if self.state == NmtState::Operational {
             if let Some(p) = self.rx.iter().find(|p| p.cob == id) {
+                let k = usize::from(p.number);
                 if !p.unpack(f.payload(), &mut self.outputs) {
                     self.emcy(0x8210); // PDO not processed due to length error
+                } else if k < MAX_PDOS {
+                    self.rpdo_seen[k] = Some(now);
+                    self.rpdo_lost[k] = false;
                 }
                 let window = self.read_u32(0x1007);
                 if let Some(t) = self.last_sync {
@@ -705,6 +752,39 @@ impl EmulatedNode {
             }
         }
         self.watch_sync(now);
+        self.watch_rpdos(now);
+    }
+
+    /// RPDO deadline monitoring (module documentation), at `now`.
+    fn watch_rpdos(&mut self, now: Nanos) {
+        if self.state != NmtState::Operational {
+            return;
+        }
+        for k in 0..MAX_PDOS {
+            let Some(last) = self.rpdo_seen[k] else {
+                continue;
+            };
+            if self.rpdo_lost[k] {
+                continue;
+            }
+            let ms = self
+                .od
+                .read(Direction::Rx.comm_index(k as u8), 5)
+                .ok()
+                .and_then(|b| b.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])))
+                .unwrap_or(0);
+            if ms == 0 || now.0.saturating_sub(last.0) <= u64::from(ms) * 1_000_000 {
+                continue;
+            }
+            self.rpdo_lost[k] = true;
+            self.rpdo_timeouts += 1;
+            tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
+                "RPDO {} missing for {} µs (event-timer {ms} ms): EMCY 0x8250, drive fault",
+                k + 1, now.0.saturating_sub(last.0) / 1000);
+            self.emcy_with(RPDO_TIMEOUT_EMCY, SYNC_TIMEOUT_REGISTER);
+            self.emcy_sent_for = Some(RPDO_TIMEOUT_EMCY);
+            self.od.model_mut().inject_fault(RPDO_TIMEOUT_EMCY);
+        }
     }
 
     /// The TPDOs of the last SYNC step (operational only).

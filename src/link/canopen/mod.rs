@@ -11,9 +11,11 @@
 //! 0x1000 and 0x1018 (identity), the drive file's process data packed into ≤ 4 RPDOs / TPDOs of
 //! ≤ 8 bytes ([`pack_layout`]) and written by the CiA 301 remap procedure, unused PDOs disabled,
 //! producer heartbeat 0x1017 set, 0x1006 communication cycle period (µs = machine cycle) and
-//! 0x1007 synchronous window length (µs = half the cycle, [`paced::sync_window_us`]) → NMT
-//! start. A node without 0x1006 / 0x1007 (abort 0x0602_0000, e.g. an EDS that lacks 0x1007)
-//! is a warning; any other refusal of them is a start-up error naming node and object.
+//! 0x1007 synchronous window length (µs = half the cycle, [`paced::sync_window_us`]), the
+//! event-timer of every RPDO (sub-index 5: the node's deadline monitoring, five cycles rounded
+//! up to ms, [`paced::rpdo_event_timer_ms`]) → NMT start. A node without 0x1006 / 0x1007 or
+//! without the event-timer sub-index (abort 0x0602_0000 / 0x0609_0011, e.g. an EDS that lacks
+//! them) is a warning; any other refusal of them is a start-up error naming node and object.
 //!
 //! # One exchange at `now`
 //!
@@ -56,7 +58,7 @@ use crate::drive::model::DriveModel;
 use crate::sim::canopen::{CanopenSegment, EmulatedNode};
 use crate::sim::plant::Plant;
 use crate::units::Nanos;
-use paced::{cycle_period_us, sync_window_us, Pacing};
+use paced::{cycle_period_us, rpdo_event_timer_ms, sync_window_us, Pacing};
 use std::sync::Arc;
 
 /// A node is lost when its last heartbeat is older than this many periods.
@@ -65,6 +67,8 @@ pub const HEARTBEAT_TIMEOUT_FACTOR: u64 = 3;
 pub const HEARTBEAT_MS: u16 = 100;
 /// CiA 301 SDO abort code "object does not exist in the object dictionary".
 const ABORT_NO_OBJECT: u32 = 0x0602_0000;
+/// CiA 301 abort: sub-index does not exist.
+const ABORT_NO_SUBINDEX: u32 = 0x0609_0011;
 
 /// One axis's node.
 #[derive(Debug)]
@@ -632,37 +636,51 @@ impl CanopenLink {
     }
 
     /// Start-up: 0x1006 communication cycle period and 0x1007 synchronous window length
-    /// (CiA 301) of axis `i`'s node. A node without the object (abort 0x0602_0000) runs
+    /// (CiA 301) of axis `i`'s node, and the event-timer (deadline monitoring) of each of its
+    /// RPDOs. A node without the object or sub-index (abort 0x0602_0000 / 0x0609_0011) runs
     /// without it: a warning. Any other refusal is an error naming node and object.
     fn write_sync_timing(&mut self, i: usize) -> Result<(), LinkError> {
         let node = self.axes[i].node;
-        let objects = [
+        let event_ms = rpdo_event_timer_ms(self.cycle);
+        let mut objects = vec![
             (
                 0x1006u16,
-                "communication cycle period",
-                cycle_period_us(self.cycle),
+                0u8,
+                "communication cycle period".to_string(),
+                cycle_period_us(self.cycle).to_le_bytes().to_vec(),
+                format!("{} µs", cycle_period_us(self.cycle)),
             ),
             (
                 0x1007,
-                "synchronous window length",
-                sync_window_us(self.cycle),
+                0,
+                "synchronous window length".to_string(),
+                sync_window_us(self.cycle).to_le_bytes().to_vec(),
+                format!("{} µs", sync_window_us(self.cycle)),
             ),
         ];
-        for (index, what, us) in objects {
-            match self.sdo_transfer(i, index, 0, Some(&us.to_le_bytes())) {
+        for p in &self.axes[i].rx {
+            objects.push((
+                Direction::Rx.comm_index(p.number),
+                5,
+                format!("RPDO {} event-timer", p.number + 1),
+                event_ms.to_le_bytes().to_vec(),
+                format!("{event_ms} ms"),
+            ));
+        }
+        for (index, sub, what, data, value) in objects {
+            match self.sdo_transfer(i, index, sub, Some(&data)) {
                 Ok(_) => {
-                    tracing::debug!(target: "fieldprobe::link::canopen", node, "{index:#06x} {what} = {us} µs");
+                    tracing::debug!(target: "fieldprobe::link::canopen", node, "{index:#06x}:{sub:02x} {what} = {value}");
                 }
-                Err(LinkError::Abort {
-                    code: ABORT_NO_OBJECT,
-                    ..
-                }) => {
+                Err(LinkError::Abort { code, .. })
+                    if code == ABORT_NO_OBJECT || code == ABORT_NO_SUBINDEX =>
+                {
                     tracing::warn!(target: "fieldprobe::link::canopen", node,
-                        "node {node} has no {index:#06x} {what} (SDO abort 0x06020000); it runs without it");
+                        "node {node} has no {index:#06x}:{sub:02x} {what} (SDO abort {code:#010x}); it runs without it");
                 }
                 Err(LinkError::Abort { code, .. }) => {
                     return Err(other(format!(
-                        "node {node}: start-up: writing {index:#06x}:00 {what} = {us} µs refused, \
+                        "node {node}: start-up: writing {index:#06x}:{sub:02x} {what} = {value} refused, \
                          abort code {code:#010x} ({})",
                         crate::bus::ethercat::mailbox::abort_text(code)
                     )))

@@ -69,6 +69,16 @@ pub fn sync_window_us(period: Nanos) -> u32 {
     u32::try_from(us.max(1)).unwrap_or(u32::MAX)
 }
 
+/// The RPDO event-timer the master configures (0x1400 + k sub-index 5, ms, deadline
+/// monitoring in the node): [`crate::sim::canopen::SYNC_TIMEOUT_PERIODS`] cycles, rounded up to
+/// whole ms, at least 1, at most 65535 — the same tolerance as the nodes' SYNC watch.
+pub fn rpdo_event_timer_ms(period: Nanos) -> u16 {
+    let ns = period
+        .0
+        .saturating_mul(crate::sim::canopen::SYNC_TIMEOUT_PERIODS);
+    u16::try_from(ns.div_ceil(1_000_000).max(1)).unwrap_or(u16::MAX)
+}
+
 /// 0x1006 communication cycle period for `period` (µs).
 pub fn cycle_period_us(period: Nanos) -> u32 {
     u32::try_from((period.0 / 1000).max(1)).unwrap_or(u32::MAX)
