@@ -200,9 +200,9 @@ fn median(mut v: Vec<u64>) -> u64 {
 fn paced_run(cycle_us: u64) {
     let dir = tempfile::tempdir().unwrap();
     let _pair = VethPair::create();
-    // At 250 µs the emulated devices get real-time priority too (they stand for hardware: on a
-    // 2-core machine shared with the master, tcpdump and the test harness, an emulator in
-    // SCHED_OTHER answers a good part of the frames a millisecond late).
+    // At 250 µs the emulated devices get real-time priority too: they stand for hardware, and
+    // on a 2-core machine shared with the master, tcpdump and other tests an emulator in
+    // SCHED_OTHER may answer a frame later than a quarter of a millisecond.
     let mut emu_args: Vec<String> = vec!["--probe-at".into(), "3=100".into()];
     if cycle_us < 1000 {
         emu_args.extend(["--rt-priority".into(), "60".into()]);

@@ -266,12 +266,14 @@ impl WireEnd {
         }
     }
 
-    /// Interface: take every frame that arrived.
+    /// Interface: wait for the next frame (at most the port's receive timeout, [`RX_WAIT`]) and
+    /// hand it to the PDU loop. One frame per call: the caller polls the master's future after
+    /// each, so a reply is processed as soon as it is in, not after a further wait.
     fn receive(&mut self) {
         let Some(port) = self.port.as_mut() else {
             return;
         };
-        while let Some(frame) = port.try_receive() {
+        if let Some(frame) = port.try_receive() {
             if let Some(tap) = self.tap.as_mut() {
                 tap.record(&frame);
             }
@@ -280,14 +282,22 @@ impl WireEnd {
     }
 }
 
-/// Run `fut` to completion while pumping frames through `wire` (single thread).
+/// Longest wait of one receive on an interface. The socket is polled with it (poll(2) takes
+/// whole ms: a shorter timeout would be 0, a busy loop that keeps a device emulator sharing the
+/// CPU from answering — measured: wire round trip p90 1.4 ms instead of 73 µs at 1 ms). A
+/// frame that arrives ends the wait at once.
+const RX_WAIT: Duration = Duration::from_millis(1);
+
+/// Run `fut` to completion while pumping frames through `wire` (single thread): send what the
+/// master queued, then wait for one frame, then poll the master again.
 fn drive<T>(wire: &mut WireEnd, fut: impl Future<Output = T>) -> T {
     let pump = std::future::poll_fn(|cx| {
         wire.tx.replace_waker(cx.waker());
-        wire.receive();
         wire.pump();
+        wire.receive();
         if wire.port.is_some() {
-            // Nothing wakes us when a frame arrives on the socket: poll again soon.
+            // Nothing wakes us when a frame arrives on the socket: the receive above waited
+            // for it; poll the master again.
             cx.waker().wake_by_ref();
         }
         Poll::<T>::Pending
@@ -758,7 +768,7 @@ fn connect(
         Wire::Interface(i) => (
             None,
             Some(
-                crate::sim::esc::raw::RawPort::open_with_timeout(i, Duration::from_micros(200))
+                crate::sim::esc::raw::RawPort::open_with_timeout(i, RX_WAIT)
                     .map_err(|e| LinkError::Other(format!("ethercat:{i}: {e}")))?,
             ),
         ),
