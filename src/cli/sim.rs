@@ -71,7 +71,7 @@ use fieldprobe::sim::esc::{
     segment::{Segment, Stepping},
     EchoApp, Esc, EscApplication, EscConfig, NullApp,
 };
-use fieldprobe::sim::plant::{Plant, ProbeSurface};
+use fieldprobe::sim::plant::{FixedStop, Plant, ProbeSurface};
 use fieldprobe::sim::world::World;
 use fieldprobe::units::{Nanos, Scaling};
 use std::collections::BTreeMap;
@@ -399,7 +399,7 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
 ///
 /// ```text
 /// fieldprobe sim canopen --bus udp[:GROUP:PORT]|socketcan:IF --node ID [--node ID]...
-///                        [--eds FILE] [--drive DRIVE] [--probe-at ID=MM]...
+///                        [--eds FILE] [--drive DRIVE] [--probe-at ID=MM]... [--fixed-stop-at ID=MM]...
 ///                        [--heartbeat-ms MS] [--seconds N] [--rt-priority N] [--cpu N] [--mlock]
 /// ```
 /// Serves one emulated CiA 402 node per `--node` ([`EmulatedNode`]: NMT slave, boot-up and
@@ -447,6 +447,11 @@ pub struct CanopenArgs {
     /// Repeatable.
     #[arg(long = "probe-at", value_name = "ID=MM")]
     probes: Vec<String>,
+    /// A mechanical stop at MM (axis units) in front of node ID's axis: the drive's position
+    /// stays there while its torque rises to the limit (0x6072) and its following error grows,
+    /// as `run --fixed-stop-at` does on the in-process links. Repeatable.
+    #[arg(long = "fixed-stop-at", value_name = "ID=MM")]
+    fixed_stops: Vec<String>,
     /// Producer heartbeat time 0x1017 of every node in ms (default: the EDS value, or 100
     /// without `--eds`).
     #[arg(long = "heartbeat-ms", value_name = "MS")]
@@ -613,24 +618,37 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         nodes.push(node);
     }
     let mut segment = CanopenSegment::new(nodes, Nanos(SYNC_MODEL_CYCLE.as_nanos() as u64));
-    for spec in &a.probes {
+    // `--probe-at` / `--fixed-stop-at ID=MM`: (node id, device index, mm, increments).
+    let node_position = |option: &str, spec: &str| -> anyhow::Result<(u8, usize, f64, i32)> {
         let (id, mm) = spec
             .split_once('=')
-            .with_context(|| format!("--probe-at {spec}: expected ID=MM"))?;
-        let id = parse_node_id("--probe-at", spec, id)?;
+            .with_context(|| format!("{option} {spec}: expected ID=MM"))?;
+        let id = parse_node_id(option, spec, id)?;
         let device = ids.iter().position(|&n| n == id).with_context(|| {
-            format!("--probe-at {spec}: node {id} is not emulated (nodes: {ids:?})")
+            format!("{option} {spec}: node {id} is not emulated (nodes: {ids:?})")
         })?;
         let mm: f64 = mm
             .trim()
             .parse()
             .ok()
             .filter(|v: &f64| v.is_finite())
-            .with_context(|| format!("--probe-at {spec}: {mm:?} is not a position in mm"))?;
+            .with_context(|| format!("{option} {spec}: {mm:?} is not a position in mm"))?;
         let inc = def
             .scaling
             .to_increments(mm)
-            .with_context(|| format!("--probe-at {spec}: {mm} mm does not fit INTEGER32"))?;
+            .with_context(|| format!("{option} {spec}: {mm} mm does not fit INTEGER32"))?;
+        Ok((id, device, mm, inc))
+    };
+    for spec in &a.fixed_stops {
+        let (id, device, mm, inc) = node_position("--fixed-stop-at", spec)?;
+        segment.world_mut().plant_mut().add_fixed_stop(FixedStop {
+            device,
+            position: f64::from(inc),
+        });
+        eprintln!("fieldprobe sim canopen: fixed stop at {mm} mm = {inc} increments of node {id}");
+    }
+    for spec in &a.probes {
+        let (id, device, mm, inc) = node_position("--probe-at", spec)?;
         segment
             .world_mut()
             .plant_mut()

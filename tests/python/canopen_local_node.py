@@ -2,7 +2,7 @@
 """python-canopen 2.4.1 LocalNode (CANopen slave) for tests/canopen_interop.rs: our Rust master
 talks to it over python-can's udp_multicast bus.
 
-  canopen_local_node.py GROUP PORT NODE_ID EDS SECONDS
+  canopen_local_node.py GROUP PORT NODE_ID EDS SECONDS   (or socketcan:IF 0 NODE_ID EDS SECONDS)
 
 Builds a LocalNode from EDS (python-canopen's own EDS import), adds one writable
 VISIBLE_STRING object 0x2FF0 "fieldprobe scratch" (the test EDS has no writable string, and a
@@ -21,10 +21,18 @@ SCRATCH = 0x2FF0
 SCRATCH_INITIAL = "initial scratch text"
 
 
+def connect(net, group, port):
+    """GROUP PORT of python-can's udp_multicast bus, or `socketcan:IF` (PORT ignored)."""
+    if group.startswith("socketcan:"):
+        net.connect(interface="socketcan", channel=group[len("socketcan:"):])
+    else:
+        net.connect(interface="udp_multicast", channel=group, port=port)
+
+
 def main(argv):
     group, port, node_id, eds, seconds = argv[1], int(argv[2]), int(argv[3]), argv[4], float(argv[5])
     net = canopen.Network()
-    net.connect(interface="udp_multicast", channel=group, port=port)
+    connect(net, group, port)
     try:
         node = canopen.LocalNode(node_id, eds)
         scratch = odm.ODVariable("fieldprobe scratch", SCRATCH, 0)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """python-canopen 2.4.1 as CANopen master against `fieldprobe sim canopen` (tests/canopen_interop.rs).
 
-  canopen_master.py GROUP PORT NODE_ID RAMP_END_INC
+  canopen_master.py GROUP PORT NODE_ID RAMP_END_INC   (or socketcan:IF 0 NODE_ID RAMP_END_INC)
 
 Talks to one emulated CiA 402 node over python-can's udp_multicast bus and prints ONE JSON line
 with what it observed (the Rust test judges it; this script asserts nothing about values):
@@ -108,11 +108,19 @@ def lockstep(net, tpdo, timeout=1.0):
     return ok
 
 
+def connect(net, group, port):
+    """GROUP PORT of python-can's udp_multicast bus, or `socketcan:IF` (PORT ignored)."""
+    if group.startswith("socketcan:"):
+        net.connect(interface="socketcan", channel=group[len("socketcan:"):])
+    else:
+        net.connect(interface="udp_multicast", channel=group, port=port)
+
+
 def main(argv):
     group, port, node_id, ramp_end = argv[1], int(argv[2]), int(argv[3]), int(argv[4])
     out = {"steps": []}
     net = canopen.Network()
-    net.connect(interface="udp_multicast", channel=group, port=port)
+    connect(net, group, port)
     try:
         run(net, node_id, ramp_end, out)
         out["ok"] = True
