@@ -30,3 +30,29 @@ fn inconsistent_arc_gives_one_error_900022_only() {
         "{e}"
     );
 }
+
+/// A reader that goes away (`fieldprobe run … | head`) must not panic the tool: the failed
+/// write is reported once on stderr, the run goes on to its end (axes stopped as usual) and
+/// exits with the run's own status.
+#[test]
+fn closed_stdout_is_reported_not_a_panic() {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+        .args(["run", "examples/nc/seed004/meas1.nc", "--link", "sim"])
+        .args(["--probe-at", "Z=100", "--json"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    drop(child.stdout.take()); // the reader is gone before the first line
+    let out = child.wait_with_output().expect("wait");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        err.matches("writing to stdout failed").count(),
+        1,
+        "reported once: {err}"
+    );
+    assert_eq!(out.status.code(), Some(0), "{err}");
+}

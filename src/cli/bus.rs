@@ -116,11 +116,18 @@ pub struct ScanArgs {
 /// `fieldprobe scan`.
 pub fn scan(a: ScanArgs) -> anyhow::Result<i32> {
     let s = a.bus.open()?;
-    println!("pos  address  vendor      product     revision    state    DC              name");
+    outln!("pos  address  vendor      product     revision    state    DC              name");
     for d in s.devices() {
-        println!(
+        outln!(
             "{:<4} {:#06x}   {:#010x}  {:#010x}  {:#010x}  {:<8} {:<15} {}",
-            d.position, d.address, d.vendor, d.product, d.revision, d.state, d.dc, d.name
+            d.position,
+            d.address,
+            d.vendor,
+            d.product,
+            d.revision,
+            d.state,
+            d.dc,
+            d.name
         );
     }
     Ok(EXIT_OK)
@@ -282,7 +289,7 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                     } else {
                         raw as i64
                     };
-                    println!("{index:#06x}:{sub:02x} = {v} ({raw:#x})");
+                    outln!("{index:#06x}:{sub:02x} = {v} ({raw:#x})");
                 }
                 Some(t) => {
                     eprintln!(
@@ -300,7 +307,7 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                     && !bytes.is_empty()
                     && bytes.iter().all(|b| b.is_ascii_graphic() || *b == b' ') =>
                 {
-                    println!(
+                    outln!(
                         "{index:#06x}:{sub:02x} = \"{}\" ({} bytes)",
                         String::from_utf8_lossy(&bytes),
                         bytes.len()
@@ -308,7 +315,7 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                 }
                 None => {
                     let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02x}")).collect();
-                    println!(
+                    outln!(
                         "{index:#06x}:{sub:02x} = [{}] ({} bytes)",
                         hex.join(" "),
                         bytes.len()
@@ -354,7 +361,7 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
             };
             match result {
                 Ok(()) => {
-                    println!("{index:#06x}:{sub:02x} written ({} bytes)", data.len());
+                    outln!("{index:#06x}:{sub:02x} written ({} bytes)", data.len());
                     Ok(EXIT_OK)
                 }
                 Err(e) => refused(e),
@@ -418,9 +425,9 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
                 Ok((v, name)) => {
                     let shown = fieldprobe::drive::sercos::idn_name(idn);
                     if name.is_empty() {
-                        println!("{shown} = {v}");
+                        outln!("{shown} = {v}");
                     } else {
-                        println!("{shown} = {v} ({name})");
+                        outln!("{shown} = {v} ({name})");
                     }
                     Ok(EXIT_OK)
                 }
@@ -434,7 +441,7 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
             let mut s = w.bus.open()?;
             match s.idn_write(w.device, idn, v) {
                 Ok(()) => {
-                    println!("{} written", fieldprobe::drive::sercos::idn_name(idn));
+                    outln!("{} written", fieldprobe::drive::sercos::idn_name(idn));
                     Ok(EXIT_OK)
                 }
                 Err(e) => refused(e),
@@ -480,12 +487,10 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
             anyhow::ensure!(s.bus.is_can(), "--link {}: `can scan` needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)", s.bus.link);
             let mut session = s.bus.open_can()?;
             let nodes = session.scan().map_err(|e| anyhow::anyhow!("{e}"))?;
-            println!(
-                "node  state            device type  vendor      product     revision    name"
-            );
+            outln!("node  state            device type  vendor      product     revision    name");
             let hex = |v: Option<u32>| v.map_or_else(|| "-".to_string(), |v| format!("{v:#010x}"));
             for n in nodes {
-                println!(
+                outln!(
                     "{:<5} {:<16} {:#010x}   {:<11} {:<11} {:<11} {}",
                     n.id,
                     n.state.map_or("unknown", |s| s.name()),
@@ -517,9 +522,9 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
                     let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
                     let meaning = fieldprobe::bus::canopen::describe(f);
                     if meaning.is_empty() {
-                        println!("{line}");
+                        outln!("{line}");
                     } else {
-                        println!("{line}  ; {meaning}");
+                        outln!("{line}  ; {meaning}");
                     }
                 })
                 .map_err(|e| anyhow::anyhow!("{e}"))?;

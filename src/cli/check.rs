@@ -29,13 +29,13 @@ pub fn run(a: CheckArgs) -> anyhow::Result<i32> {
     let report = machine.commissioning_check(&cfg);
     let mut findings = 0;
     for axis in &report {
-        println!("{} ({}, {}):", axis.axis, axis.drive, axis.profile);
+        outln!("{} ({}, {}):", axis.axis, axis.drive, axis.profile);
         if axis.findings.is_empty() {
-            println!("  ok");
+            outln!("  ok");
         }
         for f in &axis.findings {
             findings += 1;
-            println!("  - {f}");
+            outln!("  - {f}");
         }
     }
     Ok(if findings == 0 {

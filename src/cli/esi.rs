@@ -89,9 +89,9 @@ fn show(a: ShowArgs) -> anyhow::Result<i32> {
         }
         None => file.devices.iter().collect(),
     };
-    println!("file: {}", file.file);
-    println!("vendor: 0x{:08X} {}", file.vendor.id, file.vendor.name);
-    println!("devices: {}", file.devices.len());
+    outln!("file: {}", file.file);
+    outln!("vendor: 0x{:08X} {}", file.vendor.id, file.vendor.name);
+    outln!("devices: {}", file.devices.len());
     for d in devices {
         show_device(file.vendor.id, d, a.objects);
     }
@@ -99,19 +99,20 @@ fn show(a: ShowArgs) -> anyhow::Result<i32> {
 }
 
 fn show_device(vendor: u32, d: &Device, objects: bool) {
-    println!();
-    println!("device {}: {}", d.type_name, d.name());
-    println!(
+    outln!();
+    outln!("device {}: {}", d.type_name, d.name());
+    outln!(
         "  identity: vendor 0x{vendor:08X}, product code 0x{:08X}, revision 0x{:08X}",
-        d.product_code, d.revision_no
+        d.product_code,
+        d.revision_no
     );
     if let Some(g) = &d.group {
-        println!("  group: {g}");
+        outln!("  group: {g}");
     }
     if let Some(p) = &d.physics {
-        println!("  physics: {p}");
+        outln!("  physics: {p}");
     }
-    println!("  mailbox: {}", mailbox(d));
+    outln!("  mailbox: {}", mailbox(d));
     if !d.fmmus.is_empty() {
         let f: Vec<String> = d
             .fmmus
@@ -123,9 +124,9 @@ fn show_device(vendor: u32, d: &Device, objects: bool) {
                 esi::FmmuKind::Other(s) => format!("{s:?}"),
             })
             .collect();
-        println!("  fmmus: {}", f.join(", "));
+        outln!("  fmmus: {}", f.join(", "));
     }
-    println!("  sync managers: {}", d.sync_managers.len());
+    outln!("  sync managers: {}", d.sync_managers.len());
     for (i, sm) in d.sync_managers.iter().enumerate() {
         let kind = match &sm.kind {
             SmKind::MBoxOut => "MBoxOut".to_string(),
@@ -137,7 +138,7 @@ fn show_device(vendor: u32, d: &Device, objects: bool) {
         let size = sm
             .default_size
             .map_or_else(|| "-".to_string(), |s| s.to_string());
-        println!(
+        outln!(
             "    SM{i} {kind}: start 0x{:04X}, default size {size}, control 0x{:02X}, {}",
             sm.start_address,
             sm.control_byte,
@@ -151,7 +152,7 @@ fn show_device(vendor: u32, d: &Device, objects: bool) {
         show_pdo("TxPDO", p);
     }
     if !d.dc_op_modes.is_empty() {
-        println!("  DC op modes: {}", d.dc_op_modes.len());
+        outln!("  DC op modes: {}", d.dc_op_modes.len());
         for m in &d.dc_op_modes {
             let mut line = format!(
                 "    {}: assign activate 0x{:04X}",
@@ -173,17 +174,17 @@ fn show_device(vendor: u32, d: &Device, objects: bool) {
             if let Some(desc) = &m.desc {
                 line.push_str(&format!(" ({desc})"));
             }
-            println!("{line}");
+            outln!("{line}");
         }
     }
     if let Some(e) = &d.eeprom {
         if let Some(b) = e.byte_size {
-            println!("  eeprom: {b} bytes");
+            outln!("  eeprom: {b} bytes");
         }
     }
     let dict = d.dictionary();
     let count = dict.map_or(0, |dict| dict.objects.len());
-    println!("  objects: {count}");
+    outln!("  objects: {count}");
     if objects {
         if let Some(dict) = dict {
             for o in &dict.objects {
@@ -198,9 +199,11 @@ fn show_device(vendor: u32, d: &Device, objects: bool) {
                     (Some(b), _) => b.iter().map(|x| format!("{x:02X}")).collect(),
                     (None, _) => "-".to_string(),
                 };
-                println!(
+                outln!(
                     "    0x{:04X} {}: {}, {access}, default {default}",
-                    o.index, o.name, o.type_name
+                    o.index,
+                    o.name,
+                    o.type_name
                 );
             }
         }
@@ -269,7 +272,7 @@ fn show_pdo(kind: &str, p: &Pdo) {
         let ex: Vec<String> = p.excludes.iter().map(|x| format!("0x{x:04X}")).collect();
         attrs.push(format!("excludes {}", ex.join(" ")));
     }
-    println!(
+    outln!(
         "  {kind} 0x{:04X} {}: {}",
         p.index,
         if p.name.is_empty() { "-" } else { &p.name },
@@ -286,9 +289,11 @@ fn show_pdo(kind: &str, p: &Pdo) {
             .as_deref()
             .map(|t| format!(" ({t})"))
             .unwrap_or_default();
-        println!(
+        outln!(
             "    0x{:04X}:{:02X} {:>2} bits {name}{ty}",
-            e.index, e.subindex, e.bit_len
+            e.index,
+            e.subindex,
+            e.bit_len
         );
     }
 }

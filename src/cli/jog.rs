@@ -98,7 +98,7 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
         .jog_range(i)
         .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
     let ax = &ch.axes()[i];
-    println!(
+    outln!(
         "{} command {:.6} actual {:.6} range [{lo:.6}, {hi:.6}]",
         ax.name(),
         ax.command(),

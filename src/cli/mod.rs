@@ -13,6 +13,19 @@
 //! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (seed 000 control areas,
 //! see `docs/areas.md`).
 
+/// `println!` for the tool's results on stdout that survives a reader going away
+/// (`fieldprobe run … | head`): the first failed write is reported once on stderr and later
+/// output is dropped, while the command goes on to its end (a run still stops its axes and
+/// disables its drives as it would otherwise). `println!` would panic instead.
+macro_rules! outln {
+    () => {
+        $crate::cli::write_stdout(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::write_stdout(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
 mod areas;
 mod bus;
 mod check;
@@ -269,5 +282,21 @@ fn default_link(cfg: &fieldprobe::params::MachineConfig) -> &'static str {
         "ethercat-emu"
     } else {
         "sim"
+    }
+}
+
+/// Write to stdout; see [`outln!`].
+pub(crate) fn write_stdout(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static FAILED: AtomicBool = AtomicBool::new(false);
+    if FAILED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(args).and_then(|()| out.flush()) {
+        if !FAILED.swap(true, Ordering::Relaxed) {
+            eprintln!("fieldprobe: writing to stdout failed ({e}); further output is dropped");
+        }
     }
 }

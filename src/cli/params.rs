@@ -26,7 +26,7 @@ pub fn run(a: ParamsArgs) -> anyhow::Result<i32> {
                 .unwrap_or_default();
             anyhow::anyhow!("unknown parameter '{k}'{hint}")
         })?;
-        println!(
+        outln!(
             "{}  {}\n  {}\n  type {:?}, default {}\n  range: {}\n  dimension: {}\n  source: {}",
             d.id,
             d.path,
@@ -40,7 +40,7 @@ pub fn run(a: ParamsArgs) -> anyhow::Result<i32> {
         return Ok(EXIT_OK);
     }
     for d in registry() {
-        println!(
+        outln!(
             "{:<13} {:<55} {:<8} {:>12}  {}",
             d.id,
             d.path,

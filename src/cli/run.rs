@@ -132,7 +132,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
             .with_context(|| format!("--trace {}", path.display()))?;
     }
     if json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&report_json(&program.name, &report, &machine))?
         );
