@@ -454,7 +454,8 @@ pub struct CanArgs {
 enum CanOp {
     /// Find the CANopen nodes (SDO 0x1000 to every id): id, state, device type, identity, name.
     Scan(CanScan),
-    /// Print the frames on the bus, candump style, with their CANopen meaning.
+    /// Print the frames on the bus as `candump -L` lines, each with its CANopen meaning after
+    /// `  ; ` (`--plain`: the lines alone, as candump, canplayer and python-can read them).
     Dump(CanDump),
 }
 
@@ -471,6 +472,10 @@ struct CanDump {
     /// How long to listen, s.
     #[arg(long, default_value = "1")]
     seconds: f64,
+    /// Plain `candump -L` lines without the `  ; meaning` comment, for tools that read candump
+    /// logs (canplayer, log2asc, python-can's `CanutilsLogReader`).
+    #[arg(long)]
+    plain: bool,
 }
 
 /// `fieldprobe can`.
@@ -509,14 +514,15 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
                 "--seconds {}: allowed 0 … 86400",
                 d.seconds
             );
-            let iface = d.bus.link.clone();
             let mut session = d.bus.open_can()?;
+            let iface = session.log_interface();
+            let plain = d.plain;
             session
                 .listen(std::time::Duration::from_secs_f64(d.seconds), &mut |f| {
                     let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
                     let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
                     let meaning = fieldprobe::bus::canopen::describe(f);
-                    if meaning.is_empty() {
+                    if plain || meaning.is_empty() {
                         println!("{line}");
                     } else {
                         println!("{line}  ; {meaning}");

@@ -236,10 +236,11 @@ impl Transport {
             let hub = VirtualCan::new();
             let master = hub.endpoint();
             let node_side = hub.endpoint();
+            let iface = master.log_interface();
             return Ok(Transport {
                 bus: Box::new(master),
                 emulated: Some((CanopenSegment::new(nodes, cycle), node_side)),
-                candump: candump.map(|p| open_candump(p, "vcan-emu")).transpose()?,
+                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
             });
         }
         let bus: Box<dyn CanBus> = if let Some(ifname) = link.strip_prefix("socketcan:") {
@@ -253,7 +254,7 @@ impl Transport {
                 "unknown CAN link '{link}' (allowed: canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)"
             )));
         };
-        let iface = bus.describe().replace(' ', "_");
+        let iface = bus.log_interface();
         Ok(Transport {
             bus,
             emulated: None,
@@ -316,6 +317,11 @@ impl Transport {
                 p.keep_alive(self).map_err(|e| (None, e.to_string()))?;
             }
         }
+    }
+
+    /// The interface name of the bus in `candump -L` lines ([`CanBus::log_interface`]).
+    fn log_interface(&self) -> String {
+        self.bus.log_interface()
     }
 
     fn log(&mut self, f: &CanFrame) {
@@ -445,7 +451,7 @@ impl CanopenLink {
         cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
-        let iface = bus.describe().replace(' ', "_");
+        let iface = bus.log_interface();
         CanopenLink::start(
             Transport {
                 bus,
