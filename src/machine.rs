@@ -146,6 +146,51 @@ impl LinkChoice {
         }
     }
 
+    /// A CAN link (`canopen-emu`, `canopen-udp[:GROUP:PORT]`, `socketcan:IF`).
+    pub fn is_can(&self) -> bool {
+        let l = self.link.as_str();
+        l.starts_with("canopen") || l.starts_with("socketcan:")
+    }
+
+    /// An EtherCAT link (`ethercat-emu`, `ethercat:IFACE`).
+    pub fn is_ethercat(&self) -> bool {
+        self.link == "ethercat-emu" || self.link.starts_with("ethercat:")
+    }
+
+    /// Refuse a capture the link cannot write, before anything is opened: `pcap` needs an
+    /// EtherCAT link, `candump` a CAN link, `cycle_log` a link that leaves the process. The text names the option and the link (the CLI
+    /// exits 2); an option is never silently ignored.
+    pub fn check_options(&self) -> Result<(), String> {
+        let link = &self.link;
+        if let Some(p) = &self.pcap {
+            if !self.is_ethercat() {
+                return Err(format!(
+                    "--pcap {}: --pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE); --link {link} is not one{}",
+                    p.display(),
+                    if self.is_can() { " (its CAN frames: --candump FILE.log)" } else { "" }
+                ));
+            }
+        }
+        if let Some(p) = &self.candump {
+            if !self.is_can() {
+                return Err(format!(
+                    "--candump {}: --candump needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT] or socketcan:IF); --link {link} is not one{}",
+                    p.display(),
+                    if self.is_ethercat() { " (its EtherCAT frames: --pcap FILE.pcap)" } else { "" }
+                ));
+            }
+        }
+        if let Some(p) = &self.cycle_log {
+            if !self.leaves_process() {
+                return Err(format!(
+                    "--cycle-log {}: only for links that leave the process (ethercat:IF, canopen-udp[:GROUP:PORT], socketcan:IF); --link {link} runs on virtual time",
+                    p.display()
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The link leaves the process (`ethercat:IF`, `canopen-udp…`, `socketcan:IF`): it runs
     /// at the bus's real cycle on the wall clock; the others run on virtual time.
     pub fn leaves_process(&self) -> bool {
@@ -221,6 +266,7 @@ impl Machine {
                 cfg.source
             )));
         }
+        choice.check_options().map_err(MachineError::Config)?;
         let cycle = Nanos::from_micros(u64::from(cfg.cycle_time_us));
         let mut axes = Vec::new();
         let mut models = Vec::new();
@@ -333,17 +379,6 @@ impl Machine {
                 Box::new(link)
             }
         };
-        let can = choice.link.starts_with("canopen") || choice.link.starts_with("socketcan:");
-        if choice.candump.is_some() && !can {
-            return Err(MachineError::Config(
-                "--candump needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT] or socketcan:IF)".into(),
-            ));
-        }
-        if choice.link == "sim" && choice.pcap.is_some() {
-            return Err(MachineError::Config(
-                "--pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE)".into(),
-            ));
-        }
         let mut link = link;
         if let Some(path) = &choice.cycle_log {
             let file = std::fs::File::create(path).map_err(|e| {
