@@ -119,6 +119,11 @@ impl RunReport {
     }
 }
 
+/// Upper bound on the cycles of [`Machine::power_off`]'s disable (a CiA 402 drive takes 3 to 4:
+/// the controlword goes out with the next exchange, takes effect at the SYNC, and the statusword
+/// sampled there comes back one exchange later).
+pub const POWER_OFF_CYCLES: u32 = 100;
+
 /// Upper bound on the cycles of one run (virtual time; 1 h at 1 ms).
 pub const DEFAULT_MAX_CYCLES: u64 = 3_600_000;
 
@@ -620,6 +625,60 @@ impl Machine {
             self.channel
                 .acyclic_done(req.id, result.map_err(|e| e.to_string()));
         }
+    }
+
+    /// The end of a run: disable every drive and bring the bus to its end state.
+    ///
+    /// Each cycle (at most [`POWER_OFF_CYCLES`]) exchanges the process data and has every axis
+    /// write "disable" ([`Channel::power_off_cycle`]: CiA 402 controlword 0x0006 shutdown →
+    /// READY TO SWITCH ON), until every drive reports its power stage off; then the link's end
+    /// state ([`Link::release`]: CANopen nodes to NMT pre-operational). Runs after a completed
+    /// and after an aborted program alike; a lost exchange is retried within the bound.
+    /// Returns warnings [`ids::POWER_OFF`] naming the axes still on or the link's failure (none:
+    /// every drive off, the bus in its end state), and the emergencies that came meanwhile.
+    /// A later [`run_program`](Self::run_program) enables the drives again.
+    pub fn power_off(&mut self) -> Vec<CncMessage> {
+        let mut on = self
+            .channel
+            .axes()
+            .iter()
+            .map(|a| a.name().to_string())
+            .collect::<Vec<_>>();
+        let mut lost = None;
+        for _ in 0..POWER_OFF_CYCLES {
+            self.now = self.now.saturating_add(self.cycle);
+            match self.link.exchange(self.now, &mut self.images) {
+                Ok(()) => {
+                    lost = None;
+                    on = self.channel.power_off_cycle(self.now, &mut self.images);
+                    if on.is_empty() {
+                        break;
+                    }
+                }
+                Err(e) => lost = Some(e),
+            }
+        }
+        for e in self.link.take_drive_emergencies() {
+            self.channel.drive_emergency(e.device, e.code, e.text);
+        }
+        let mut out = self.channel.take_messages();
+        if !on.is_empty() {
+            out.push(CncMessage::warning(
+                ids::POWER_OFF,
+                format!(
+                    "end of run: the drives of axes {} still report their power stage on after {POWER_OFF_CYCLES} cycles of disable{}",
+                    on.join(", "),
+                    lost.map(|e| format!(" (last exchange: {e})")).unwrap_or_default()
+                ),
+            ));
+        }
+        if let Err(e) = self.link.release(self.now) {
+            out.push(CncMessage::warning(
+                ids::POWER_OFF,
+                format!("end of run: {e}"),
+            ));
+        }
+        out
     }
 
     /// Step until the channel leaves `Enabling` / `Busy` / `Stopping`, at most `max` cycles.

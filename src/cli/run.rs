@@ -118,6 +118,12 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         RunEvent::Message(m) => eprintln!("{m}"),
         RunEvent::Output(_) => {}
     });
+    // The end of the run, completed or aborted: drives disabled (CiA 402 shutdown), CANopen
+    // nodes to pre-operational (docs/canopen.md "The end of a run"); what could not be
+    // confirmed is a warning.
+    for m in machine.power_off() {
+        eprintln!("{m}");
+    }
     // The paced cycle of a link that leaves the process: one summary line, and the log.
     let cycle = machine.cycle_summary();
     if let Some(c) = &cycle {
