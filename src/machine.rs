@@ -119,6 +119,11 @@ impl RunReport {
     }
 }
 
+/// Upper bound on the cycles of [`Machine::power_off`]'s disable (a CiA 402 drive takes 3 to 4:
+/// the controlword goes out with the next exchange, takes effect at the SYNC, and the statusword
+/// sampled there comes back one exchange later).
+pub const POWER_OFF_CYCLES: u32 = 100;
+
 /// Upper bound on the cycles of one run (virtual time; 1 h at 1 ms).
 pub const DEFAULT_MAX_CYCLES: u64 = 3_600_000;
 
@@ -144,6 +149,51 @@ impl LinkChoice {
             candump: None,
             cycle_log: None,
         }
+    }
+
+    /// A CAN link (`canopen-emu`, `canopen-udp[:GROUP:PORT]`, `socketcan:IF`).
+    pub fn is_can(&self) -> bool {
+        let l = self.link.as_str();
+        l.starts_with("canopen") || l.starts_with("socketcan:")
+    }
+
+    /// An EtherCAT link (`ethercat-emu`, `ethercat:IFACE`).
+    pub fn is_ethercat(&self) -> bool {
+        self.link == "ethercat-emu" || self.link.starts_with("ethercat:")
+    }
+
+    /// Refuse a capture the link cannot write, before anything is opened: `pcap` needs an
+    /// EtherCAT link, `candump` a CAN link, `cycle_log` a link that leaves the process. The text names the option and the link (the CLI
+    /// exits 2); an option is never silently ignored.
+    pub fn check_options(&self) -> Result<(), String> {
+        let link = &self.link;
+        if let Some(p) = &self.pcap {
+            if !self.is_ethercat() {
+                return Err(format!(
+                    "--pcap {}: --pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE); --link {link} is not one{}",
+                    p.display(),
+                    if self.is_can() { " (its CAN frames: --candump FILE.log)" } else { "" }
+                ));
+            }
+        }
+        if let Some(p) = &self.candump {
+            if !self.is_can() {
+                return Err(format!(
+                    "--candump {}: --candump needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT] or socketcan:IF); --link {link} is not one{}",
+                    p.display(),
+                    if self.is_ethercat() { " (its EtherCAT frames: --pcap FILE.pcap)" } else { "" }
+                ));
+            }
+        }
+        if let Some(p) = &self.cycle_log {
+            if !self.leaves_process() {
+                return Err(format!(
+                    "--cycle-log {}: only for links that leave the process (ethercat:IF, canopen-udp[:GROUP:PORT], socketcan:IF); --link {link} runs on virtual time",
+                    p.display()
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The link leaves the process (`ethercat:IF`, `canopen-udp…`, `socketcan:IF`): it runs
@@ -221,6 +271,7 @@ impl Machine {
                 cfg.source
             )));
         }
+        choice.check_options().map_err(MachineError::Config)?;
         let cycle = Nanos::from_micros(u64::from(cfg.cycle_time_us));
         let mut axes = Vec::new();
         let mut models = Vec::new();
@@ -333,17 +384,6 @@ impl Machine {
                 Box::new(link)
             }
         };
-        let can = choice.link.starts_with("canopen") || choice.link.starts_with("socketcan:");
-        if choice.candump.is_some() && !can {
-            return Err(MachineError::Config(
-                "--candump needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT] or socketcan:IF)".into(),
-            ));
-        }
-        if choice.link == "sim" && choice.pcap.is_some() {
-            return Err(MachineError::Config(
-                "--pcap needs an EtherCAT link (ethercat-emu or ethercat:IFACE)".into(),
-            ));
-        }
         let mut link = link;
         if let Some(path) = &choice.cycle_log {
             let file = std::fs::File::create(path).map_err(|e| {
@@ -585,6 +625,60 @@ impl Machine {
             self.channel
                 .acyclic_done(req.id, result.map_err(|e| e.to_string()));
         }
+    }
+
+    /// The end of a run: disable every drive and bring the bus to its end state.
+    ///
+    /// Each cycle (at most [`POWER_OFF_CYCLES`]) exchanges the process data and has every axis
+    /// write "disable" ([`Channel::power_off_cycle`]: CiA 402 controlword 0x0006 shutdown →
+    /// READY TO SWITCH ON), until every drive reports its power stage off; then the link's end
+    /// state ([`Link::release`]: CANopen nodes to NMT pre-operational). Runs after a completed
+    /// and after an aborted program alike; a lost exchange is retried within the bound.
+    /// Returns warnings [`ids::POWER_OFF`] naming the axes still on or the link's failure (none:
+    /// every drive off, the bus in its end state), and the emergencies that came meanwhile.
+    /// A later [`run_program`](Self::run_program) enables the drives again.
+    pub fn power_off(&mut self) -> Vec<CncMessage> {
+        let mut on = self
+            .channel
+            .axes()
+            .iter()
+            .map(|a| a.name().to_string())
+            .collect::<Vec<_>>();
+        let mut lost = None;
+        for _ in 0..POWER_OFF_CYCLES {
+            self.now = self.now.saturating_add(self.cycle);
+            match self.link.exchange(self.now, &mut self.images) {
+                Ok(()) => {
+                    lost = None;
+                    on = self.channel.power_off_cycle(self.now, &mut self.images);
+                    if on.is_empty() {
+                        break;
+                    }
+                }
+                Err(e) => lost = Some(e),
+            }
+        }
+        for e in self.link.take_drive_emergencies() {
+            self.channel.drive_emergency(e.device, e.code, e.text);
+        }
+        let mut out = self.channel.take_messages();
+        if !on.is_empty() {
+            out.push(CncMessage::warning(
+                ids::POWER_OFF,
+                format!(
+                    "end of run: the drives of axes {} still report their power stage on after {POWER_OFF_CYCLES} cycles of disable{}",
+                    on.join(", "),
+                    lost.map(|e| format!(" (last exchange: {e})")).unwrap_or_default()
+                ),
+            ));
+        }
+        if let Err(e) = self.link.release(self.now) {
+            out.push(CncMessage::warning(
+                ids::POWER_OFF,
+                format!("end of run: {e}"),
+            ));
+        }
+        out
     }
 
     /// Step until the channel leaves `Enabling` / `Busy` / `Stopping`, at most `max` cycles.

@@ -199,6 +199,10 @@ pub mod ids {
     pub const NC_ARC_GEOMETRY: u32 = 900022;
     /// Project: the run exceeded its cycle budget (a block that never ends).
     pub const RUN_TIMEOUT: u32 = 900030;
+    /// Project: the end of a run could not confirm its end state — a drive still reports its
+    /// power stage on after the disable, or the bus did not take the end state (CANopen nodes
+    /// not pre-operational). Warning; names the axes or nodes.
+    pub const POWER_OFF: u32 = 900017;
 
     /// Seed 000 §3.4 notice: CLEAR of an active workspace / protection area (warning; the area
     /// stays active).

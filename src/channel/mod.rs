@@ -23,6 +23,7 @@ mod cycle;
 mod independent;
 pub mod manual;
 pub mod measure;
+pub mod power_off;
 mod prep;
 pub mod profile;
 

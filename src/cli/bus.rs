@@ -28,16 +28,18 @@ pub struct BusArgs {
     /// `socketcan:IF`.
     #[arg(long, value_name = "LINK", default_value = "ethercat-emu")]
     link: String,
-    /// Log every CAN frame in candump -L format (CAN links).
+    /// Log every CAN frame in candump -L format (CAN links; refused on EtherCAT links).
     #[arg(long, value_name = "FILE.log")]
     candump: Option<PathBuf>,
-    /// Machine file whose axes the emulated segment carries (ethercat-emu).
+    /// Machine file whose axes the emulated devices are (ethercat-emu, canopen-emu; refused on
+    /// the links to a real bus).
     #[arg(long)]
     machine: Option<PathBuf>,
-    /// Parameter assignment for the machine file (e.g. `Z.drive=sercos-ax5000`).
+    /// Parameter assignment for the machine file (e.g. `Z.drive=sercos-ax5000`; emulated links
+    /// only, as `--machine`).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     sets: Vec<String>,
-    /// Write every frame into this pcap file.
+    /// Write every EtherCAT frame into this pcap file (EtherCAT links; refused on CAN links).
     #[arg(long, value_name = "FILE.pcap")]
     pcap: Option<PathBuf>,
 }
@@ -45,6 +47,41 @@ pub struct BusArgs {
 impl BusArgs {
     fn is_can(&self) -> bool {
         self.link.starts_with("canopen") || self.link.starts_with("socketcan:")
+    }
+
+    /// Refuse the options `command` does not use on this link, naming option and link (exit
+    /// 2), instead of ignoring them: `--pcap` on a CAN link, `--candump` on an EtherCAT link,
+    /// `--machine` / `--set` on a link that reaches a real bus (they describe the emulated
+    /// devices of `ethercat-emu` and `canopen-emu` only).
+    fn check_options(&self, command: &str) -> anyhow::Result<()> {
+        let link = &self.link;
+        if self.is_can() {
+            if let Some(p) = &self.pcap {
+                anyhow::bail!(
+                    "--pcap {}: `{command}` on --link {link} (a CAN link) writes no pcap capture; the CAN frames go to --candump FILE.log",
+                    p.display()
+                );
+            }
+        } else if let Some(p) = &self.candump {
+            anyhow::bail!(
+                "--candump {}: `{command}` on --link {link} writes no candump log (CAN links only: canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF); EtherCAT frames go to --pcap FILE.pcap",
+                p.display()
+            );
+        }
+        if link != "canopen-emu" && link != "ethercat-emu" {
+            let mut given = Vec::new();
+            if let Some(m) = &self.machine {
+                given.push(format!("--machine {}", m.display()));
+            }
+            given.extend(self.sets.iter().map(|s| format!("--set {s}")));
+            if !given.is_empty() {
+                anyhow::bail!(
+                    "{}: `{command}` on --link {link} talks to the devices on the bus; the machine file describes the emulated devices of --link ethercat-emu / canopen-emu only",
+                    given.join(", ")
+                );
+            }
+        }
+        Ok(())
     }
 
     /// The machine's drives and CANopen node ids.
@@ -115,6 +152,12 @@ pub struct ScanArgs {
 
 /// `fieldprobe scan`.
 pub fn scan(a: ScanArgs) -> anyhow::Result<i32> {
+    anyhow::ensure!(
+        !a.bus.is_can(),
+        "--link {}: `scan` lists EtherCAT SubDevices (ethercat-emu, ethercat:IFACE); CANopen nodes: `can scan`",
+        a.bus.link
+    );
+    a.bus.check_options("scan")?;
     let s = a.bus.open()?;
     outln!("pos  address  vendor      product     revision    state    DC              name");
     for d in s.devices() {
@@ -226,6 +269,7 @@ enum Target {
 
 fn target(to: &SdoTo) -> anyhow::Result<Target> {
     let bus = &to.bus;
+    bus.check_options("sdo")?;
     match (bus.is_can(), to.device, to.node) {
         (false, Some(d), None) => Ok(Target::Device(d)),
         (true, None, Some(n)) if (1..=127).contains(&n) => Ok(Target::Node(n)),
@@ -420,6 +464,12 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
     match a.op {
         IdnOp::Read(r) => {
             let idn = parse_idn(&r.idn)?;
+            anyhow::ensure!(
+                !r.bus.is_can(),
+                "--link {}: `idn` reaches SERCOS IDNs of EtherCAT SubDevices (SoE); expected ethercat-emu or ethercat:IFACE",
+                r.bus.link
+            );
+            r.bus.check_options("idn")?;
             let mut s = r.bus.open()?;
             match s.idn_read(r.device, idn) {
                 Ok((v, name)) => {
@@ -436,6 +486,12 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
         }
         IdnOp::Write(w) => {
             let idn = parse_idn(&w.idn)?;
+            anyhow::ensure!(
+                !w.bus.is_can(),
+                "--link {}: `idn` reaches SERCOS IDNs of EtherCAT SubDevices (SoE); expected ethercat-emu or ethercat:IFACE",
+                w.bus.link
+            );
+            w.bus.check_options("idn")?;
             let v = parse_int(&w.value)
                 .with_context(|| format!("value '{}': not an integer", w.value))?;
             let mut s = w.bus.open()?;
@@ -461,7 +517,8 @@ pub struct CanArgs {
 enum CanOp {
     /// Find the CANopen nodes (SDO 0x1000 to every id): id, state, device type, identity, name.
     Scan(CanScan),
-    /// Print the frames on the bus, candump style, with their CANopen meaning.
+    /// Print the frames on the bus as `candump -L` lines, each with its CANopen meaning after
+    /// `  ; ` (`--plain`: the lines alone, as candump, canplayer and python-can read them).
     Dump(CanDump),
 }
 
@@ -478,6 +535,10 @@ struct CanDump {
     /// How long to listen, s.
     #[arg(long, default_value = "1")]
     seconds: f64,
+    /// Plain `candump -L` lines without the `  ; meaning` comment, for tools that read candump
+    /// logs (canplayer, log2asc, python-can's `CanutilsLogReader`).
+    #[arg(long)]
+    plain: bool,
 }
 
 /// `fieldprobe can`.
@@ -485,6 +546,7 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
     match a.op {
         CanOp::Scan(s) => {
             anyhow::ensure!(s.bus.is_can(), "--link {}: `can scan` needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)", s.bus.link);
+            s.bus.check_options("can scan")?;
             let mut session = s.bus.open_can()?;
             let nodes = session.scan().map_err(|e| anyhow::anyhow!("{e}"))?;
             outln!("node  state            device type  vendor      product     revision    name");
@@ -509,19 +571,21 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
                 "--link {}: `can dump` needs a CAN link",
                 d.bus.link
             );
+            d.bus.check_options("can dump")?;
             anyhow::ensure!(
                 d.seconds.is_finite() && (0.0..=86_400.0).contains(&d.seconds),
                 "--seconds {}: allowed 0 … 86400",
                 d.seconds
             );
-            let iface = d.bus.link.clone();
             let mut session = d.bus.open_can()?;
+            let iface = session.log_interface();
+            let plain = d.plain;
             session
                 .listen(std::time::Duration::from_secs_f64(d.seconds), &mut |f| {
                     let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
                     let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
                     let meaning = fieldprobe::bus::canopen::describe(f);
-                    if meaning.is_empty() {
+                    if plain || meaning.is_empty() {
                         outln!("{line}");
                     } else {
                         outln!("{line}  ; {meaning}");

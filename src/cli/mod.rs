@@ -161,10 +161,13 @@ pub struct LinkArgs {
     /// families the EtherCAT emulator plays), else `sim`.
     #[arg(long, value_name = "LINK")]
     link: Option<String>,
-    /// Write every EtherCAT frame (both directions) into this pcap file (EtherCAT links).
+    /// Write every EtherCAT frame (both directions) into this pcap file (EtherCAT links; refused
+    /// on the others).
     #[arg(long, value_name = "FILE.pcap")]
     pcap: Option<std::path::PathBuf>,
-    /// Log every CAN frame (both directions) in candump -L format into this file (CAN links).
+    /// Log every CAN frame (both directions) in candump -L format into this file (CAN links;
+    /// refused on the others). The interface field is a kernel name: `vcan0` for
+    /// `socketcan:vcan0`, `udp0` for canopen-udp, `emu0` for canopen-emu.
     #[arg(long, value_name = "FILE.log")]
     candump: Option<std::path::PathBuf>,
     /// One CSV row per cycle (deadline, send time, period error, round trip, missed, lost, DC

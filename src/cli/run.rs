@@ -118,6 +118,15 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         RunEvent::Message(m) => eprintln!("{m}"),
         RunEvent::Output(_) => {}
     });
+    // The JSON report is the state at the program's end (command and actual positions,
+    // limits); the power-off below makes the command follow the actual position.
+    let mut json_report = json.then(|| report_json(&program.name, &report, &machine));
+    // The end of the run, completed or aborted: drives disabled (CiA 402 shutdown), CANopen
+    // nodes to pre-operational (docs/canopen.md "The end of a run"); what could not be
+    // confirmed is a warning.
+    for m in machine.power_off() {
+        eprintln!("{m}");
+    }
     // The paced cycle of a link that leaves the process: one summary line, and the log.
     let cycle = machine.cycle_summary();
     if let Some(c) = &cycle {
@@ -131,11 +140,10 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         super::trace::write(tr, path, format)
             .with_context(|| format!("--trace {}", path.display()))?;
     }
-    if json {
-        outln!(
-            "{}",
-            serde_json::to_string_pretty(&report_json(&program.name, &report, &machine))?
-        );
+    if let Some(v) = json_report.as_mut() {
+        // The paced cycle's statistics include the power-off cycles.
+        v["cycle"] = serde_json::to_value(machine.cycle_summary())?;
+        outln!("{}", serde_json::to_string_pretty(v)?);
     }
     Ok(match report.status {
         RunStatus::Completed => EXIT_OK,

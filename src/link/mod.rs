@@ -239,6 +239,18 @@ pub trait Link: Send {
     fn finish_cycle_log(&mut self) -> Result<(), String> {
         Ok(())
     }
+
+    /// The end of a run, after the drives were disabled: bring the bus to its documented end
+    /// state at `now` (CANopen: NMT enter pre-operational to every axis's node, confirmed by
+    /// their heartbeats; no process data any more). The other links have no such state: `Ok`.
+    /// The next [`exchange`](Link::exchange) starts the bus again (CANopen: NMT start).
+    ///
+    /// # Errors
+    /// The end state could not be sent or was not confirmed (naming the nodes).
+    fn release(&mut self, now: Nanos) -> Result<(), LinkError> {
+        let _ = now;
+        Ok(())
+    }
 }
 
 /// Dead time of every link fieldprobe has, in cycles ([`Link::dead_time_cycles`]).

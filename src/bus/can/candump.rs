@@ -14,6 +14,18 @@
 //! timestamp with 6 decimals. Parsing also accepts lower-case hex, `.` between data bytes, the
 //! raw-DLC suffix `_D` of 8-byte frames (ignored), and a trailing `R`/`T` direction marker.
 //! CAN FD lines (`##`) are refused: this crate carries classic CAN only.
+//!
+//! # Interface names
+//!
+//! `canplayer` sends each line on the interface the line names (or the one `-t` / an
+//! assignment `vcan0=can0` maps it to) and refuses a name of [`IFNAMSIZ`] bytes or more
+//! ("interface name too long"); the kernel takes no name with `/`, `:` or blanks
+//! (`dev_valid_name`). So every log this crate writes names the interface as the kernel does:
+//! `vcan0` for `socketcan:vcan0`; a bus that is no kernel interface gets a short stand-in,
+//! [`UDP_INTERFACE`] for python-can's `udp_multicast`, [`EMU_INTERFACE`] for the in-process
+//! virtual bus (`canopen-emu`); [`CandumpWriter::new`] makes any other name fit
+//! ([`interface_name`]). The reader takes any name without blanks, so logs written before this
+//! rule (`socketcan_vcan0`, `udp_239.74.163.2:43113`, `vcan-emu`) still read.
 
 use std::{
     io::{self, Write},
@@ -41,6 +53,52 @@ pub struct CandumpError {
     pub line: String,
     /// What is wrong with it.
     pub why: String,
+}
+
+/// `IFNAMSIZ` of `linux/if.h`: an interface name has at most `IFNAMSIZ - 1` bytes.
+pub const IFNAMSIZ: usize = 16;
+
+/// Interface name in logs of python-can's `udp_multicast` bus (`canopen-udp`, `sim canopen
+/// --bus udp`): no kernel interface, so a stand-in `canplayer` takes (`-t … vcan0=udp0`).
+pub const UDP_INTERFACE: &str = "udp0";
+
+/// Interface name in logs of the in-process virtual bus (`canopen-emu`).
+pub const EMU_INTERFACE: &str = "emu0";
+
+/// Is `name` an interface name the kernel and `canplayer` take: 1 … `IFNAMSIZ - 1` bytes, not
+/// `.` or `..`, none of `/`, `:` or whitespace (`net/core/dev.c` `dev_valid_name`)?
+pub fn is_interface_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() < IFNAMSIZ
+        && name != "."
+        && name != ".."
+        && !name
+            .chars()
+            .any(|c| c == '/' || c == ':' || c.is_whitespace())
+}
+
+/// `name` made into an interface name ([`is_interface_name`]): a valid name stays as it is;
+/// otherwise every character other than ASCII letters, digits, `_` and `-` becomes `_` and
+/// the result is cut to `IFNAMSIZ - 1` bytes; nothing left gives `can0`.
+pub fn interface_name(name: &str) -> String {
+    if is_interface_name(name) {
+        return name.to_string();
+    }
+    let mut s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(IFNAMSIZ - 1)
+        .collect();
+    if s.chars().all(|c| c == '_') {
+        s = "can0".into();
+    }
+    s
 }
 
 fn hex_upper(out: &mut String, bytes: &[u8]) {
@@ -243,16 +301,18 @@ pub struct CandumpWriter<W: Write> {
 }
 
 impl<W: Write> CandumpWriter<W> {
-    /// Log to `out` under interface name `interface` (blanks become `_`; empty becomes `-`).
+    /// Log to `out` under interface name `interface`, made to fit the kernel's rules by
+    /// [`interface_name`] (module documentation).
     pub fn new(out: W, interface: &str) -> CandumpWriter<W> {
-        let mut interface = interface
-            .split_ascii_whitespace()
-            .collect::<Vec<_>>()
-            .join("_");
-        if interface.is_empty() {
-            interface.push('-');
+        CandumpWriter {
+            out,
+            interface: interface_name(interface),
         }
-        CandumpWriter { out, interface }
+    }
+
+    /// The interface name the lines carry.
+    pub fn interface(&self) -> &str {
+        &self.interface
     }
 
     /// Log `frame` at `timestamp` (since the UNIX epoch).

@@ -294,4 +294,8 @@ impl<B: CanBus> CanBus for FaultBus<B> {
     fn describe(&self) -> String {
         format!("fault({})", self.inner.describe())
     }
+
+    fn log_interface(&self) -> String {
+        self.inner.log_interface()
+    }
 }

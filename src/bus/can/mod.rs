@@ -310,4 +310,10 @@ pub trait CanBus: Send {
     fn recv(&mut self, timeout: Duration) -> Result<Option<CanFrame>, CanError>;
     /// Short description for messages (`virtual`, `udp 239.74.163.2:43113`, `socketcan vcan0`).
     fn describe(&self) -> String;
+    /// The interface name `candump -L` logs of this bus carry: the kernel's name of a SocketCAN
+    /// interface, a short stand-in for a bus that is none (see [`candump`] "Interface
+    /// names"). Default: [`describe`](CanBus::describe) made to fit.
+    fn log_interface(&self) -> String {
+        candump::interface_name(&self.describe())
+    }
 }

@@ -259,6 +259,10 @@ mod linux {
         fn describe(&self) -> String {
             format!("socketcan {}", self.ifname)
         }
+
+        fn log_interface(&self) -> String {
+            crate::bus::can::candump::interface_name(&self.ifname)
+        }
     }
 }
 
@@ -317,6 +321,10 @@ mod other {
 
         fn describe(&self) -> String {
             format!("socketcan {} (unavailable)", self.ifname)
+        }
+
+        fn log_interface(&self) -> String {
+            crate::bus::can::candump::interface_name(&self.ifname)
         }
     }
 }

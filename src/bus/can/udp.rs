@@ -316,4 +316,8 @@ impl CanBus for UdpMulticastBus {
     fn describe(&self) -> String {
         format!("udp {}:{}", self.config.group, self.config.port)
     }
+
+    fn log_interface(&self) -> String {
+        super::candump::UDP_INTERFACE.to_string()
+    }
 }

@@ -225,6 +225,10 @@ impl CanBus for VirtualEndpoint {
     fn describe(&self) -> String {
         format!("virtual #{}", self.key)
     }
+
+    fn log_interface(&self) -> String {
+        super::candump::EMU_INTERFACE.to_string()
+    }
 }
 
 impl Drop for VirtualEndpoint {

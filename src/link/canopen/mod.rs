@@ -32,6 +32,16 @@
 //! same order on the wall clock, one SYNC per machine cycle on absolute deadlines: see
 //! [`paced`] (timing, synchronous window, stall rule, cycle statistics).
 //!
+//! # The end of a run ([`Link::release`])
+//!
+//! After the machine disabled the drives (controlword 0x0006 shutdown in the RPDOs, see
+//! [`crate::machine::Machine::power_off`]): NMT enter pre-operational (0x80) to every axis's
+//! node, one frame per node; no SYNC and no PDO follow. Each node confirms with its next
+//! heartbeat (state 0x7F), awaited for [`RELEASE_HEARTBEATS`] heartbeat periods (virtual time
+//! on `canopen-emu`, where the nodes run on in cycle steps; the wall clock elsewhere). A node
+//! that does not confirm is an error naming it. The next exchange sends NMT start to the nodes
+//! again (their PDO configuration stays).
+//!
 //! # Acyclic access
 //!
 //! SDO upload / download with our sans-IO client ([`SdoClient`]); sizes as for EtherCAT (drive
@@ -60,6 +70,9 @@ use crate::sim::plant::Plant;
 use crate::units::Nanos;
 use paced::{cycle_period_us, rpdo_event_timer_ms, sync_window_us, Pacing};
 use std::sync::Arc;
+
+/// [`Link::release`] waits this many heartbeat periods for the nodes to report pre-operational.
+pub const RELEASE_HEARTBEATS: u64 = 3;
 
 /// A node is lost when its last heartbeat is older than this many periods.
 pub const HEARTBEAT_TIMEOUT_FACTOR: u64 = 3;
@@ -100,6 +113,8 @@ pub struct CanopenLink {
     /// The SYNC producer on the wall clock (links that leave the process); `None` on
     /// `canopen-emu`.
     pacing: Option<Pacing>,
+    /// [`Link::release`] sent the nodes to pre-operational; the next exchange starts them.
+    released: bool,
 }
 
 impl std::fmt::Debug for CanopenLink {
@@ -236,10 +251,11 @@ impl Transport {
             let hub = VirtualCan::new();
             let master = hub.endpoint();
             let node_side = hub.endpoint();
+            let iface = master.log_interface();
             return Ok(Transport {
                 bus: Box::new(master),
                 emulated: Some((CanopenSegment::new(nodes, cycle), node_side)),
-                candump: candump.map(|p| open_candump(p, "vcan-emu")).transpose()?,
+                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
             });
         }
         let bus: Box<dyn CanBus> = if let Some(ifname) = link.strip_prefix("socketcan:") {
@@ -253,7 +269,7 @@ impl Transport {
                 "unknown CAN link '{link}' (allowed: canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)"
             )));
         };
-        let iface = bus.describe().replace(' ', "_");
+        let iface = bus.log_interface();
         Ok(Transport {
             bus,
             emulated: None,
@@ -316,6 +332,11 @@ impl Transport {
                 p.keep_alive(self).map_err(|e| (None, e.to_string()))?;
             }
         }
+    }
+
+    /// The interface name of the bus in `candump -L` lines ([`CanBus::log_interface`]).
+    fn log_interface(&self) -> String {
+        self.bus.log_interface()
     }
 
     fn log(&mut self, f: &CanFrame) {
@@ -445,7 +466,7 @@ impl CanopenLink {
         cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
-        let iface = bus.describe().replace(' ', "_");
+        let iface = bus.log_interface();
         CanopenLink::start(
             Transport {
                 bus,
@@ -502,6 +523,7 @@ impl CanopenLink {
             cycle,
             tpdo_cobs: Vec::new(),
             pacing: None,
+            released: false,
         };
         link.tpdo_cobs = link
             .axes
@@ -795,6 +817,22 @@ impl CanopenLink {
         Ok(())
     }
 
+    /// After [`Link::release`]: NMT start to every axis's node (their PDO configuration is
+    /// kept in pre-operational), as at the end of the start-up.
+    fn restart(&mut self, now: Nanos) -> Result<(), LinkError> {
+        self.released = false;
+        let nodes: Vec<u8> = self.axes.iter().map(|a| a.node).collect();
+        for node in nodes {
+            self.send(&NmtCommand::Start.frame(node))?;
+        }
+        let hb = self.heartbeat_clock(now);
+        for a in &mut self.axes {
+            a.state = Some(NmtState::Operational);
+            a.last_heartbeat = Some(hb);
+        }
+        Ok(())
+    }
+
     /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus (dropped before
     /// the master sees them; the exchange then reports the missing TPDO).
     pub fn lose_exchange_at(&mut self, n: u64) {
@@ -841,6 +879,9 @@ impl Link for CanopenLink {
             });
         }
         self.now = now;
+        if self.released {
+            self.restart(now)?;
+        }
         let n = self.exchanges;
         self.exchanges += 1;
         let mut rpdos = Vec::new();
@@ -874,6 +915,64 @@ impl Link for CanopenLink {
                 let got = self.note(frames, now)?;
                 self.finish_exchange(n, now, got, images)
             }
+        }
+    }
+
+    fn release(&mut self, now: Nanos) -> Result<(), LinkError> {
+        self.now = now;
+        self.released = true;
+        let nodes: Vec<u8> = self.axes.iter().map(|a| a.node).collect();
+        for &node in &nodes {
+            self.send(&NmtCommand::EnterPreOperational.frame(node))?;
+        }
+        // Only heartbeats after the command count.
+        for a in &mut self.axes {
+            a.state = None;
+        }
+        let bound = u64::from(HEARTBEAT_MS) * 1_000_000 * RELEASE_HEARTBEATS;
+        let confirmed = |axes: &[AxisNode]| {
+            axes.iter()
+                .all(|a| a.state == Some(NmtState::PreOperational))
+        };
+        if self.bus.emulated.is_some() {
+            // Virtual time: the nodes take the command at `now` and run on in cycle steps
+            // until their heartbeats came (the machine's time is not moved: nothing else runs).
+            let step = self.cycle.0.max(1);
+            let mut t = now;
+            loop {
+                self.run_nodes(t);
+                let frames = self.receive_all(Duration::ZERO)?;
+                self.note(frames, t)?;
+                if confirmed(&self.axes) || t.0 - now.0 >= bound {
+                    break;
+                }
+                t = Nanos(t.0 + step);
+            }
+        } else {
+            let end = Instant::now() + Duration::from_nanos(bound);
+            while !confirmed(&self.axes) && Instant::now() < end {
+                let frames = self.receive_all(Duration::from_millis(10))?;
+                self.note(frames, now)?;
+            }
+        }
+        let missing: Vec<String> = self
+            .axes
+            .iter()
+            .filter(|a| a.state != Some(NmtState::PreOperational))
+            .map(|a| match a.state {
+                Some(s) => format!("node {} ({})", a.node, s.name()),
+                None => format!("node {} (no heartbeat)", a.node),
+            })
+            .collect();
+        if missing.is_empty() {
+            Ok(())
+        } else {
+            Err(other(format!(
+                "NMT enter pre-operational: {} not confirmed by a heartbeat within {} ms on {}",
+                missing.join(", "),
+                bound / 1_000_000,
+                self.bus.describe()
+            )))
         }
     }
 

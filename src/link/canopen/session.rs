@@ -66,6 +66,12 @@ impl CanSession {
         Ok(s)
     }
 
+    /// The interface name `candump -L` lines of this bus carry (`vcan0` for `socketcan:vcan0`,
+    /// `udp0`, `emu0`; [`crate::bus::can::candump`] "Interface names").
+    pub fn log_interface(&self) -> String {
+        self.bus.log_interface()
+    }
+
     fn wall(&self) -> Nanos {
         Nanos(self.t0.elapsed().as_nanos() as u64)
     }
