@@ -7,7 +7,11 @@
 //!     while the target position ramps across a probe surface in lockstep with SYNC;
 //! (b) our master (library API: `UdpMulticastBus` + `SdoClient` + `nmt`) against a
 //!     python-canopen `LocalNode` built from `python-canopen-e35.eds`
-//!     (`tests/python/canopen_local_node.py`).
+//!     (`tests/python/canopen_local_node.py`);
+//! (c) python-canopen as master (`tests/python/canopen_sdo_drive.py`, object dictionary from
+//!     the Technosoft EDS) against `fieldprobe sim canopen --eds` of the same file: 0x6041 and
+//!     the EDS's PDO defaults read before any SYNC, controlword 6 / 7 / 0xF by SDO to
+//!     OPERATION ENABLED, the event-driven TPDO1 after NMT start; no SYNC at all.
 //!
 //! Isolation as in `can_udp_interop.rs`: each test re-executes itself inside a fresh
 //! unprivileged user + network namespace (`unshare -rn`) with multicast routed to `lo`; only a
@@ -250,6 +254,94 @@ fn python_canopen_master_drives_sim_canopen() {
         assert!((l - surface).abs() <= 1, "{latch} = {l}, surface {surface}");
     }
     println!("python-canopen master against sim canopen: {elapsed:?}");
+    println!("INNER OK");
+}
+
+// ------------------------------------------------------------------------------------------
+// (c) python-canopen drives an EDS node by SDO alone (`tests/python/canopen_sdo_drive.py`)
+
+const SDO_DRIVE: &str = "python_canopen_drives_an_eds_node_by_sdo_without_sync";
+
+#[test]
+fn python_canopen_drives_an_eds_node_by_sdo_without_sync() {
+    // Checked in both halves: the outer one skips (or fails) before building the venv.
+    let Some(eds_path) = test_data("eds/technosoft-ipos-cia402.eds", SDO_DRIVE) else {
+        return;
+    };
+    let Some(python) = inner_python() else {
+        return run_in_namespace(SDO_DRIVE);
+    };
+    netns_setup();
+    let (group, port) = ("239.74.171.3", 43303u16);
+    let mut sim = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+            .args(["sim", "canopen", "--bus"])
+            .arg(format!("udp:{group}:{port}"))
+            .args(["--node", "5", "--eds"])
+            .arg(&eds_path)
+            .args(["--seconds", "60"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn fieldprobe sim canopen"),
+    );
+    let sim_err = lines_of(sim.0.stderr.take().expect("stderr"));
+    let (ready, seen) = wait_line(&sim_err, "listening", Duration::from_secs(10));
+    assert!(ready, "sim canopen not listening: {seen:?}");
+
+    let (status, out, err) = run_bounded(
+        Command::new(&python)
+            .arg(manifest_path("tests/python/canopen_sdo_drive.py"))
+            .args(["--interface", "udp_multicast", "--channel", group])
+            .args(["--port", &port.to_string(), "--node", "5", "--eds"])
+            .arg(&eds_path),
+        PEER_TIMEOUT,
+    );
+    drop(sim);
+    let sim_log: Vec<String> = sim_err.try_iter().collect();
+    println!("python master:\n{out}\n{err}\nsim: {sim_log:?}");
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "python master: {status:?}\n{err}"
+    );
+    let line = out
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .expect("JSON line");
+    let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
+    assert_eq!(r["ok"], true, "{}", r["traceback"].as_str().unwrap_or(""));
+
+    // Expected values from the EDS text (minimal INI lookup) and CiA 402.
+    let eds = std::fs::read(&eds_path).expect("read EDS");
+    let eds = String::from_utf8_lossy(&eds);
+    let want = |section: &str| eds_uint(&ini_value(&eds, section, "DefaultValue").unwrap());
+    // 0x6041 before any SYNC: SWITCH ON DISABLED after start-up, voltage enabled, remote.
+    assert_eq!(r["statusword_before_sync"], 0x0250);
+    assert_eq!(r["rpdo1_type"], want("1400sub2"));
+    assert_eq!(r["tpdo1_type"], want("1800sub2"));
+    assert_eq!(r["heartbeat_ms"], want("1017"));
+    // Controlword 6, 7, 0xF by SDO: READY TO SWITCH ON (0x21), SWITCHED ON (0x23), OPERATION
+    // ENABLED (0x27) under mask 0x6F, each seen by a statusword read.
+    let steps = r["steps"].as_array().expect("steps");
+    assert_eq!(steps.len(), 3, "{steps:?}");
+    for (step, (cw, state)) in steps.iter().zip([(6, 0x21), (7, 0x23), (0xF, 0x27)]) {
+        assert_eq!(step["controlword"], cw);
+        let last = step["statusword_reads"]
+            .as_array()
+            .and_then(|v| v.last())
+            .and_then(|v| v.as_u64())
+            .expect("a statusword read");
+        assert_eq!(last & 0x6F, state, "controlword {cw:#x}: {step}");
+    }
+    assert_eq!(r["statusword_final"].as_u64().unwrap() & 0x6F, 0x27);
+    assert_eq!(r["controlword_readback"], 0x000F);
+    // After NMT start the event-driven TPDO1 (type 255, 0x6041) came without a SYNC.
+    let tpdo = r["tpdo1_after_start"]
+        .as_str()
+        .expect("TPDO1 after NMT start");
+    let sw = u16::from_str_radix(&format!("{}{}", &tpdo[2..4], &tpdo[0..2]), 16).unwrap();
+    assert_eq!(sw & 0x6F, 0x27, "TPDO1 {tpdo}");
     println!("INNER OK");
 }
 
