@@ -3,7 +3,9 @@
 //! `tests/common/canopen_peers.rs`, shared with the SocketCAN tests (`tests/socketcan.rs`):
 //!
 //! (a) python-canopen as master against `fieldprobe sim canopen`;
-//! (b) our master against a python-canopen `LocalNode` built from `python-canopen-e35.eds`.
+//! (b) our master against a python-canopen `LocalNode` built from `python-canopen-e35.eds`;
+//! (c) python-canopen drives `sim canopen --eds` (Technosoft EDS) by SDO alone to OPERATION
+//!     ENABLED.
 //!
 //! Isolation as in `can_udp_interop.rs`: each test re-executes itself inside a fresh
 //! unprivileged user + network namespace (`unshare -rn`) with multicast routed to `lo`; only a
@@ -69,6 +71,26 @@ fn rust_master_against_python_canopen_local_node() {
         &python,
         &eds_path,
         PeerBus::Udp(Ipv4Addr::new(239, 74, 171, 2), 43302),
+    );
+    println!("INNER OK");
+}
+
+const SDO_DRIVE: &str = "python_canopen_drives_an_eds_node_by_sdo_without_sync";
+
+#[test]
+fn python_canopen_drives_an_eds_node_by_sdo_without_sync() {
+    // Checked in both halves: the outer one skips (or fails) before building the venv.
+    let Some(eds_path) = test_data("eds/technosoft-ipos-cia402.eds", SDO_DRIVE) else {
+        return;
+    };
+    let Some(python) = inner_python() else {
+        return run_in_namespace(SDO_DRIVE);
+    };
+    netns_setup();
+    canopen_peers::python_sdo_drives_eds_node(
+        &python,
+        &eds_path,
+        PeerBus::Udp(Ipv4Addr::new(239, 74, 171, 3), 43303),
     );
     println!("INNER OK");
 }

@@ -126,6 +126,50 @@ fn a_node_without_0x1007_is_a_warning_a_refusal_is_an_error_naming_node_and_obje
     }
 }
 
+#[test]
+fn the_master_remaps_a_node_with_the_ipos_pdo_defaults_and_enables_it_by_its_pdos() {
+    let Some(text) = ipos_text() else { return };
+    let ipos = eds::parse(&text, "ipos.eds").unwrap();
+    let d = def();
+    let node = EmulatedNode::from_eds(5, &d, &ipos).unwrap();
+    // Boot defaults from the EDS: [1400sub2] RPDO1 type 255, [1402sub1] RPDO3 valid.
+    assert_eq!(node.read_object(0x1400, 2), Ok(vec![255]));
+    assert_eq!(
+        node.read_object(0x1402, 1),
+        Ok(0x405u32.to_le_bytes().to_vec())
+    );
+    let mut link = CanopenLink::with_nodes(vec![node], std::slice::from_ref(&d), Nanos(2_000_000))
+        .unwrap_or_else(|e| panic!("{e}"));
+    // The master's start-up remap: synchronous (type 1) PDOs, the unused ones disabled.
+    assert_eq!(link.read_object(0, 0x1400, 2), Ok(1));
+    assert_eq!(link.read_object(0, 0x1800, 2), Ok(1));
+    assert_ne!(link.read_object(0, 0x1402, 1).unwrap() & 0x8000_0000, 0);
+    // Controlword 6, 7, 0xF through the RPDOs, statusword back through the TPDOs.
+    let mut images = vec![ProcessImage::new(d.rxpdo.len(), d.txpdo.len())];
+    let mut states = Vec::new();
+    for k in 1..=12u64 {
+        let cw = match k {
+            1..=3 => 6,
+            4..=6 => 7,
+            _ => 0xF,
+        };
+        d.rxpdo
+            .set_u16(&mut images[0].outputs, 0x6040, 0, cw)
+            .unwrap();
+        link.exchange(Nanos(k * 2_000_000), &mut images).unwrap();
+        let sw = d.txpdo.get_u16(&images[0].inputs, 0x6041, 0).unwrap();
+        states.push(sw & 0x6F);
+    }
+    // CiA 402 state coding (mask 0x6F): READY TO SWITCH ON 0x21, SWITCHED ON 0x23, OPERATION
+    // ENABLED 0x27.
+    assert!(
+        states.contains(&0x21) && states.contains(&0x23),
+        "{states:x?}"
+    );
+    assert_eq!(states.last(), Some(&0x27), "{states:x?}");
+    assert_eq!(link.segment().unwrap().nodes()[0].syncs(), 12);
+}
+
 /// The node side on its own thread and clock: receive (≤ 1 ms), run the segment with the
 /// wall-clock time since the start, send what it returns; until `stop`. While `deaf`, SDO
 /// requests are dropped (the master's SDO client waits for its timeout).

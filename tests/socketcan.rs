@@ -24,7 +24,9 @@
 //! - `cansend vcan0 000#0203` (NMT stop node 3) mid-run makes our master report the lost
 //!   process data of node 3 (900012, exit 1, no latch printed);
 //! - python-canopen over `interface='socketcan'` as master against `sim canopen`, and our
-//!   master against a python-canopen `LocalNode` (`tests/common/canopen_peers.rs`);
+//!   master against a python-canopen `LocalNode`; python-canopen writing the controlword by
+//!   SDO to OPERATION ENABLED against `sim canopen --eds` with the Technosoft EDS
+//!   (`tests/common/canopen_peers.rs`);
 //! - our `SocketCanBus`: frames, remote frames, extended IDs and filters across two sockets.
 
 use std::{
@@ -62,6 +64,7 @@ const VCAN_TESTS: &[&str] = &[
     "vcan_nmt_stop_from_cansend_is_reported_as_lost_node",
     "vcan_python_canopen_master_drives_sim_canopen",
     "vcan_rust_master_against_python_canopen_local_node",
+    "vcan_python_canopen_drives_technosoft_eds_node_by_sdo",
 ];
 
 fn in_guest() -> bool {
@@ -560,4 +563,16 @@ fn vcan_rust_master_against_python_canopen_local_node() {
         return;
     };
     canopen_peers::rust_master_against_local_node(&python(), &eds, PeerBus::SocketCan(IFACE));
+}
+
+#[test]
+fn vcan_python_canopen_drives_technosoft_eds_node_by_sdo() {
+    const TEST: &str = "vcan_python_canopen_drives_technosoft_eds_node_by_sdo";
+    let Some(eds) = test_data("eds/technosoft-ipos-cia402.eds", TEST) else {
+        return;
+    };
+    let Some(_bus) = vcan(TEST) else {
+        return;
+    };
+    canopen_peers::python_sdo_drives_eds_node(&python(), &eds, PeerBus::SocketCan(IFACE));
 }

@@ -403,11 +403,14 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
 ///                        [--heartbeat-ms MS] [--seconds N] [--rt-priority N] [--cpu N] [--mlock]
 /// ```
 /// Serves one emulated CiA 402 node per `--node` ([`EmulatedNode`]: NMT slave, boot-up and
-/// heartbeat producer, SDO server with segmented and block transfers, SYNC-driven PDOs, EMCY)
-/// until `--seconds` pass (default: forever) or the process is killed. With `--eds` the object
-/// dictionary comes from the EDS / DCF ([`EmulatedNode::from_eds`] lists the rules; note that
-/// many EDS files have 0x1017 = 0, i.e. no heartbeat until the master writes 0x1017 or
-/// `--heartbeat-ms` is given), else it is the built-in CiA 402 table ([`EmulatedNode::new`]).
+/// heartbeat producer, SDO server with segmented and block transfers, synchronous and
+/// event-driven PDOs by their transmission types, EMCY) until `--seconds` pass (default:
+/// forever) or the process is killed. The drive acts on SDO writes at once (a controlword by
+/// SDO moves its CiA 402 state machine without any SYNC) and its statusword is valid from
+/// start-up (0x0250). With `--eds` the object dictionary, the PDO defaults and 0x1017 come from
+/// the EDS / DCF ([`EmulatedNode::from_eds`] lists the rules; note that many EDS files have
+/// 0x1017 = 0, i.e. no heartbeat until the master writes 0x1017 or `--heartbeat-ms` is given),
+/// else it is the built-in CiA 402 table ([`EmulatedNode::new`]).
 ///
 /// Loop: receive with a short timeout, hand the frames with `now` = wall-clock time since the
 /// start to [`CanopenSegment::run`], send what it returns; `run` is also called without frames

@@ -9,7 +9,12 @@
 //!     latched while the target position ramps across a probe surface in lockstep with SYNC;
 //! (b) [`rust_master_against_local_node`]: our master (library API: a [`CanBus`] + `SdoClient`
 //!     + `nmt`) against a python-canopen `LocalNode` built from `python-canopen-e35.eds`
-//!     (`tests/python/canopen_local_node.py`).
+//!     (`tests/python/canopen_local_node.py`);
+//! (c) [`python_sdo_drives_eds_node`]: python-canopen as master
+//!     (`tests/python/canopen_sdo_drive.py`, object dictionary from the Technosoft EDS) against
+//!     `fieldprobe sim canopen --eds` of the same file: 0x6041 and the EDS's PDO defaults read
+//!     before any SYNC, controlword 6 / 7 / 0xF by SDO to OPERATION ENABLED, the event-driven
+//!     TPDO1 after NMT start; no SYNC at all.
 //!
 //! Every wait is bounded. Expected values come from the test data files, read here with a
 //! minimal INI / TOML lookup (not with the crate's parsers).
@@ -59,6 +64,23 @@ impl PeerBus {
         match self {
             PeerBus::Udp(g, p) => [g.to_string(), p.to_string()],
             PeerBus::SocketCan(i) => [format!("socketcan:{i}"), "0".into()],
+        }
+    }
+
+    /// `--interface … --channel … [--port …]` of the python scripts that take options.
+    pub fn python_options(&self) -> Vec<String> {
+        match self {
+            PeerBus::Udp(g, p) => ["--interface", "udp_multicast", "--channel"]
+                .into_iter()
+                .map(String::from)
+                .chain([g.to_string(), "--port".into(), p.to_string()])
+                .collect(),
+            PeerBus::SocketCan(i) => vec![
+                "--interface".into(),
+                "socketcan".into(),
+                "--channel".into(),
+                i.to_string(),
+            ],
         }
     }
 
@@ -448,4 +470,80 @@ pub fn rust_master_against_local_node(python: &Path, eds_path: &Path, bus: PeerB
         t0.elapsed()
     );
     drop(node);
+}
+
+// ------------------------------------------------------------------------------------------
+// (c) python-canopen drives an EDS node by SDO alone (`tests/python/canopen_sdo_drive.py`)
+
+/// Case (c) on `bus`; `eds_path` is `technosoft-ipos-cia402.eds` from the test data.
+pub fn python_sdo_drives_eds_node(python: &Path, eds_path: &Path, bus: PeerBus) {
+    let mut sim = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+            .args(["sim", "canopen", "--bus"])
+            .arg(bus.sim_arg())
+            .args(["--node", "5", "--eds"])
+            .arg(eds_path)
+            .args(["--seconds", "60"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn fieldprobe sim canopen"),
+    );
+    let sim_err = lines_of(sim.0.stderr.take().expect("stderr"));
+    let (ready, seen) = wait_line(&sim_err, "listening", Duration::from_secs(10) * slack());
+    assert!(ready, "sim canopen not listening: {seen:?}");
+
+    let (status, out, err) = run_bounded(
+        Command::new(python)
+            .arg(manifest_path("tests/python/canopen_sdo_drive.py"))
+            .args(bus.python_options())
+            .args(["--node", "5", "--eds"])
+            .arg(eds_path),
+        PEER_TIMEOUT,
+    );
+    drop(sim);
+    let sim_log: Vec<String> = sim_err.try_iter().collect();
+    println!("python master:\n{out}\n{err}\nsim: {sim_log:?}");
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "python master: {status:?}\n{err}"
+    );
+    let line = out
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .expect("JSON line");
+    let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
+    assert_eq!(r["ok"], true, "{}", r["traceback"].as_str().unwrap_or(""));
+
+    // Expected values from the EDS text (minimal INI lookup) and CiA 402.
+    let eds = std::fs::read(eds_path).expect("read EDS");
+    let eds = String::from_utf8_lossy(&eds);
+    let want = |section: &str| eds_uint(&ini_value(&eds, section, "DefaultValue").unwrap());
+    // 0x6041 before any SYNC: SWITCH ON DISABLED after start-up, voltage enabled, remote.
+    assert_eq!(r["statusword_before_sync"], 0x0250);
+    assert_eq!(r["rpdo1_type"], want("1400sub2"));
+    assert_eq!(r["tpdo1_type"], want("1800sub2"));
+    assert_eq!(r["heartbeat_ms"], want("1017"));
+    // Controlword 6, 7, 0xF by SDO: READY TO SWITCH ON (0x21), SWITCHED ON (0x23), OPERATION
+    // ENABLED (0x27) under mask 0x6F, each seen by a statusword read.
+    let steps = r["steps"].as_array().expect("steps");
+    assert_eq!(steps.len(), 3, "{steps:?}");
+    for (step, (cw, state)) in steps.iter().zip([(6, 0x21), (7, 0x23), (0xF, 0x27)]) {
+        assert_eq!(step["controlword"], cw);
+        let last = step["statusword_reads"]
+            .as_array()
+            .and_then(|v| v.last())
+            .and_then(|v| v.as_u64())
+            .expect("a statusword read");
+        assert_eq!(last & 0x6F, state, "controlword {cw:#x}: {step}");
+    }
+    assert_eq!(r["statusword_final"].as_u64().unwrap() & 0x6F, 0x27);
+    assert_eq!(r["controlword_readback"], 0x000F);
+    // After NMT start the event-driven TPDO1 (type 255, 0x6041) came without a SYNC.
+    let tpdo = r["tpdo1_after_start"]
+        .as_str()
+        .expect("TPDO1 after NMT start");
+    let sw = u16::from_str_radix(&format!("{}{}", &tpdo[2..4], &tpdo[0..2]), 16).unwrap();
+    assert_eq!(sw & 0x6F, 0x27, "TPDO1 {tpdo}");
 }

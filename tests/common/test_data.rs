@@ -3,8 +3,9 @@
 //!
 //! A test that reads one asks [`test_data`] for it first. Where the file is absent (a plain clone
 //! without `../shared/test-data`) the test prints `SKIP` with the reason and returns; with
-//! `FIELDPROBE_REQUIRE_TEST_DATA=1` (set by `.ci/run`) it fails instead. `src/sim/canopen.rs`
-//! repeats this logic in its unit tests (the library cannot use `tests/common`).
+//! `FIELDPROBE_REQUIRE_TEST_DATA=1` (set by `.ci/run`) it fails instead.
+//! `src/sim/canopen/tests.rs` repeats this logic in its unit tests (the library cannot use
+//! `tests/common`).
 
 #![allow(dead_code)] // each test crate uses its own subset
 

@@ -99,6 +99,11 @@ pub trait DriveModel: Send + fmt::Debug {
             p.set_disturbance(offset_inc)
         }
     }
+    /// Act on acyclically written commands now, between two cycles (a CiA 402 controlword
+    /// written by SDO or an event-driven RPDO, and the start-up transition at power-up): the
+    /// power state machine moves, the axis does not. Default: nothing (the profile acts in its
+    /// cycle only).
+    fn settle(&mut self) {}
     /// Force a drive fault with this error code.
     fn inject_fault(&mut self, code: u16);
     /// Acyclic read.
@@ -144,6 +149,9 @@ impl DriveModel for ds402::Ds402Model {
     }
     fn last_error_code(&self) -> u16 {
         ds402::Ds402Model::last_error_code(self)
+    }
+    fn settle(&mut self) {
+        ds402::Ds402Model::settle(self)
     }
     fn inject_fault(&mut self, code: u16) {
         ds402::Ds402Model::inject_fault(self, code)

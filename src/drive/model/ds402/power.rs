@@ -80,6 +80,19 @@ impl Ds402Model {
         self.state = next;
     }
 
+    /// Between two cycles: the automatic start-up transition 1 (NOT READY TO SWITCH ON →
+    /// SWITCH ON DISABLED once the self test is done, CiA 402 §6.2) and the transition the
+    /// controlword 0x6040 commands now (CiA 402 §6.3), without moving the axis. A drive obeys a
+    /// controlword written acyclically (SDO, event-driven RPDO) at once; the enable delay
+    /// (`enable_delay_cycles`) still counts cycles, so with a delay the last step to OPERATION
+    /// ENABLED waits for the steps.
+    pub fn settle(&mut self) {
+        if self.state == PowerState::NotReadyToSwitchOn {
+            self.state = PowerState::SwitchOnDisabled;
+        }
+        self.apply_controlword();
+    }
+
     /// The drive follows the cyclic set-point: operation enabled in CSP.
     pub(super) fn following(&self) -> bool {
         self.state == PowerState::OperationEnabled && self.mode == MODE_CSP

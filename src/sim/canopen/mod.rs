@@ -1,23 +1,51 @@
 //! Emulated CANopen nodes: a CiA 402 drive model behind a CiA 301 node (NMT slave, heartbeat
-//! producer, SDO server, synchronous PDOs, EMCY producer), and [`CanopenSegment`], the nodes of
-//! one bus with their [`World`] (probe surfaces, fixed stops).
+//! producer, SDO server, synchronous and event-driven PDOs, EMCY producer), and
+//! [`CanopenSegment`], the nodes of one bus with their [`World`] (probe surfaces, fixed stops).
 //!
 //! Object dictionary: the CiA 402 objects of [`ds402_objects`] (backed by the drive model), 0x1018
 //! identity, 0x1017 producer heartbeat time, and the communication / mapping parameters of 4
 //! RPDOs (0x1400.. / 0x1600..) and 4 TPDOs (0x1800.. / 0x1A00..), which start with the drive
-//! file's process data packed by [`pack_layout`] and may be rewritten in PRE-OPERATIONAL by the
-//! CiA 301 procedure. On NMT start the node reads its PDO parameters and refuses (stays
-//! pre-operational, EMCY 0x8200) a mapping its drive model cannot serve.
+//! file's process data packed by [`pack_layout`] (transmission type 1) — or with an EDS's
+//! defaults — and may be rewritten in PRE-OPERATIONAL by the CiA 301 procedure. On NMT start
+//! the node reads its PDO parameters and refuses (stays pre-operational, EMCY 0x8200) a
+//! mapping it cannot serve. NMT reset communication restores every writable object of the
+//! communication area 0x1000 … 0x1FFF to its boot default.
 //!
 //! [`EmulatedNode::from_eds`] builds the object dictionary from an EDS / DCF instead; its doc
 //! lists the rules.
 //!
-//! Cycle: RPDOs received while operational are stored; at SYNC every node first sends its TPDOs
-//! (the values its drive sampled at the previous SYNC), then the segment steps every operational
-//! node's model once with the stored outputs (one [`World::step`], the same step
-//! [`SimLink`](crate::link::sim::SimLink) makes). So a master that sends its RPDOs, then SYNC,
-//! then reads the TPDOs sees the actual values one cycle after they were sampled, as over
-//! `--link sim` and EtherCAT. One step covers 0x1006 (when the master wrote it) or the
+//! # The drive behind the node
+//!
+//! * **From power-up** the drive has passed CiA 402 transition 1: 0x6041 reads 0x0250 (SWITCH
+//!   ON DISABLED, voltage enabled, remote) by SDO before any SYNC, and the first TPDOs carry
+//!   the real actual values ([`crate::drive::model::DriveModel::settle`]).
+//! * **SDO downloads act at once**: the model gets the value, a controlword moves the CiA 402
+//!   state machine there and then (6 → READY TO SWITCH ON, 7 → SWITCHED ON, 0xF → OPERATION
+//!   ENABLED, no SYNC needed). A value of the drive's RPDO image (0x6040, 0x607A, 0x60B8 …)
+//!   also goes into the image, so it stays until an RPDO brings a new value; a SYNC without
+//!   a new RPDO does not overwrite it.
+//!
+//! # PDO transmission types (CiA 301 §7.2.2, [`pdo`])
+//!
+//! * RPDO 0 … 240: synchronous; the data are taken over at the next SYNC (the newest before
+//!   it wins), for the model step of that SYNC. RPDO 254 / 255: taken over on reception, the
+//!   drive acts at once as on an SDO write.
+//! * TPDO 1 … 240: every n-th SYNC since NMT start, with the values of the last model step;
+//!   TPDO 0: at a SYNC when its data changed since it was last sent; TPDO 254 / 255:
+//!   event-driven, checked at every [`EmulatedNode::poll`] — sent at NMT start, whenever its
+//!   data differ from the last transmission but not sooner than the inhibit time (sub-index
+//!   3, × 100 µs) after it, and when the event-timer (sub-index 5, ms, 0 = off) elapses since
+//!   it. 252 / 253 (RTR only) stay silent: the node does not answer remote frames.
+//! * A mapped object outside the drive file's process data (e.g. an EDS default mapping of
+//!   0x60FF or 0x606C) is served from the object dictionary: an RPDO writes it like an SDO
+//!   download, a TPDO reads it when it is sent.
+//!
+//! Cycle: at SYNC every node first takes over its synchronous RPDOs and sends its
+//! synchronous TPDOs (the values its drive sampled at the previous SYNC), then the segment
+//! steps every operational node's model once with its RPDO image (one [`World::step`], the
+//! same step [`SimLink`](crate::link::sim::SimLink) makes). So a master that sends its RPDOs,
+//! then SYNC, then reads the TPDOs sees the actual values one cycle after they were sampled,
+//! as over `--link sim` and EtherCAT. One step covers 0x1006 (when the master wrote it) or the
 //! segment's cycle.
 //!
 //! # SYNC timing (CiA 301 0x1006, 0x1007)
@@ -59,6 +87,7 @@
 use crate::bus::can::CanFrame;
 use std::collections::BTreeMap;
 
+use self::pdo::{NodePdo, Place, Slot, Transmission};
 use crate::bus::canopen::eds::{self, AccessType, Eds};
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{pack_layout, Direction, Mapped, Pdo, MAX_PDOS};
@@ -68,6 +97,8 @@ use crate::drive::pdo::PdoLayout;
 use crate::sim::esc::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
 use crate::sim::world::{Port, World};
 use crate::units::Nanos;
+
+pub mod pdo;
 
 /// Vendor ID the emulated nodes report in 0x1018:1 (the EtherCAT emulator's, made up).
 pub const VENDOR_ID: u32 = 0x0000_0FB0;
@@ -89,13 +120,21 @@ const SYNC_TIMEOUT_REGISTER: u8 = 0x11;
 pub const EDS_STRING_CAPACITY: usize = 256;
 
 /// The object dictionary as the SDO server sees it: the CoE object table, PDO parameters only
-/// writable in pre-operational.
+/// writable in pre-operational. A write to an object of the drive model's RPDO image also goes
+/// into the image, so the next SYNC step keeps it until an RPDO brings a new value.
 struct Od<'a> {
     od: &'a mut CoeServer,
     state: NmtState,
     /// Objects stored as byte strings that have one fixed length (EDS types the CoE table has
     /// no numeric type for: INTEGER24, REAL32, TIME_OF_DAY …).
     fixed_len: &'a BTreeMap<(u16, u8), usize>,
+    /// The drive model's RPDO layout and image.
+    rx_layout: &'a PdoLayout,
+    outputs: &'a mut [u8],
+    /// A download succeeded (the node refreshes its TPDO image).
+    wrote: bool,
+    /// The controlword 0x6040 was written (the drive acts on it at once).
+    wrote_controlword: bool,
 }
 
 impl ObjectAccess for Od<'_> {
@@ -114,7 +153,15 @@ impl ObjectAccess for Od<'_> {
                 return Err(0x0607_0010);
             }
         }
-        self.od.write(index, sub, data)
+        self.od.write(index, sub, data)?;
+        self.wrote = true;
+        self.wrote_controlword |= (index, sub) == (0x6040, 0);
+        if let Some(e) = self.rx_layout.find(index, sub) {
+            if let Ok(v) = self.od.model().read_object(index, sub) {
+                let _ = e.write(self.outputs, e.ty.saturate(v));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -127,8 +174,9 @@ pub struct EmulatedNode {
     sdo: SdoServer,
     model_rx: PdoLayout,
     model_tx: PdoLayout,
-    rx: Vec<Pdo>,
-    tx: Vec<Pdo>,
+    /// The valid RPDOs / TPDOs as read at NMT start.
+    rx: Vec<NodePdo>,
+    tx: Vec<NodePdo>,
     outputs: Vec<u8>,
     inputs: Vec<u8>,
     last_heartbeat: Option<Nanos>,
@@ -152,8 +200,9 @@ pub struct EmulatedNode {
     /// An EMCY for this model error code was sent already (the SYNC watch sends it before the
     /// model faults).
     emcy_sent_for: Option<u16>,
-    /// 0x1006 / 0x1007 and the RPDO event-timers as built (restored by NMT reset
-    /// communication): (index, sub-index, value).
+    /// The writable objects of the communication area 0x1000 … 0x1FFF as built (0x1006,
+    /// 0x1007, 0x1017, the PDO parameters …), restored by NMT reset communication:
+    /// (index, sub-index, value).
     comm_defaults: Vec<(u16, u8, Vec<u8>)>,
 }
 
@@ -328,8 +377,17 @@ impl EmulatedNode {
     ///   built-in one (0x00020192).
     /// * 0x1017 producer heartbeat time: the EDS value (often 0 = no heartbeat until the master
     ///   writes it); if the EDS lacks 0x1017, [`DEFAULT_HEARTBEAT_MS`].
-    /// * PDO parameters 0x1400..=0x1BFF: not taken from the EDS; the node has them as
-    ///   [`Self::new`] does (the drive file's process data packed by [`pack_layout`]).
+    /// * PDO parameters: when the EDS has any object in 0x1400..=0x1BFF, the communication
+    ///   (0x1400 + k, 0x1800 + k: COB-ID with `$NODEID`, transmission type, inhibit time,
+    ///   event-timer) and mapping parameters (0x1600 + k, 0x1A00 + k) of PDOs 1 … 4 (k < 4)
+    ///   are the EDS's, with the sub-indices the EDS lists (a missing inhibit time or
+    ///   event-timer counts as 0, a missing transmission type as 255); PDOs 5 and up are left
+    ///   out (the node serves the predefined connection set, SDO abort 0x0602_0000). An EDS
+    ///   without PDO objects gets the built-in ones of [`Self::new`] (the drive file's process
+    ///   data packed by [`pack_layout`], transmission type 1). A mapping whose objects the node
+    ///   cannot serve is refused at NMT start, not here.
+    /// * These EDS values are the node's boot defaults: NMT reset communication restores every
+    ///   writable object of the communication area 0x1000 … 0x1FFF to them.
     pub fn from_eds(id: u8, def: &DriveDefinition, eds: &Eds) -> Result<Self, String> {
         check_node_id(id)?;
         let builtin = ds402_objects(&format!("fieldprobe CiA 402 node ({})", def.name));
@@ -341,7 +399,10 @@ impl EmulatedNode {
         let mut entries = Vec::new();
         let mut fixed_len = BTreeMap::new();
         for (&(index, sub), e) in &eds.objects {
-            if (0x1400..0x1C00).contains(&index) || index == 0x1018 {
+            // PDOs 5 and up (number = index & 0x1FF in each of the four parameter ranges).
+            let beyond =
+                (0x1400..0x1C00).contains(&index) && usize::from(index & 0x1FF) >= MAX_PDOS;
+            if beyond || index == 0x1018 {
                 continue;
             }
             if let Some(m) = model_backed.get(&(index, sub)) {
@@ -406,24 +467,40 @@ impl EmulatedNode {
         Self::build(id, def, entries, fixed_len)
     }
 
-    /// The node around an object table (without the PDO parameters, which this adds).
+    /// The node around an object table; without PDO parameters in the table, it adds the
+    /// built-in ones (the drive file's process data packed by [`pack_layout`]).
+    ///
+    /// The drive is powered up here: it passes CiA 402 transition 1 (SWITCH ON DISABLED,
+    /// statusword 0x0250), its RPDO image holds the model's values and its TPDO image the
+    /// actual values, so SDO reads and the first TPDOs are valid before any SYNC.
     fn build(
         id: u8,
         def: &DriveDefinition,
         mut entries: Vec<ObjectEntry>,
         fixed_len: BTreeMap<(u16, u8), usize>,
     ) -> Result<Self, String> {
-        let model = crate::drive::model::for_definition(def).map_err(|e| e.to_string())?;
-        let rx = pack_layout(&def.rxpdo, Direction::Rx, id)?;
-        let tx = pack_layout(&def.txpdo, Direction::Tx, id)?;
-        entries.extend(pdo_entries(Direction::Rx, id, &rx));
-        entries.extend(pdo_entries(Direction::Tx, id, &tx));
-        let (rx_len, tx_len) = (model.rx_len(), model.tx_len());
+        let mut model = crate::drive::model::for_definition(def).map_err(|e| e.to_string())?;
+        if !entries.iter().any(|e| (0x1400..0x1C00).contains(&e.index)) {
+            let rx = pack_layout(&def.rxpdo, Direction::Rx, id)?;
+            let tx = pack_layout(&def.txpdo, Direction::Tx, id)?;
+            entries.extend(pdo_entries(Direction::Rx, id, &rx));
+            entries.extend(pdo_entries(Direction::Tx, id, &tx));
+        }
+        model.settle();
+        let mut outputs = vec![0; model.rx_len()];
+        for e in def.rxpdo.entries() {
+            if let Ok(v) = model.read_object(e.index, e.sub) {
+                let _ = e.write(&mut outputs, e.ty.saturate(v));
+            }
+        }
+        let mut inputs = vec![0; model.tx_len()];
+        model.finish_step(&mut inputs);
         let od = CoeServer::new(model, entries, 0);
-        let comm_defaults = [(0x1006u16, 0u8), (0x1007, 0)]
-            .into_iter()
-            .chain((0..MAX_PDOS as u8).map(|k| (Direction::Rx.comm_index(k), 5)))
-            .filter_map(|(i, sub)| od.read(i, sub).ok().map(|b| (i, sub, b)))
+        let comm_defaults = od
+            .entries()
+            .iter()
+            .filter(|e| (0x1000..0x2000).contains(&e.index) && e.access != Access::Ro)
+            .filter_map(|e| Some((e.index, e.sub, e.data.clone()?)))
             .collect();
         Ok(EmulatedNode {
             id,
@@ -432,10 +509,10 @@ impl EmulatedNode {
             sdo: SdoServer::new(id),
             model_rx: def.rxpdo.clone(),
             model_tx: def.txpdo.clone(),
-            rx,
-            tx,
-            outputs: vec![0; rx_len],
-            inputs: vec![0; tx_len],
+            rx: Vec::new(),
+            tx: Vec::new(),
+            outputs,
+            inputs,
             last_heartbeat: None,
             boot_pending: true,
             last_error: 0,
@@ -486,11 +563,17 @@ impl EmulatedNode {
         self.rpdos_outside_window
     }
 
-    /// A SYNC reached the node at `now`.
+    /// A SYNC reached the node at `now`: the synchronous RPDOs received since the last one
+    /// are taken over (CiA 301 §7.2.2.2), for the model step that follows.
     fn on_sync(&mut self, now: Nanos) {
         if self.state == NmtState::Operational {
             self.last_sync = Some(now);
             self.sync_lost = false;
+            for i in 0..self.rx.len() {
+                if let Some(data) = self.rx[i].take_pending() {
+                    self.take_over_rpdo(i, &data, false);
+                }
+            }
         }
     }
 
@@ -542,10 +625,21 @@ impl EmulatedNode {
         self.od.model_mut()
     }
 
-    /// Fault knob: the producer heartbeat time 0x1017 (0 = no heartbeat, the master's consumer
-    /// then reports the node lost).
+    /// The producer heartbeat time 0x1017 and its default, which NMT reset communication
+    /// restores (`sim canopen --heartbeat-ms`; as a fault knob 0 = no heartbeat, the master's
+    /// consumer then reports the node lost).
     pub fn set_heartbeat_ms(&mut self, ms: u16) {
-        let _ = self.od.write(0x1017, 0, &ms.to_le_bytes());
+        let v = ms.to_le_bytes();
+        if self.od.write(0x1017, 0, &v).is_ok() {
+            match self
+                .comm_defaults
+                .iter_mut()
+                .find(|d| (d.0, d.1) == (0x1017, 0))
+            {
+                Some(d) => d.2 = v.to_vec(),
+                None => self.comm_defaults.push((0x1017, 0, v.to_vec())),
+            }
+        }
     }
 
     /// Fault knob: ignore SDO requests (the client times out).
@@ -558,8 +652,16 @@ impl EmulatedNode {
         self.syncs
     }
 
-    /// Read the PDO parameters of `direction` from the object dictionary.
-    fn pdos_from_od(&self, direction: Direction, layout: &PdoLayout) -> Result<Vec<Pdo>, String> {
+    /// Read the valid PDOs of `direction` from the object dictionary (CiA 301 §7.5.2.35 –
+    /// §7.5.2.38): COB-ID (bit 31 set = not valid, skipped), transmission type, inhibit time,
+    /// event-timer, mapping. A mapped object is served from the drive model's image when the
+    /// drive file's layout has it, else from the object dictionary when it is there with that
+    /// bit length and readable (TPDO) / writable (RPDO). Anything else is an error.
+    fn pdos_from_od(
+        &self,
+        direction: Direction,
+        layout: &PdoLayout,
+    ) -> Result<Vec<NodePdo>, String> {
         let num = |index: u16, sub: u8| -> Result<u32, String> {
             let b = self
                 .od
@@ -572,56 +674,163 @@ impl EmulatedNode {
         };
         let mut out = Vec::new();
         for k in 0..MAX_PDOS as u8 {
-            let cob = num(direction.comm_index(k), 1)?;
+            let comm = direction.comm_index(k);
+            let Ok(cob) = num(comm, 1) else {
+                continue; // PDO k is not in the dictionary
+            };
             if cob & 0x8000_0000 != 0 {
                 continue;
             }
+            let transmission = Transmission::from_code(num(comm, 2).map_or(255, |v| v as u8));
+            let inhibit = num(comm, 3).map_or(0, |v| v as u16);
+            let event = num(comm, 5).map_or(0, |v| v as u16);
             let map = direction.mapping_index(k);
             let n = num(map, 0)?;
-            let mut mapped = Vec::new();
+            let mut slots = Vec::new();
             let mut off = 0;
-            for j in 1..=n.min(8) {
+            for j in 1..=n.min(64) {
                 let v = num(map, j as u8)?;
                 let (index, sub, bits) = (
                     (v >> 16) as u16,
                     ((v >> 8) & 0xFF) as u8,
                     (v & 0xFF) as usize,
                 );
-                let e = layout.find(index, sub).ok_or_else(|| {
-                    format!(
-                        "{map:#06x}:{j:02x}: object {index:#06x}:{sub:02x} is not mappable here"
-                    )
-                })?;
-                if bits != 8 * e.ty.size() {
-                    return Err(format!(
-                        "{map:#06x}:{j:02x}: {bits} bits, the object has {}",
-                        8 * e.ty.size()
-                    ));
-                }
-                mapped.push(Mapped {
+                let place = self
+                    .mapped_place(direction, layout, index, sub, bits)
+                    .map_err(|why| {
+                        format!("{map:#06x}:{j:02x}: object {index:#06x}:{sub:02x} {why}")
+                    })?;
+                slots.push(Slot {
                     index,
                     sub,
                     len: bits / 8,
                     pdo_offset: off,
-                    image_offset: e.offset,
+                    place,
                 });
                 off += bits / 8;
             }
             if off > 8 {
                 return Err(format!("{map:#06x}: {off} bytes, a PDO carries at most 8"));
             }
-            out.push(Pdo {
-                direction,
-                number: k,
-                cob: (cob & 0x7FF) as u16,
-                mapped,
-            });
+            out.push(NodePdo::new(
+                k,
+                (cob & 0x7FF) as u16,
+                transmission,
+                inhibit,
+                event,
+                slots,
+            ));
         }
         Ok(out)
     }
 
+    /// Where the node serves `index:sub` mapped with `bits` in a PDO of `direction`.
+    fn mapped_place(
+        &self,
+        direction: Direction,
+        layout: &PdoLayout,
+        index: u16,
+        sub: u8,
+        bits: usize,
+    ) -> Result<Place, String> {
+        if let Some(e) = layout.find(index, sub) {
+            if bits != 8 * e.ty.size() {
+                return Err(format!(
+                    "mapped with {bits} bits, the object has {}",
+                    8 * e.ty.size()
+                ));
+            }
+            return Ok(Place::Image(e.offset));
+        }
+        let e = self
+            .od
+            .entries()
+            .iter()
+            .find(|e| (e.index, e.sub) == (index, sub))
+            .ok_or("is not in the object dictionary")?;
+        let size =
+            e.ty.size()
+                .or_else(|| self.fixed_len.get(&(index, sub)).copied());
+        if size.map(|n| 8 * n) != Some(bits) || bits == 0 {
+            return Err(format!("is not mappable with {bits} bits"));
+        }
+        let allowed = match direction {
+            Direction::Rx => e.access != Access::Ro,
+            Direction::Tx => e.access != Access::Wo,
+        };
+        if !allowed {
+            return Err(format!("has the wrong access for a {direction:?}PDO"));
+        }
+        Ok(Place::Object)
+    }
+
+    /// Current data of TPDO `p`: image bytes as the model wrote them at its last step (or
+    /// its last acyclic change), other objects as the dictionary has them now.
+    fn tpdo_data(&self, p: &NodePdo) -> Vec<u8> {
+        let mut d = vec![0u8; p.len()];
+        for s in &p.slots {
+            let src = match s.place {
+                Place::Image(off) => self.inputs.get(off..off + s.len).map(<[u8]>::to_vec),
+                Place::Object => self.od.read(s.index, s.sub).ok(),
+            };
+            if let (Some(dst), Some(src)) = (d.get_mut(s.pdo_offset..s.pdo_offset + s.len), src) {
+                let n = src.len().min(s.len);
+                dst[..n].copy_from_slice(&src[..n]);
+            }
+        }
+        d
+    }
+
+    /// Take over the data of RPDO `i` (index into `self.rx`). At a SYNC (`at_once` false) the
+    /// image bytes are what the model reads at its step; on reception of an event-driven RPDO
+    /// (`at_once`) the model also gets them now and acts on a controlword at once. Objects
+    /// outside the image are written into the dictionary either way. Values the object refuses
+    /// (read-only, out of range) are left out, as the model's own step does.
+    fn take_over_rpdo(&mut self, i: usize, data: &[u8], at_once: bool) {
+        let Some(p) = self.rx.get(i) else {
+            return;
+        };
+        let mut controlword = false;
+        for s in p.slots.clone() {
+            let Some(bytes) = data.get(s.pdo_offset..s.pdo_offset + s.len) else {
+                continue;
+            };
+            match s.place {
+                Place::Image(off) => {
+                    if let Some(dst) = self.outputs.get_mut(off..off + s.len) {
+                        dst.copy_from_slice(bytes);
+                    }
+                    if at_once {
+                        if let Some(v) = self.model_rx.get(&self.outputs, s.index, s.sub) {
+                            let _ = self.od.model_mut().write_object(s.index, s.sub, v);
+                        }
+                        controlword |= (s.index, s.sub) == (0x6040, 0);
+                    }
+                }
+                Place::Object => {
+                    let _ = self.od.write(s.index, s.sub, bytes);
+                    controlword |= (s.index, s.sub) == (0x6040, 0);
+                }
+            }
+        }
+        if at_once {
+            self.acted(controlword);
+        }
+    }
+
+    /// After an acyclic write: the drive acts on a new controlword, the TPDO image shows the
+    /// drive as it is now.
+    fn acted(&mut self, controlword: bool) {
+        if controlword {
+            self.od.model_mut().settle();
+        }
+        self.od.model_mut().finish_step(&mut self.inputs);
+    }
+
     fn nmt(&mut self, cmd: NmtCommand) {
         match cmd {
+            // Already started: the PDOs (which cannot change in OPERATIONAL) keep their state.
+            NmtCommand::Start if self.state == NmtState::Operational => {}
             NmtCommand::Start => {
                 let rx = self.pdos_from_od(Direction::Rx, &self.model_rx.clone());
                 let tx = self.pdos_from_od(Direction::Tx, &self.model_tx.clone());
@@ -646,6 +855,11 @@ impl EmulatedNode {
                     let _ = self.od.write(index, sub, &data);
                 }
             }
+        }
+        if self.state != NmtState::Operational {
+            // Synchronous RPDO data not yet taken over are dropped with the PDOs.
+            self.rx.clear();
+            self.tx.clear();
         }
         // The SYNC watch arms again with the first SYNC in OPERATIONAL, the RPDO deadline
         // monitoring with each RPDO's first reception.
@@ -694,19 +908,33 @@ impl EmulatedNode {
                 od: &mut self.od,
                 state: self.state,
                 fixed_len: &self.fixed_len,
+                rx_layout: &self.model_rx,
+                outputs: &mut self.outputs,
+                wrote: false,
+                wrote_controlword: false,
             };
             let replies = self.sdo.handle(f, &mut od, now);
+            let (wrote, controlword) = (od.wrote, od.wrote_controlword);
             self.outgoing.extend(replies);
+            if wrote {
+                self.acted(controlword);
+            }
             return;
         }
         if self.state == NmtState::Operational {
-            if let Some(p) = self.rx.iter().find(|p| p.cob == id) {
+            if let Some(i) = self.rx.iter().position(|p| p.cob == id) {
+                let p = &mut self.rx[i];
                 let k = usize::from(p.number);
-                if !p.unpack(f.payload(), &mut self.outputs) {
+                if f.payload().len() != p.len() {
                     self.emcy(0x8210); // PDO not processed due to length error
-                } else if k < MAX_PDOS {
-                    self.rpdo_seen[k] = Some(now);
-                    self.rpdo_lost[k] = false;
+                } else {
+                    if k < MAX_PDOS {
+                        self.rpdo_seen[k] = Some(now);
+                        self.rpdo_lost[k] = false;
+                    }
+                    if let Some(data) = p.receive(f.payload()) {
+                        self.take_over_rpdo(i, &data, true);
+                    }
                 }
                 let window = self.read_u32(0x1007);
                 if let Some(t) = self.last_sync {
@@ -719,7 +947,7 @@ impl EmulatedNode {
     }
 
     /// Time-driven work at `now`: boot-up message, heartbeat, SDO server timeout, EMCY for a new
-    /// model fault, the SYNC watch.
+    /// model fault, the SYNC watch, RPDO deadlines, event-driven TPDOs.
     pub fn poll(&mut self, now: Nanos) {
         if self.boot_pending {
             self.boot_pending = false;
@@ -753,6 +981,33 @@ impl EmulatedNode {
         }
         self.watch_sync(now);
         self.watch_rpdos(now);
+        self.send_event_tpdos(now);
+    }
+
+    /// Event-driven TPDOs (types 254 / 255) at `now` (operational only): sent when their data
+    /// changed since their last transmission, or their event-timer elapsed, once the inhibit
+    /// time is over ([`NodePdo::event_due`]); each at its NMT start (nothing sent yet).
+    fn send_event_tpdos(&mut self, now: Nanos) {
+        if self.state != NmtState::Operational {
+            return;
+        }
+        for i in 0..self.tx.len() {
+            if !self.tx[i].transmission.event_driven() {
+                continue;
+            }
+            let data = self.tpdo_data(&self.tx[i]);
+            if self.tx[i].event_due(now, &data) {
+                self.transmit_tpdo(i, now, data);
+            }
+        }
+    }
+
+    /// Send TPDO `i` (index into `self.tx`) with `data` at `now`.
+    fn transmit_tpdo(&mut self, i: usize, now: Nanos, data: Vec<u8>) {
+        if let Ok(f) = CanFrame::new(self.tx[i].cob, &data) {
+            self.outgoing.push(f);
+        }
+        self.tx[i].sent(now, data);
     }
 
     /// RPDO deadline monitoring (module documentation), at `now`.
@@ -787,15 +1042,16 @@ impl EmulatedNode {
         }
     }
 
-    /// The TPDOs of the last SYNC step (operational only).
-    fn send_tpdos(&mut self) {
+    /// At a SYNC (operational only), the synchronous TPDOs due ([`NodePdo::sync_due`]: type
+    /// n every n-th SYNC, type 0 when the data changed), with the values of the last model step.
+    fn send_tpdos(&mut self, now: Nanos) {
         if self.state != NmtState::Operational {
             return;
         }
-        for p in &self.tx {
-            let data = p.pack(&self.inputs);
-            if let Ok(f) = CanFrame::new(p.cob, &data) {
-                self.outgoing.push(f);
+        for i in 0..self.tx.len() {
+            let data = self.tpdo_data(&self.tx[i]);
+            if self.tx[i].sync_due(&data) {
+                self.transmit_tpdo(i, now, data);
             }
         }
     }
@@ -862,7 +1118,7 @@ impl CanopenSegment {
                 for n in &mut self.nodes {
                     n.syncs += u64::from(n.state == NmtState::Operational);
                     n.on_sync(now);
-                    n.send_tpdos();
+                    n.send_tpdos(now);
                     n.take_outgoing().into_iter().for_each(&mut *send);
                 }
                 self.step_models(now);
@@ -908,162 +1164,4 @@ impl CanopenSegment {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::bus::canopen::eds;
-    use crate::drive::catalogue;
-
-    const TECHNOSOFT: &str = "eds/technosoft-ipos-cia402.eds";
-
-    /// `../shared/test-data/REL` when the file exists. Otherwise: panics if
-    /// `FIELDPROBE_REQUIRE_TEST_DATA=1` (set by `.ci/run`), else prints `SKIP TEST_NAME: …` and
-    /// returns `None` (the test returns). Same rule as `tests/common/test_data.rs`.
-    fn test_data(rel: &str, test_name: &str) -> Option<std::path::PathBuf> {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/test-data")
-            .join(rel);
-        if path.is_file() {
-            return Some(path);
-        }
-        let why = format!(
-            "{} not present (a plain clone without ../shared/test-data)",
-            path.display()
-        );
-        if std::env::var("FIELDPROBE_REQUIRE_TEST_DATA").is_ok_and(|v| v == "1") {
-            panic!("{test_name}: {why}; FIELDPROBE_REQUIRE_TEST_DATA=1 requires the test data");
-        }
-        eprintln!("SKIP {test_name}: {why}");
-        None
-    }
-
-    /// One SDO request (8 bytes on 0x600 + 5) and the node's single reply on 0x585.
-    #[track_caller]
-    fn sdo(node: &mut EmulatedNode, req: [u8; 8]) -> [u8; 8] {
-        let f = CanFrame::new(0x605, &req).unwrap();
-        node.handle(&f, Nanos(1_000_000));
-        let out = node.take_outgoing();
-        assert_eq!(out.len(), 1, "{out:?}");
-        assert_eq!(out[0].id, 0x585);
-        out[0].data
-    }
-
-    /// Expedited upload of `index:sub`: `Ok(4 data bytes)` or `Err(abort code)`.
-    #[track_caller]
-    fn upload(node: &mut EmulatedNode, index: u16, sub: u8) -> Result<[u8; 4], u32> {
-        let [lo, hi] = index.to_le_bytes();
-        let r = sdo(node, [0x40, lo, hi, sub, 0, 0, 0, 0]);
-        match r[0] {
-            0x80 => Err(u32::from_le_bytes([r[4], r[5], r[6], r[7]])),
-            c if c & 0xE3 == 0x43 => Ok([r[4], r[5], r[6], r[7]]),
-            c => panic!("unexpected reply {c:#04x}: {r:02x?}"),
-        }
-    }
-
-    /// Expedited download of 2 bytes: `Ok(())` or `Err(abort code)`.
-    #[track_caller]
-    fn download_u16(node: &mut EmulatedNode, index: u16, sub: u8, v: u16) -> Result<(), u32> {
-        let [lo, hi] = index.to_le_bytes();
-        let [a, b] = v.to_le_bytes();
-        // 0x2B: expedited, size indicated, 2 bytes
-        let r = sdo(node, [0x2B, lo, hi, sub, a, b, 0, 0]);
-        match r[0] {
-            0x60 => Ok(()),
-            0x80 => Err(u32::from_le_bytes([r[4], r[5], r[6], r[7]])),
-            c => panic!("unexpected reply {c:#04x}"),
-        }
-    }
-
-    /// The Technosoft EDS as node 5, booted (`None`: file absent, test skipped).
-    fn technosoft_node(test_name: &str) -> Option<EmulatedNode> {
-        let path = test_data(TECHNOSOFT, test_name)?;
-        let def = catalogue::load("cia402-generic").unwrap();
-        let eds = eds::load(path).unwrap();
-        let mut n = EmulatedNode::from_eds(5, &def, &eds).unwrap();
-        n.poll(Nanos(0)); // boot-up -> pre-operational
-        let boot = n.take_outgoing();
-        // 705 [1] 00: boot-up; no heartbeat follows because the EDS has 0x1017 = 0
-        assert_eq!(boot, vec![CanFrame::new(0x705, &[0]).unwrap()]);
-        Some(n)
-    }
-
-    #[test]
-    fn from_eds_takes_values_access_and_identity_from_the_file() {
-        let Some(mut n) =
-            technosoft_node("from_eds_takes_values_access_and_identity_from_the_file")
-        else {
-            return;
-        };
-        // Values as written in the file: [1000] DefaultValue=0x60192, [1018sub1] 0x000001A3.
-        assert_eq!(upload(&mut n, 0x1000, 0), Ok(0x0006_0192u32.to_le_bytes()));
-        assert_eq!(upload(&mut n, 0x1018, 0).map(|b| b[0]), Ok(4));
-        assert_eq!(upload(&mut n, 0x1018, 1), Ok(0x1A3u32.to_le_bytes()));
-        // No product code in the file ([1018sub2] without default, no ProductNumber): 0.
-        assert_eq!(upload(&mut n, 0x1018, 2), Ok([0; 4]));
-        // Serial number: none in the file -> the node id.
-        assert_eq!(upload(&mut n, 0x1018, 4), Ok(5u32.to_le_bytes()));
-        // [1008] const "iPOS" (4 bytes: expedited).
-        assert_eq!(upload(&mut n, 0x1008, 0), Ok(*b"iPOS"));
-        assert_eq!(download_u16(&mut n, 0x1008, 0, 0x4141), Err(0x0601_0002));
-        // [1017] rw DefaultValue=0.
-        assert_eq!(
-            upload(&mut n, 0x1017, 0).map(|b| b[..2].to_vec()),
-            Ok(vec![0, 0])
-        );
-        // Manufacturer objects: [2000] ro u16 0, [2010] rww u16 0.
-        assert_eq!(
-            upload(&mut n, 0x2000, 0).map(|b| b[..2].to_vec()),
-            Ok(vec![0, 0])
-        );
-        assert_eq!(download_u16(&mut n, 0x2000, 0, 1), Err(0x0601_0002));
-        assert_eq!(download_u16(&mut n, 0x2010, 0, 0xBEEF), Ok(()));
-        assert_eq!(
-            upload(&mut n, 0x2010, 0).map(|b| b[..2].to_vec()),
-            Ok(vec![0xEF, 0xBE])
-        );
-        // A 4-byte write to a u16 object is refused (length does not match).
-        let r = sdo(&mut n, [0x23, 0x10, 0x20, 0, 1, 2, 3, 4]);
-        assert_eq!(r, [0x80, 0x10, 0x20, 0, 0x10, 0, 0x07, 0x06]);
-        // Not in the file: built-in emulator notice 0x2000 is replaced, 0x1C00 gone.
-        assert_eq!(upload(&mut n, 0x1C00, 0), Err(0x0602_0000));
-        // PDO parameters as the node has them: TPDO1 COB-ID 0x185, first entry 0x6041:00 16 bit
-        // (drives/cia402-generic.toml txpdo starts with the statusword).
-        assert_eq!(upload(&mut n, 0x1800, 1), Ok(0x185u32.to_le_bytes()));
-        assert_eq!(upload(&mut n, 0x1A00, 1), Ok(0x6041_0010u32.to_le_bytes()));
-    }
-
-    #[test]
-    fn from_eds_keeps_the_drive_model_behind_its_objects() {
-        let Some(mut n) = technosoft_node("from_eds_keeps_the_drive_model_behind_its_objects")
-        else {
-            return;
-        };
-        // 0x60B8 touch probe function is in the file; a write reaches the model.
-        assert_eq!(download_u16(&mut n, 0x60B8, 0, 0x0011), Ok(()));
-        assert_eq!(n.model().read_object(0x60B8, 0), Ok(0x0011));
-        // 0x6041 statusword comes from the model, not from the file (which has no default).
-        let sw = upload(&mut n, 0x6041, 0).map(|b| i64::from(u16::from_le_bytes([b[0], b[1]])));
-        assert_eq!(sw, n.model().read_object(0x6041, 0));
-        // Read-only model object stays read-only.
-        assert_eq!(download_u16(&mut n, 0x6041, 0, 0), Err(0x0601_0002));
-    }
-
-    #[test]
-    fn from_eds_rejects_bad_node_ids_and_values() {
-        let Some(path) = test_data(TECHNOSOFT, "from_eds_rejects_bad_node_ids_and_values") else {
-            return;
-        };
-        let def = catalogue::load("cia402-generic").unwrap();
-        let eds = eds::load(path).unwrap();
-        assert!(EmulatedNode::from_eds(0, &def, &eds).is_err());
-        assert!(EmulatedNode::from_eds(128, &def, &eds).is_err());
-        let bad = eds::parse(
-            "[MandatoryObjects]\nSupportedObjects=1\n1=0x1000\n\n[1000]\nParameterName=Device type\n\
-             ObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0x1FFFFFFFF\nPDOMapping=0\n",
-            "bad.eds",
-        );
-        if let Ok(bad) = bad {
-            let e = EmulatedNode::from_eds(5, &def, &bad).unwrap_err();
-            assert!(e.contains("0x1000"), "{e}");
-        }
-    }
-}
+mod tests;
