@@ -25,7 +25,8 @@
 #
 # Environment: FIELDPROBE_GUEST_DIR (cache), FIELDPROBE_GUEST_MEM (MiB, default 2048),
 # FIELDPROBE_GUEST_CPUS (default: the host's CPU count, at most 4), FIELDPROBE_GUEST_KERNEL_PKG
-# (default: what linux-image-amd64 depends on).
+# (default: what linux-image-amd64 depends on), FIELDPROBE_GUEST_QEMU (default
+# qemu-system-x86_64).
 set -euo pipefail
 
 say() { echo "can-guest: $*" >&2; }
@@ -54,8 +55,9 @@ fi
 CACHE="${FIELDPROBE_GUEST_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/fieldprobe-guest}"
 MODULES="vcan can-raw can-bcm can-gw veth 9p 9pnet_virtio virtio_pci"
 
+QEMU="${FIELDPROBE_GUEST_QEMU:-qemu-system-x86_64}"
 missing=""
-for c in qemu-system-x86_64:qemu-system-x86 busybox:busybox-static cpio:cpio depmod:kmod \
+for c in "$QEMU:qemu-system-x86" busybox:busybox-static cpio:cpio depmod:kmod \
     modprobe:kmod dpkg-deb:dpkg; do
     command -v "${c%%:*}" >/dev/null 2>&1 || missing="$missing ${c##*:}"
 done
@@ -177,7 +179,7 @@ CPUS="${FIELDPROBE_GUEST_CPUS:-$(nproc)}"
 [ "$CPUS" -gt 4 ] && CPUS=4
 ACCEL=(-accel tcg,thread=multi)
 set +e
-timeout --kill-after=10 "$TIMEOUT" qemu-system-x86_64 "${ACCEL[@]}" -m "${FIELDPROBE_GUEST_MEM:-2048}" \
+timeout --kill-after=10 "$TIMEOUT" "$QEMU" "${ACCEL[@]}" -m "${FIELDPROBE_GUEST_MEM:-2048}" \
     -smp "$CPUS" -nographic -no-reboot -nic none \
     -kernel "$GUEST/vmlinuz" -initrd "$GUEST/initrd.img" \
     -append "console=ttyS0 quiet loglevel=3 panic=-1 fp.run=$RUN" \

@@ -297,6 +297,81 @@ fn socketcan_tests_in_a_linux_guest() {
     );
 }
 
+/// `scripts/can-guest.sh` says what is missing (exit 125) instead of failing obscurely.
+#[test]
+fn guest_runner_names_what_is_missing() {
+    let (status, out, err) = run_bounded(
+        Command::new("bash")
+            .arg(manifest_path("scripts/can-guest.sh"))
+            .args(["--", "true"])
+            .env("FIELDPROBE_GUEST_QEMU", "/nonexistent/qemu-system-x86_64"),
+        Duration::from_secs(60),
+    );
+    assert_eq!(status.and_then(|s| s.code()), Some(125), "{out}{err}");
+    assert!(
+        err.contains("no guest can run here") && err.contains("qemu-system-x86"),
+        "{err}"
+    );
+    let (status, _, err) = run_bounded(
+        Command::new("bash")
+            .arg(manifest_path("scripts/can-guest.sh"))
+            .args(["--timeout", "soon", "--", "true"]),
+        Duration::from_secs(60),
+    );
+    assert_eq!(status.and_then(|s| s.code()), Some(2), "{err}");
+    assert!(err.contains("--timeout soon"), "{err}");
+}
+
+/// The guest runner bounds the command: a command that outlives `--timeout` ends with 124,
+/// and a command's own exit status and its stdout / stderr come back separately.
+#[test]
+fn guest_runner_returns_status_and_output_and_times_out() {
+    const TEST: &str = "guest_runner_returns_status_and_output_and_times_out";
+    if in_guest() {
+        return;
+    }
+    let script = manifest_path("scripts/can-guest.sh");
+    let (status, _, err) = run_bounded(
+        Command::new("bash").arg(&script).arg("--check"),
+        Duration::from_secs(600),
+    );
+    match status.and_then(|s| s.code()) {
+        Some(0) => {}
+        Some(125) if std::env::var("FIELDPROBE_REQUIRE_SOCKETCAN").as_deref() != Ok("1") => {
+            eprintln!("SKIP {TEST}: {}", err.trim());
+            return;
+        }
+        other => panic!("scripts/can-guest.sh --check: {other:?}\n{err}"),
+    }
+    let (status, out, err) = run_bounded(
+        Command::new("bash").arg(&script).args([
+            "--",
+            "sh",
+            "-c",
+            "echo out; echo err >&2; ip -br link show vcan0; exit 7",
+        ]),
+        Duration::from_secs(300),
+    );
+    assert_eq!(status.and_then(|s| s.code()), Some(7), "{out}{err}");
+    assert!(out.starts_with("out\n") && out.contains("vcan0"), "{out}");
+    assert!(out.contains("UP"), "vcan0 is up in the guest: {out}");
+    assert!(err.contains("err") && !err.contains("out"), "{err}");
+    let t0 = Instant::now();
+    let (status, out, err) = run_bounded(
+        Command::new("bash")
+            .arg(&script)
+            .args(["--timeout", "20", "--", "sleep", "600"]),
+        Duration::from_secs(300),
+    );
+    assert_eq!(status.and_then(|s| s.code()), Some(124), "{out}{err}");
+    assert!(err.contains("timed out after 20 s"), "{err}");
+    assert!(
+        t0.elapsed() < Duration::from_secs(120),
+        "{:?}",
+        t0.elapsed()
+    );
+}
+
 // ------------------------------------------------------------------------------------------
 // Our SocketCAN transport
 
