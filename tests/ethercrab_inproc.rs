@@ -237,8 +237,15 @@ fn segment(specs: &[DeviceSpec]) -> Arc<Mutex<Segment>> {
 fn main_device(pdu_loop: ethercrab::PduLoop<'static>) -> MainDevice<'static> {
     MainDevice::new(
         pdu_loop,
+        // The in-process wire answers every frame at once: no wall-clock timeout may decide
+        // here (issue 15: ethercrab's 30 ms PDU timeout fired with the CPU saturated). Every
+        // wait is bounded by `wire::bounded(TEST_TIMEOUT, …)` instead.
         Timeouts {
-            state_transition: Duration::from_secs(2),
+            pdu: TEST_TIMEOUT,
+            eeprom: TEST_TIMEOUT,
+            mailbox_echo: TEST_TIMEOUT,
+            mailbox_response: TEST_TIMEOUT,
+            state_transition: TEST_TIMEOUT,
             ..Timeouts::default()
         },
         MainDeviceConfig {

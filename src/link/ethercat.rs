@@ -234,6 +234,11 @@ struct WireEnd {
     tap: Option<Tap>,
     port: Option<crate::sim::esc::raw::RawPort>,
     t0: Instant,
+    /// Emulated wire: a frame of the current [`drive`] call was lost (dropped by a fault knob
+    /// or refused as invalid by the segment).
+    lost: bool,
+    /// Emulated wire: frames the current [`drive`] call has put through the segment.
+    frames: u64,
 }
 
 impl WireEnd {
@@ -254,11 +259,14 @@ impl WireEnd {
             if let Some(seg) = self.segment.as_mut() {
                 let now = self.t0.elapsed().as_nanos() as u64;
                 // A dropped (fault knob) or invalid frame is lost on the wire.
+                self.frames += 1;
                 if let Ok(true) = seg.process_frame(&mut buf, now) {
                     if let Some(tap) = self.tap.as_mut() {
                         tap.record(&buf);
                     }
                     let _ = self.rx.receive_frame(&buf);
+                } else {
+                    self.lost = true;
                 }
             } else if let Some(port) = self.port.as_mut() {
                 let _ = port.send(&buf);
@@ -288,12 +296,63 @@ impl WireEnd {
 /// frame that arrives ends the wait at once.
 const RX_WAIT: Duration = Duration::from_millis(1);
 
+/// Frames one [`drive`] call may put through the emulated segment before it gives up (the
+/// in-process wire's bound in place of ethercrab's wall-clock timeouts: a master loop that
+/// polls a device which never reaches the awaited state ends here). Start-up with 100 DC
+/// static-sync iterations takes a few thousand frames, an SDO transfer a few dozen.
+const EMULATED_FRAMES_PER_CALL: u64 = 1_000_000;
+
+/// ethercrab's timeouts on the in-process wire: never reached. The emulated segment answers
+/// every frame synchronously inside [`WireEnd::pump`], so a reply can only be missing because
+/// the segment dropped the frame, which [`drive`] sees at once and reports; a wall-clock
+/// timeout there would only fire when the test machine is busy (it did, with 20 ms, under CPU
+/// load: "frame lost: timeout: PDU").
+const EMULATED_TIMEOUT: Duration = Duration::from_secs(24 * 3600);
+
+/// The value a master future gives when [`drive`] ends it because the emulated wire lost one
+/// of its frames (or it exceeded [`EMULATED_FRAMES_PER_CALL`]), the in-process, virtual-time
+/// counterpart of ethercrab's PDU timeout.
+trait LostOnWire {
+    fn lost_on_wire() -> Self;
+}
+
+impl<T> LostOnWire for Result<T, ethercrab::error::Error> {
+    fn lost_on_wire() -> Self {
+        Err(ethercrab::error::Error::ReceiveFrame)
+    }
+}
+
+impl<T> LostOnWire for Result<T, MailboxError> {
+    fn lost_on_wire() -> Self {
+        Err(MailboxError::Datagram(
+            "frame lost on the emulated wire".into(),
+        ))
+    }
+}
+
+impl<T> LostOnWire for Result<T, LinkError> {
+    fn lost_on_wire() -> Self {
+        Err(LinkError::Other(
+            "EtherCAT: a frame was lost on the emulated wire".into(),
+        ))
+    }
+}
+
 /// Run `fut` to completion while pumping frames through `wire` (single thread): send what the
-/// master queued, then wait for one frame, then poll the master again.
-fn drive<T>(wire: &mut WireEnd, fut: impl Future<Output = T>) -> T {
+/// master queued, then wait for one frame, then poll the master again. On the emulated wire a
+/// frame the segment drops ends `fut` at once with [`LostOnWire`] (ethercrab releases the
+/// frame when its future is dropped); no clock decides.
+fn drive<T: LostOnWire>(wire: &mut WireEnd, fut: impl Future<Output = T>) -> T {
+    wire.lost = false;
+    wire.frames = 0;
     let pump = std::future::poll_fn(|cx| {
         wire.tx.replace_waker(cx.waker());
         wire.pump();
+        if wire.lost || wire.frames > EMULATED_FRAMES_PER_CALL {
+            tracing::debug!(target: "fieldprobe::link::ethercat", frames = wire.frames,
+                "emulated wire: frame lost or no progress; the master operation ends");
+            return Poll::Ready(T::lost_on_wire());
+        }
         wire.receive();
         if wire.port.is_some() {
             // Nothing wakes us when a frame arrives on the socket: the receive above waited
@@ -368,6 +427,16 @@ impl EthercatLink {
                 .await
                 .map_err(ec_err("init"))?;
             let mut axes = assign_axes(md, &group, spec).await?;
+            if emulated {
+                // In-process: the frame budget of `drive` bounds the mailbox polls, not a clock.
+                for ax in axes.iter_mut() {
+                    match &mut ax.mailbox {
+                        Mailbox::Coe(c) => c.timeout = EMULATED_TIMEOUT,
+                        Mailbox::Soe(c) => c.timeout = EMULATED_TIMEOUT,
+                        Mailbox::None => {}
+                    }
+                }
+            }
             for ax in axes.iter_mut() {
                 if let Mailbox::Coe(c) = &mut ax.mailbox {
                     write_pdo_mapping(md, c, &ax.def, &ax.name).await?;
@@ -781,16 +850,29 @@ fn connect(
         tap,
         port,
         t0: Instant::now(),
+        lost: false,
+        frames: 0,
     };
-    let timeouts = Timeouts {
-        pdu: Duration::from_millis(if emulated { 20 } else { 30 }),
-        state_transition: Duration::from_secs(5),
-        mailbox_response: Duration::from_secs(2),
-        // One SII (EEPROM) word read, busy bit polled over the wire: ethercrab's 10 ms is
-        // shorter than a raw-socket round trip to a busy emulator (or a long segment) can take;
-        // it only matters at start-up.
-        eeprom: Duration::from_millis(100),
-        ..Timeouts::default()
+    let timeouts = if emulated {
+        Timeouts {
+            pdu: EMULATED_TIMEOUT,
+            state_transition: EMULATED_TIMEOUT,
+            mailbox_echo: EMULATED_TIMEOUT,
+            mailbox_response: EMULATED_TIMEOUT,
+            eeprom: EMULATED_TIMEOUT,
+            ..Timeouts::default()
+        }
+    } else {
+        Timeouts {
+            pdu: Duration::from_millis(30),
+            state_transition: Duration::from_secs(5),
+            mailbox_response: Duration::from_secs(2),
+            // One SII (EEPROM) word read, busy bit polled over the wire: ethercrab's 10 ms is
+            // shorter than a raw-socket round trip to a busy emulator (or a long segment) can
+            // take; it only matters at start-up.
+            eeprom: Duration::from_millis(100),
+            ..Timeouts::default()
+        }
     };
     let md: &'static MainDevice<'static> = Box::leak(Box::new(MainDevice::new(
         pdu_loop,
@@ -955,6 +1037,9 @@ impl Session {
     pub fn sdo_read(&mut self, position: usize, index: u16, sub: u8) -> Result<Vec<u8>, LinkError> {
         let d = self.device(position)?;
         let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        if self.wire.segment.is_some() {
+            c.timeout = EMULATED_TIMEOUT;
+        }
         let md = self.md;
         drive(&mut self.wire, c.sdo_upload(md, index, sub)).map_err(|e| self.named(position, e))
     }
@@ -969,6 +1054,9 @@ impl Session {
     ) -> Result<(), LinkError> {
         let d = self.device(position)?;
         let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        if self.wire.segment.is_some() {
+            c.timeout = EMULATED_TIMEOUT;
+        }
         let md = self.md;
         drive(&mut self.wire, c.sdo_download(md, index, sub, data))
             .map_err(|e| self.named(position, e))
@@ -978,6 +1066,9 @@ impl Session {
     pub fn idn_read(&mut self, position: usize, idn: u16) -> Result<(i64, String), LinkError> {
         let d = self.device(position)?;
         let mut c = SoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        if self.wire.segment.is_some() {
+            c.timeout = EMULATED_TIMEOUT;
+        }
         let md = self.md;
         let r = drive(&mut self.wire, async {
             let v = c.read_value(md, 0, idn).await?;
@@ -991,6 +1082,9 @@ impl Session {
     pub fn idn_write(&mut self, position: usize, idn: u16, value: i64) -> Result<(), LinkError> {
         let d = self.device(position)?;
         let mut c = SoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
+        if self.wire.segment.is_some() {
+            c.timeout = EMULATED_TIMEOUT;
+        }
         let md = self.md;
         drive(&mut self.wire, c.write_value(md, 0, idn, value)).map_err(|e| self.named(position, e))
     }

@@ -298,4 +298,8 @@ impl<B: CanBus> CanBus for FaultBus<B> {
     fn log_interface(&self) -> String {
         self.inner.log_interface()
     }
+
+    fn malformed_dropped(&self) -> u64 {
+        self.inner.malformed_dropped()
+    }
 }

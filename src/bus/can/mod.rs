@@ -316,4 +316,9 @@ pub trait CanBus: Send {
     fn log_interface(&self) -> String {
         candump::interface_name(&self.describe())
     }
+    /// Received datagrams or frames this bus could not decode and dropped (junk on the wire is
+    /// counted, never an error). Default 0: a transport that cannot carry junk.
+    fn malformed_dropped(&self) -> u64 {
+        0
+    }
 }

@@ -11,6 +11,12 @@
 //!   drops datagrams whose source port is the send socket's port: those are this bus's own
 //!   echoes (python-can peers all send from the group port).
 //!
+//! Malformed datagrams (anything [`udp_wire::decode`] refuses — junk another program sends to
+//! the group, a truncated datagram) are what error frames and noise are on a real bus: the
+//! receiver drops them, counts them ([`UdpMulticastBus::malformed_dropped`]) and logs a
+//! `tracing` warning (the first [`MALFORMED_WARN_FIRST`], then every
+//! [`MALFORMED_WARN_EVERY`]th, and the total when the bus is closed); they never end a session.
+//!
 //! Like python-can's transport this is unreliable under unpaced bursts (receive-buffer
 //! overflow); [`UdpConfig::min_send_interval`] paces transmissions.
 
@@ -30,6 +36,11 @@ pub const DEFAULT_GROUP: Ipv4Addr = Ipv4Addr::new(239, 74, 163, 2);
 pub const DEFAULT_PORT: u16 = 43113;
 /// Receive buffer asked for (the kernel caps it at `net.core.rmem_max`).
 pub const RECV_BUFFER_BYTES: usize = 4 << 20;
+
+/// Malformed datagrams logged one by one before the warnings thin out.
+pub const MALFORMED_WARN_FIRST: u64 = 10;
+/// After [`MALFORMED_WARN_FIRST`], one warning per this many malformed datagrams.
+pub const MALFORMED_WARN_EVERY: u64 = 1000;
 
 /// Where a [`UdpMulticastBus`] lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -134,6 +145,7 @@ pub struct UdpMulticastBus {
     rx_timeout: Option<Duration>,
     last_send: Option<Instant>,
     own_echoes: u64,
+    malformed: u64,
 }
 
 impl fmt::Debug for UdpMulticastBus {
@@ -202,6 +214,7 @@ impl UdpMulticastBus {
             rx_timeout: None,
             last_send: None,
             own_echoes: 0,
+            malformed: 0,
         })
     }
 
@@ -218,6 +231,24 @@ impl UdpMulticastBus {
     /// Own transmissions received back and dropped so far.
     pub fn own_echoes_dropped(&self) -> u64 {
         self.own_echoes
+    }
+
+    /// Malformed datagrams received and dropped so far (see the module docs).
+    pub fn malformed_dropped(&self) -> u64 {
+        self.malformed
+    }
+
+    /// Count and log one malformed datagram from `from`.
+    fn malformed_datagram(&mut self, from: SocketAddr, len: usize, why: &CanError) {
+        self.malformed += 1;
+        let n = self.malformed;
+        if n <= MALFORMED_WARN_FIRST || n.is_multiple_of(MALFORMED_WARN_EVERY) {
+            tracing::warn!(
+                target: "fieldprobe::bus::can",
+                bus = %self.config,
+                "malformed datagram ({len} bytes from {from}) dropped: {why} ({n} dropped so far)"
+            );
+        }
     }
 
     fn set_rx_timeout(&mut self, t: Duration) -> Result<(), CanError> {
@@ -306,9 +337,10 @@ impl CanBus for UdpMulticastBus {
                 self.own_echoes += 1;
                 continue;
             }
-            match udp_wire::decode(&self.rx_buf[..n])? {
-                Some(f) => return Ok(Some(f)),
-                None => tracing::debug!(bus = %self.config, "CAN FD datagram ignored"),
+            match udp_wire::decode(&self.rx_buf[..n]) {
+                Ok(Some(f)) => return Ok(Some(f)),
+                Ok(None) => tracing::debug!(bus = %self.config, "CAN FD datagram ignored"),
+                Err(e) => self.malformed_datagram(from, n, &e),
             }
         }
     }
@@ -319,5 +351,22 @@ impl CanBus for UdpMulticastBus {
 
     fn log_interface(&self) -> String {
         super::candump::UDP_INTERFACE.to_string()
+    }
+
+    fn malformed_dropped(&self) -> u64 {
+        self.malformed
+    }
+}
+
+impl Drop for UdpMulticastBus {
+    fn drop(&mut self) {
+        if self.malformed > 0 {
+            tracing::warn!(
+                target: "fieldprobe::bus::can",
+                bus = %self.config,
+                "{} malformed datagrams dropped in total",
+                self.malformed
+            );
+        }
     }
 }

@@ -1103,6 +1103,15 @@ impl SdoServer {
         }
     }
 
+    /// Forget a transfer in progress without a word on the bus (CiA 301 §7.3.2.2.2: NMT reset
+    /// communication / reset node re-initialises the communication objects, the SDO server
+    /// included; the client that abandoned the transfer gets no abort, the next client starts
+    /// on an idle server).
+    pub fn reset(&mut self) {
+        self.state = ServerState::Idle;
+        self.deadline = None;
+    }
+
     /// Time allowed between the client's requests of one transfer; default 1 s.
     pub fn set_timeout(&mut self, t: Nanos) {
         self.timeout = t;

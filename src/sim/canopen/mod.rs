@@ -851,6 +851,9 @@ impl EmulatedNode {
             NmtCommand::ResetNode | NmtCommand::ResetCommunication => {
                 self.state = NmtState::BootUp;
                 self.boot_pending = true;
+                // The SDO server is a communication object: a transfer a client abandoned ends
+                // here (CiA 301 §7.3.2.2.2), the next client does not inherit it.
+                self.sdo.reset();
                 for (index, sub, data) in self.comm_defaults.clone() {
                     let _ = self.od.write(index, sub, &data);
                 }

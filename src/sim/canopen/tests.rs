@@ -537,3 +537,26 @@ fn technosoft_eds_node_starts_with_its_pdo_defaults_event_driven() {
     // No SYNC ever came.
     assert_eq!(b.node().syncs(), 0);
 }
+
+/// Issue 15: a client that starts a segmented upload and goes away (no segment requests)
+/// leaves the SDO server mid-transfer; NMT reset communication re-initialises the SDO server
+/// (CiA 301 §7.3.2.2.2, communication objects), so the next client's first request is
+/// answered normally instead of with an abort.
+#[test]
+fn reset_communication_ends_an_abandoned_sdo_transfer() {
+    for cmd in [NmtCommand::ResetCommunication, NmtCommand::ResetNode] {
+        let mut b = Bench::built_in();
+        // Initiate upload of 0x1008 device name (a VISIBLE_STRING longer than 4 bytes):
+        // CiA 301 §7.2.4.3.6: scs 2, e = 0, s = 1 → 0x41 with the size in bytes 4..8.
+        let r = b.sdo([0x40, 0x08, 0x10, 0, 0, 0, 0, 0]);
+        assert_eq!(r[0], 0x41, "segmented upload initiated: {r:02x?}");
+        assert!(u32::from_le_bytes([r[4], r[5], r[6], r[7]]) > 4);
+        // The client goes away; the master resets the node's communication.
+        b.nmt(cmd);
+        b.at_ms(1); // boot-up
+                    // CiA 402 statusword of a drive that was never enabled: switch on disabled
+                    // (bit 6 set, bits 0..3 clear, CiA 402 §6.2 table "statusword").
+        let sw = b.read(0x6041, 0).expect("answered, not aborted");
+        assert_eq!(sw & 0x4F, 0x40, "{sw:#06x}");
+    }
+}

@@ -43,6 +43,12 @@ pub trait EscApplication: Send {
     /// state; [`Self::outputs_written`] brings new outputs in OP again.
     fn outputs_invalid(&mut self) {}
 
+    /// The device entered INIT: the mailbox sync managers are off and the mailbox session
+    /// ends. Forget the master's last request counter (a master starts again at counter 1
+    /// after INIT, ETG.1000.4 §5.6 mailbox repeat rule, notes `ethercat.md` §2.4), transfers in
+    /// progress and queued device-initiated messages.
+    fn mailbox_reset(&mut self) {}
+
     /// The master is about to read input SM `sm` (SAFE-OP and OP): fill `buf`.
     fn inputs(&mut self, sm: u8, buf: &mut [u8]) {
         let _ = (sm, buf);

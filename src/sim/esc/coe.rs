@@ -19,7 +19,9 @@
 //! * emergency messages (CoE service 1) queued by [`CoeServer::emergency`] or when the model's
 //!   error code changes ([`CoeServer::poll`]);
 //! * mailbox counter: replies count 1..7 (wrapping 7 → 1); a request repeating the previous
-//!   non-zero counter is a retry and is ignored (ETG.1000.4 mailbox repeat rule);
+//!   non-zero counter is a retry and is ignored (ETG.1000.4 mailbox repeat rule); both counters
+//!   start again when the device enters INIT ([`CoeServer::reset_session`]), where a new master
+//!   starts at counter 1;
 //! * mailbox error replies (type 0) for other mailbox types and malformed headers;
 //! * fault knobs ([`CoeFaults`]): hold the answer back for N [`CoeServer::poll`] calls, and
 //!   answer the next SDO request with an EMCY first (the SDO response follows in the queue).
@@ -55,9 +57,17 @@ pub mod abort {
     pub const UNSUPPORTED_ACCESS: u32 = 0x0601_0000;
     /// 0x06070010 — data type does not match, length of service parameter does not match.
     pub const LENGTH: u32 = 0x0607_0010;
+    /// 0x05040005 — out of memory (a download larger than the server takes).
+    pub const OUT_OF_MEMORY: u32 = 0x0504_0005;
     /// 0x08000000 — general error.
     pub const GENERAL: u32 = 0x0800_0000;
 }
+
+/// Largest SDO download (bytes) the server collects: larger than every object of the emulated
+/// dictionaries (the longest is a few hundred bytes); an initiate request announcing more is
+/// aborted with 0x05040005 "out of memory" (CiA 301 §7.2.4.3.17), so segments from the wire
+/// never grow the server beyond this.
+pub const SDO_DOWNLOAD_MAX: usize = 65_536;
 
 /// Mailbox error detail codes (ETG.1000.4 mailbox error reply, type 0, service 1).
 pub mod mailbox_error {
@@ -373,6 +383,25 @@ impl CoeServer {
     /// The drive model, mutable.
     pub fn model_mut(&mut self) -> &mut dyn DriveModel {
         self.model.as_mut()
+    }
+
+    /// Bytes of a segmented download collected so far (at most [`SDO_DOWNLOAD_MAX`]).
+    pub fn download_len(&self) -> usize {
+        self.download.as_ref().map_or(0, |d| d.data.len())
+    }
+
+    /// End of a mailbox session (the device entered INIT): the request repeat counter and the
+    /// device's own counter start again (ETG.1000.4 §5.6: after INIT the master's first request
+    /// carries counter 1 and must not be taken for a repeat of the previous session's last
+    /// one), transfers in progress are cancelled and queued messages dropped. The object
+    /// dictionary and the model keep their values.
+    pub fn reset_session(&mut self) {
+        self.counter = MailboxCounter::default();
+        self.last_request_counter = 0;
+        self.upload = None;
+        self.download = None;
+        self.outgoing.clear();
+        self.delayed.clear();
     }
 
     /// The object table.
@@ -713,6 +742,9 @@ impl CoeServer {
                     return abort_body(index, sub, abort::LENGTH);
                 };
                 let size = u32::from_le_bytes([sz[0], sz[1], sz[2], sz[3]]) as usize;
+                if size > SDO_DOWNLOAD_MAX {
+                    return abort_body(index, sub, abort::OUT_OF_MEMORY);
+                }
                 let payload = &f.data[4..];
                 if payload.len() >= size {
                     let d = payload[..size].to_vec();
@@ -871,5 +903,9 @@ pub fn abort_body(index: u16, sub: u8, code: u32) -> Vec<u8> {
 impl EscApplication for CoeServer {
     fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
         self.handle(data)
+    }
+
+    fn mailbox_reset(&mut self) {
+        self.reset_session();
     }
 }

@@ -297,6 +297,14 @@ impl EscApplication for ServoApp {
         }
     }
 
+    fn mailbox_reset(&mut self) {
+        match &mut self.server {
+            MailboxServer::Coe(c) => c.reset_session(),
+            MailboxServer::Soe(s) => s.reset_session(),
+            MailboxServer::None(_) => {}
+        }
+    }
+
     fn inputs(&mut self, _sm: u8, buf: &mut [u8]) {
         if !self.synchronized {
             self.exchanges += 1;

@@ -52,6 +52,18 @@ pub use app::{EchoApp, EscApplication, NullApp, ProcessDataSizes};
 pub use clock::EscEvent;
 pub use types::{reg, Address, AlState, AlStatusCode, Command};
 
+/// Read-mailbox messages queued behind the one in the read mailbox at which the emulated
+/// firmware stops taking requests: a real ESC has one buffer per mailbox direction, and its
+/// firmware leaves a request in the write mailbox (SM0 full; the ESC refuses further master
+/// writes with WKC 0, ETG.1000.4 §6.7.2 mailbox handshake) until it can place the reply. A
+/// fragmented SoE reply or an EMCY before an SDO reply may queue a few messages, so the
+/// threshold is a little above one.
+pub const MAILBOX_HOLD_AT: usize = 4;
+
+/// Hard bound of the read-mailbox queue: device-initiated messages (EMCY, fragments) beyond it
+/// drop the oldest queued message (counted, [`Esc::mailbox_dropped`]).
+pub const MAILBOX_QUEUE_MAX: usize = 64;
+
 /// Standard mailbox configuration (SII words 0x0018..0x001B).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct MailboxConfig {
@@ -231,6 +243,8 @@ pub struct Esc {
     state: AlState,
     app: Box<dyn EscApplication>,
     mbx_queue: VecDeque<Vec<u8>>,
+    mailbox_dropped: u64,
+    mailbox_held: u64,
     last_reply: Option<Vec<u8>>,
     port_linked: [bool; 4],
     port_return_ns: [u64; 4],
@@ -274,6 +288,8 @@ impl Esc {
             state: AlState::Init,
             app,
             mbx_queue: VecDeque::new(),
+            mailbox_dropped: 0,
+            mailbox_held: 0,
             last_reply: None,
             port_linked: [true, false, false, false],
             port_return_ns: [0; 4],
@@ -467,8 +483,7 @@ impl Esc {
 
     /// Queue a device-initiated mailbox message (e.g. CoE emergency) for the read mailbox.
     pub fn push_mailbox(&mut self, msg: Vec<u8>) {
-        self.mbx_queue.push_back(msg);
-        self.load_read_mailbox();
+        self.enqueue_mailbox([msg]);
     }
 
     /// Move the application's device-initiated messages ([`EscApplication::take_outgoing`])
@@ -476,8 +491,7 @@ impl Esc {
     pub fn poll_app_mailbox(&mut self) {
         let msgs = self.app.take_outgoing();
         if !msgs.is_empty() {
-            self.mbx_queue.extend(msgs);
-            self.load_read_mailbox();
+            self.enqueue_mailbox(msgs);
         }
     }
 
@@ -830,8 +844,74 @@ impl Esc {
             if sm.is_mailbox() && !sm.ecat_writes() && sm.covers_last(start, len) {
                 self.set_sm_full(n, false);
                 self.load_read_mailbox();
+                self.release_held_request();
             }
         }
+    }
+
+    /// The emulated PDI reads the write mailbox `n` (full): the application handles the
+    /// request, its reply and device-initiated messages go to the read-mailbox queue.
+    fn consume_write_mailbox(&mut self, n: usize, sm: &Sm) {
+        let msg = self.mem[sm.start..sm.end()].to_vec();
+        let reply = self.app.mailbox_received(&msg);
+        self.set_sm_full(n, false);
+        let mut msgs: Vec<Vec<u8>> = reply.into_iter().collect();
+        msgs.extend(self.app.take_outgoing());
+        self.enqueue_mailbox(msgs);
+    }
+
+    /// A request held in the write mailbox ([`MAILBOX_HOLD_AT`]) is taken once the queue has
+    /// room again.
+    fn release_held_request(&mut self) {
+        if self.mbx_queue.len() >= MAILBOX_HOLD_AT {
+            return;
+        }
+        let held = (0..self.sm_count()).find_map(|n| {
+            self.active_sm(n)
+                .filter(|sm| sm.is_mailbox() && sm.ecat_writes() && sm.end() <= self.mem.len())
+                .map(|sm| (n, sm))
+        });
+        if let Some((n, sm)) = held {
+            if self.sm_full(n) {
+                self.consume_write_mailbox(n, &sm);
+            }
+        }
+    }
+
+    /// Queue messages for the read mailbox; beyond [`MAILBOX_QUEUE_MAX`] the oldest are dropped
+    /// and counted ([`Self::mailbox_dropped`]).
+    fn enqueue_mailbox(&mut self, msgs: impl IntoIterator<Item = Vec<u8>>) {
+        self.mbx_queue.extend(msgs);
+        while self.mbx_queue.len() > MAILBOX_QUEUE_MAX {
+            self.mbx_queue.pop_front();
+            self.mailbox_dropped += 1;
+            if self.mailbox_dropped.is_power_of_two() {
+                tracing::warn!(
+                    target: "fieldprobe::sim::esc",
+                    station = self.station_address(),
+                    "read mailbox queue full ({MAILBOX_QUEUE_MAX} messages unread): oldest dropped ({} so far)",
+                    self.mailbox_dropped
+                );
+            }
+        }
+        self.load_read_mailbox();
+    }
+
+    /// Messages waiting for the read mailbox behind the one in it (bounded by
+    /// [`MAILBOX_QUEUE_MAX`]).
+    pub fn mailbox_queue_len(&self) -> usize {
+        self.mbx_queue.len()
+    }
+
+    /// Device-initiated messages dropped because the read-mailbox queue was full.
+    pub fn mailbox_dropped(&self) -> u64 {
+        self.mailbox_dropped
+    }
+
+    /// Mailbox requests the device held in the write mailbox because its reply queue was full
+    /// (each refused further writes until the master read the read mailbox).
+    pub fn mailbox_held(&self) -> u64 {
+        self.mailbox_held
     }
 
     fn after_write(&mut self, start: usize, inc: &[u8], old_act: &[u8], now: u64) {
@@ -905,15 +985,13 @@ impl Esc {
             }
             if sm.is_mailbox() {
                 self.set_sm_full(n, true);
-                let msg = self.mem[sm.start..sm.end()].to_vec();
-                let reply = self.app.mailbox_received(&msg);
-                // The emulated PDI reads the mailbox at once.
-                self.set_sm_full(n, false);
-                if let Some(r) = reply {
-                    self.mbx_queue.push_back(r);
+                if self.mbx_queue.len() >= MAILBOX_HOLD_AT {
+                    // The firmware's reply buffer is taken: the request stays in the write
+                    // mailbox (SM0 full, further master writes refused) until the master reads.
+                    self.mailbox_held += 1;
+                    continue;
                 }
-                self.mbx_queue.extend(self.app.take_outgoing());
-                self.load_read_mailbox();
+                self.consume_write_mailbox(n, &sm);
             } else {
                 if sm.control & 0x40 != 0 {
                     self.last_output_ns = Some(now);
@@ -1075,7 +1153,9 @@ impl Esc {
         }
         if s == AlState::Init {
             self.mbx_queue.clear();
+            // A request held in SM0 goes with the mailbox session (the SMs are off in INIT).
             self.last_reply = None;
+            self.app.mailbox_reset();
         }
         self.update_sm_pdi_control();
         self.load_read_mailbox();

@@ -11,7 +11,7 @@
 //! ([`error`]). Read responses longer than the mailbox are fragmented (incomplete flag, the IDN
 //! field holding the fragments left; the fragments after the first wait in the outgoing
 //! queue, see [`SoeServer::take_outgoing`]); fragmented write requests are collected until the
-//! last fragment.
+//! last fragment, at most [`SOE_WRITE_MAX`] bytes.
 
 use std::collections::VecDeque;
 
@@ -38,6 +38,12 @@ pub mod error {
     /// 0x7008 — invalid data.
     pub const INVALID_DATA: u16 = 0x7008;
 }
+
+/// Longest write data collected from fragments (bytes): a SERCOS list element is at most
+/// 4 + 65,532 bytes (current and maximum length u16, then the data; IEC 61800-7-204), and no
+/// IDN of the emulated drives is longer than 8 bytes. A fragmented write that would exceed it
+/// is answered with the error 0x7003 "data transmitted too long" and dropped.
+pub const SOE_WRITE_MAX: usize = 65_536;
 
 /// Element flag: value.
 pub const ELEM_VALUE: u8 = 0x40;
@@ -167,6 +173,21 @@ impl SoeServer {
     /// The drive model, mutable.
     pub fn model_mut(&mut self) -> &mut dyn DriveModel {
         self.model.as_mut()
+    }
+
+    /// End of a mailbox session (the device entered INIT): the request repeat counter and the
+    /// device's own counter start again (ETG.1000.4 §5.6, a new master starts at counter 1), a
+    /// fragmented write in progress and queued read fragments are dropped.
+    pub fn reset_session(&mut self) {
+        self.counter = MailboxCounter::default();
+        self.last_request_counter = 0;
+        self.outgoing.clear();
+        self.write = None;
+    }
+
+    /// Bytes of a fragmented write collected so far (at most [`SOE_WRITE_MAX`]).
+    pub fn write_fragments_len(&self) -> usize {
+        self.write.as_ref().map_or(0, |w| w.data.len())
     }
 
     /// Add or replace an IDN entry.
@@ -307,6 +328,17 @@ impl SoeServer {
                         data: Vec::new(),
                     },
                 };
+                if frag.data.len() + data.len() > SOE_WRITE_MAX {
+                    // Beyond the longest SERCOS element: the transfer is refused and forgotten;
+                    // further fragments of it start a new one (and are refused the same way).
+                    return Some(self.error_reply(
+                        SoeOpcode::WriteResponse,
+                        frag.drive_no,
+                        frag.elements,
+                        frag.idn,
+                        error::DATA_TOO_LONG,
+                    ));
+                }
                 frag.data.extend_from_slice(data);
                 if h.incomplete {
                     // IDN field = fragments left; no answer until the last fragment.
@@ -392,5 +424,9 @@ pub fn map_abort(code: u32) -> u16 {
 impl EscApplication for SoeServer {
     fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
         self.handle(data)
+    }
+
+    fn mailbox_reset(&mut self) {
+        self.reset_session();
     }
 }
