@@ -467,9 +467,9 @@ fn eds_unknown_data_type_value_names_the_line_and_the_code() {
     let text = eds_with(obj, "1=0x2000\n", 1).replace("DT1000", "0x0007");
     let file = eds::parse(&text, "t.eds").unwrap();
     let def = fieldprobe::drive::catalogue::load("cia402-generic").unwrap();
-    let e = fieldprobe::sim::canopen::EmulatedNode::from_eds(5, &def, &file)
-        .err()
-        .expect("a value of data type 0x00FF cannot be stored");
+    let Err(e) = fieldprobe::sim::canopen::EmulatedNode::from_eds(5, &def, &file) else {
+        panic!("a value of data type 0x00FF cannot be stored");
+    };
     let line = text.lines().position(|l| l == "DefaultValue=5").unwrap() + 1;
     assert!(e.contains(&format!("line {line}")), "{e}");
     assert!(e.contains("data type 0x00ff (255)"), "{e}");
