@@ -23,8 +23,9 @@ const MIB: u64 = 1024 * 1024;
 /// 20 MB; hand-written programs are kilobytes.
 pub const MAX_NC_PROGRAM_BYTES: u64 = 32 * MIB;
 
-/// Most NC blocks in one program: 500,000. At ~0.3 KB per parsed block (see
-/// `benches/nc_parse.rs`) that is ~150 MB at most.
+/// Most NC blocks in one program: 500,000. A parsed program holds ~0.8 KB per block (measured
+/// by `benches/nc_parse.rs`: 788 bytes resident per block of ~31 source characters), so this is
+/// ~400 MB at most.
 pub const MAX_NC_BLOCKS: usize = 500_000;
 
 /// Largest machine file (TOML): 4 MiB. A 32-axis machine with every parameter set explicitly is
