@@ -20,6 +20,7 @@ pub mod channel;
 pub mod core;
 pub mod drive;
 pub mod esi;
+pub mod limits;
 pub mod link;
 pub mod machine;
 pub mod messages;

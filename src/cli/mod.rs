@@ -126,7 +126,9 @@ pub fn main() -> i32 {
 fn load_program(path: &std::path::Path) -> anyhow::Result<Option<fieldprobe::nc::ast::Program>> {
     use anyhow::Context;
     let file = path.display().to_string();
-    let src = std::fs::read_to_string(path).with_context(|| format!("cannot read {file}"))?;
+    let src =
+        fieldprobe::limits::read_text(path, "NC program", fieldprobe::limits::MAX_NC_PROGRAM_BYTES)
+            .with_context(|| format!("cannot read {file}"))?;
     match fieldprobe::nc::parser::parse(&src) {
         Ok(p) => Ok(Some(p)),
         Err(e) => {

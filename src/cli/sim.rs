@@ -64,6 +64,7 @@ use fieldprobe::bus::can::{CanBus, CanError};
 use fieldprobe::bus::canopen::eds;
 use fieldprobe::drive::catalogue;
 use fieldprobe::esi::{self, sii, to_sii, Device, EsiFile, SmKind};
+use fieldprobe::limits::MAX_SEGMENT_DEVICES;
 use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
     device::{emulated_servo, DEFAULT_CYCLE},
@@ -148,6 +149,11 @@ fn split_count(spec: &str) -> anyhow::Result<(PathBuf, usize)> {
                 .parse()
                 .with_context(|| format!("--device {spec}: bad count {n:?}"))?;
             anyhow::ensure!(count >= 1, "--device {spec}: count must be at least 1");
+            anyhow::ensure!(
+                count <= MAX_SEGMENT_DEVICES,
+                "--device {spec}: count {count} is above the limit of {MAX_SEGMENT_DEVICES} \
+                 devices per emulated segment (docs/limits.md)"
+            );
             return Ok((PathBuf::from(file), count));
         }
     }
@@ -282,6 +288,12 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
     let mut hosted: Vec<(usize, Hosted)> = Vec::new();
     for spec in &a.devices {
         let (path, count) = split_count(spec)?;
+        anyhow::ensure!(
+            escs.len() + count <= MAX_SEGMENT_DEVICES,
+            "--device {spec}: the segment would have {} devices, above the limit of \
+             {MAX_SEGMENT_DEVICES} devices per emulated segment (docs/limits.md)",
+            escs.len() + count
+        );
         let file = esi::load(&path).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
         for _ in 0..count {
             let pos = escs.len();

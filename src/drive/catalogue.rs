@@ -52,6 +52,7 @@ use super::pdo::{self, DataType, PdoLayout};
 use super::DriveError;
 use crate::units::Scaling;
 use std::ops::Range;
+use std::path::Path;
 use toml_edit::{ImDocument, Item, TableLike, Value};
 
 /// Drive profile family: which adapter and drive model play the drive.
@@ -444,7 +445,12 @@ pub fn load(name_or_path: &str) -> Result<DriveDefinition, DriveError> {
     if let Some(def) = builtin(name_or_path) {
         return Ok(def);
     }
-    let text = std::fs::read_to_string(name_or_path).map_err(|e| DriveError::Definition {
+    let text = crate::limits::read_text(
+        Path::new(name_or_path),
+        "drive definition file",
+        crate::limits::MAX_DRIVE_FILE_BYTES,
+    )
+    .map_err(|e| DriveError::Definition {
         file: name_or_path.to_string(),
         line: 0,
         message: format!(

@@ -51,6 +51,11 @@ pub enum Problem {
     /// Element text is not hexBinary (pairs of hex digits).
     #[error("not hex bytes: {0:?}")]
     BadHexBinary(String),
+    /// Sync managers whose memory areas overlap or extend beyond the 64 KiB ESC address space
+    /// (ETG.1000.4: each sync manager owns its own area of ESC memory); such a device never
+    /// answers on the emulated bus. The text names both sync managers or the end address.
+    #[error("{0}")]
+    SyncManagerLayout(String),
     /// The document is well-formed XML but not something this parser supports.
     #[error("unsupported: {0}")]
     Unsupported(String),
@@ -88,6 +93,19 @@ pub enum EsiError {
         /// The XML parser's message.
         message: String,
     },
+    /// The file is above one of the limits of [`crate::limits`] (checked before the XML
+    /// parser runs).
+    #[error("{file}:{line}:{column}: {message}")]
+    Limit {
+        /// File name.
+        file: String,
+        /// 1-based line.
+        line: u32,
+        /// 1-based column.
+        column: u32,
+        /// Which limit, and its value.
+        message: String,
+    },
     /// Well-formed XML that is not a valid / supported ESI description.
     #[error("{file}:{line}:{column}: {path}: {problem}")]
     Invalid {
@@ -108,7 +126,9 @@ impl EsiError {
     /// The 1-based line the error points at, if it has one.
     pub fn line(&self) -> Option<u32> {
         match self {
-            EsiError::Xml { line, .. } | EsiError::Invalid { line, .. } => Some(*line),
+            EsiError::Xml { line, .. }
+            | EsiError::Limit { line, .. }
+            | EsiError::Invalid { line, .. } => Some(*line),
             _ => None,
         }
     }
@@ -130,6 +150,19 @@ pub fn parse(text: &str, file: &str) -> Result<EsiFile, EsiError> {
         allow_dtd: false,
         ..Default::default()
     };
+    let max = crate::limits::MAX_ESI_ATTRIBUTES_PER_ELEMENT;
+    if let Some((offset, name)) = parse::too_many_attributes(text, max) {
+        let (line, column) = end_position(&text[..offset]);
+        return Err(EsiError::Limit {
+            file: file.to_string(),
+            line,
+            column,
+            message: format!(
+                "element <{name}> has more than {max} attributes, the limit of an ESI element \
+                 (docs/limits.md)"
+            ),
+        });
+    }
     let doc = roxmltree::Document::parse_with_options(text, opts).map_err(|e| {
         let (line, column, message) = match e {
             // roxmltree reports these at 1:1; a truncated file is better named by its end and
@@ -192,9 +225,10 @@ pub fn parse_bytes(bytes: &[u8], file: &str) -> Result<EsiFile, EsiError> {
 pub fn load(path: impl AsRef<Path>) -> Result<EsiFile, EsiError> {
     let path = path.as_ref();
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| EsiError::Io {
-        file: file.clone(),
-        source,
-    })?;
+    let bytes = crate::limits::read_file(path, "ESI file", crate::limits::MAX_ESI_FILE_BYTES)
+        .map_err(|source| EsiError::Io {
+            file: file.clone(),
+            source,
+        })?;
     parse_bytes(&bytes, &file)
 }

@@ -89,6 +89,29 @@ pub fn expression_lines(src: &str) -> Result<Vec<LogicalLine>, ParseError> {
 
 fn split(src: &str, base_depth: usize) -> Result<Vec<LogicalLine>, ParseError> {
     let mut out = Vec::new();
+    split_each(src, base_depth, &mut |line| {
+        out.push(line);
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// [`logical_lines`] one line at a time: `each` gets every logical line in order, as soon as it
+/// is complete, so a caller that parses as it goes never holds the character vectors of the
+/// whole program (12 bytes per source character). Stops at the first error of `each` or of the
+/// lexer.
+pub fn for_each_logical_line(
+    src: &str,
+    each: &mut dyn FnMut(LogicalLine) -> Result<(), ParseError>,
+) -> Result<(), ParseError> {
+    split_each(src, 0, each)
+}
+
+fn split_each(
+    src: &str,
+    base_depth: usize,
+    out: &mut dyn FnMut(LogicalLine) -> Result<(), ParseError>,
+) -> Result<(), ParseError> {
     let mut cur: Vec<LChar> = Vec::new();
     let mut cur_end = Span { line: 1, col: 1 };
     let mut depth: usize = base_depth;
@@ -209,15 +232,18 @@ fn split(src: &str, base_depth: usize) -> Result<Vec<LogicalLine>, ParseError> {
         }
         cur_end = at(chars.len());
         if !continued {
-            flush(&mut cur, cur_end, &mut out);
+            flush(&mut cur, cur_end, out)?;
             depth = base_depth;
         }
     }
-    flush(&mut cur, cur_end, &mut out);
-    Ok(out)
+    flush(&mut cur, cur_end, out)
 }
 
-fn flush(cur: &mut Vec<LChar>, end: Span, out: &mut Vec<LogicalLine>) {
+fn flush(
+    cur: &mut Vec<LChar>,
+    end: Span,
+    out: &mut dyn FnMut(LogicalLine) -> Result<(), ParseError>,
+) -> Result<(), ParseError> {
     let mut chars = std::mem::take(cur);
     while chars.last().is_some_and(|c| c.ch == ' ') {
         chars.pop();
@@ -227,9 +253,10 @@ fn flush(cur: &mut Vec<LChar>, end: Span, out: &mut Vec<LogicalLine>) {
         .position(|c| c.ch != ' ')
         .unwrap_or(chars.len());
     chars.drain(..first);
-    if !chars.is_empty() {
-        out.push(LogicalLine { chars, end });
+    if chars.is_empty() {
+        return Ok(());
     }
+    out(LogicalLine { chars, end })
 }
 
 /// An expression-level token (see [`Cursor::next_token`]).

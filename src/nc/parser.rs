@@ -68,7 +68,8 @@ mod commands;
 
 use super::ast::{BinOp, Block, Expr, IndependentMotion, Item, Program, Span};
 use super::expr::{function_arity, FUNCTIONS, MAX_EXPR_HEIGHT};
-use super::lexer::{expression_lines, logical_lines, Cursor, LogicalLine, TokenKind};
+use super::lexer::{self, expression_lines, Cursor, LogicalLine, TokenKind};
+use crate::limits::MAX_NC_BLOCKS;
 
 /// Deepest bracket / function / unary-sign nesting accepted in one expression.
 pub const MAX_NESTING: usize = 64;
@@ -113,31 +114,65 @@ const PERCENT_MISPLACED: &str =
 ///
 /// Never panics; every error names line, column and what was expected.
 pub fn parse(src: &str) -> Result<Program, ParseError> {
-    let lines = logical_lines(src)?;
     let mut program = Program::default();
-    let mut k = 0;
-    while k < lines.len() {
-        let line = &lines[k];
-        if let Some((first, rest)) = line.chars.split_first().filter(|(c, _)| c.ch == '%') {
-            if k != 0 {
-                return Err(ParseError::at(first.span, PERCENT_MISPLACED));
+    // Lines are parsed as the lexer completes them, with one line of lookahead (a following
+    // line that starts with '[' may supply the bracket of a `#` command that ends this line —
+    // module documentation, leniencies). `index` counts logical lines taken so far.
+    let mut pending: Option<LogicalLine> = None;
+    let mut index = 0usize;
+    lexer::for_each_logical_line(src, &mut |line| {
+        match pending.take() {
+            None => pending = Some(line),
+            Some(prev) => {
+                let next = Some(&line).filter(|l| l.chars.first().is_some_and(|c| c.ch == '['));
+                let used_next = take_line(&mut program, &prev, next, index)?;
+                index += 1;
+                if used_next {
+                    index += 1;
+                } else {
+                    pending = Some(line);
+                }
             }
-            let name: String = rest.iter().map(|c| c.ch).collect();
-            let name = name.trim();
-            program.name = (!name.is_empty()).then(|| name.to_string());
-            k += 1;
-            continue;
         }
-        // A following line that starts with '[' may supply the bracket of a `#` command that
-        // ends this line (module documentation, leniencies).
-        let next = lines
-            .get(k + 1)
-            .filter(|l| l.chars.first().is_some_and(|c| c.ch == '['));
-        let (block, used_next) = parse_block(line, next)?;
-        program.blocks.push(block);
-        k += if used_next { 2 } else { 1 };
+        Ok(())
+    })?;
+    if let Some(last) = pending {
+        take_line(&mut program, &last, None, index)?;
     }
+    program.blocks.shrink_to_fit();
     Ok(program)
+}
+
+/// Take logical line number `index` (0-based) into `program`: the `%name` line or one block.
+/// Returns whether `next` was used. Refuses a program of more than [`MAX_NC_BLOCKS`] blocks.
+fn take_line(
+    program: &mut Program,
+    line: &LogicalLine,
+    next: Option<&LogicalLine>,
+    index: usize,
+) -> PResult<bool> {
+    if let Some((first, rest)) = line.chars.split_first().filter(|(c, _)| c.ch == '%') {
+        if index != 0 {
+            return Err(ParseError::at(first.span, PERCENT_MISPLACED));
+        }
+        let name: String = rest.iter().map(|c| c.ch).collect();
+        let name = name.trim();
+        program.name = (!name.is_empty()).then(|| name.to_string());
+        return Ok(false);
+    }
+    if program.blocks.len() >= MAX_NC_BLOCKS {
+        return Err(ParseError::at(
+            line.start(),
+            format!(
+                "the program has more than {MAX_NC_BLOCKS} blocks, the limit of an NC program \
+                 (split it into several programs; see docs/limits.md)"
+            ),
+        ));
+    }
+    let (mut block, used_next) = parse_block(line, next)?;
+    block.items.shrink_to_fit();
+    program.blocks.push(block);
+    Ok(used_next)
 }
 
 /// Parse a single expression as written inside `[ ]`, e.g. `"V.A.ABS.X - 5 * 2"` (so `( )`

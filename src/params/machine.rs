@@ -153,6 +153,7 @@ impl MachineConfig {
                     if name == "channel" {
                         cfg.parse_channel(&ctx, &leaves)?;
                     } else {
+                        check_duplicate_params(&leaves, &ctx, "[manual]", &["list"])?;
                         for leaf in leaves.iter().filter(|l| l.key == "list") {
                             apply_list_leaf(&mut cfg.manual, leaf, &ctx)?;
                         }
@@ -196,10 +197,12 @@ impl MachineConfig {
     /// Read and parse a machine file. A read error names the file.
     pub fn load(path: &Path) -> Result<Self, ParamError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ParamError::Io {
-            file: file.clone(),
-            message: e.to_string(),
-        })?;
+        let text =
+            crate::limits::read_text(path, "machine file", crate::limits::MAX_MACHINE_FILE_BYTES)
+                .map_err(|e| ParamError::Io {
+                file: file.clone(),
+                message: e.to_string(),
+            })?;
         Self::parse(&text, &file)
     }
 
@@ -511,6 +514,17 @@ impl MachineConfig {
     }
 
     fn parse_channel(&mut self, ctx: &Ctx<'_>, leaves: &[Leaf<'_>]) -> Result<(), ParamError> {
+        check_duplicate_params(
+            leaves,
+            ctx,
+            "[channel]",
+            &[
+                "cycle_time_us",
+                "in_position_timeout_ms",
+                "max_lost_cycles",
+                "list",
+            ],
+        )?;
         for leaf in leaves.iter().filter(|l| l.key == "list") {
             apply_list_leaf(&mut self.channel, leaf, ctx)?;
         }
@@ -574,6 +588,15 @@ impl MachineConfig {
         let mut dead_time_cycles = None;
         let mut in_position_window = DEFAULT_IN_POSITION_WINDOW;
         let mut params = ParamSet::new(Scope::Axis);
+        let label = leaves
+            .iter()
+            .find(|l| l.key == "name")
+            .and_then(|l| l.value.as_str())
+            .map_or_else(
+                || format!("[[axis]] at line {header}"),
+                |n| format!("axis {n}"),
+            );
+        check_duplicate_params(&leaves, ctx, &label, AXIS_PROJECT_KEYS)?;
         for leaf in leaves.iter().filter(|l| l.key == "list") {
             apply_list_leaf(&mut params, leaf, ctx)?;
         }
@@ -834,11 +857,45 @@ fn apply_list_leaf(set: &mut ParamSet, leaf: &Leaf<'_>, ctx: &Ctx<'_>) -> Result
         .parent()
         .unwrap_or(std::path::Path::new(""));
     let path = base.join(rel);
-    let text = std::fs::read_to_string(&path).map_err(|e| ParamError::Config {
+    let text = crate::limits::read_text(
+        &path,
+        "parameter list file",
+        crate::limits::MAX_LIST_FILE_BYTES,
+    )
+    .map_err(|e| ParamError::Config {
         origin: origin.clone(),
         message: format!("list = \"{rel}\": cannot read {}: {e}", path.display()),
     })?;
     crate::params::listfile::apply_list(set, &text, &path.display().to_string())
+}
+
+/// One parameter set twice in one table through different keys (its ID and its name path, or
+/// `[0]` and `[i]`): TOML itself refuses a repeated key, but both spellings would otherwise
+/// reach the same parameter and the later one would silently win.
+fn check_duplicate_params(
+    leaves: &[Leaf<'_>],
+    ctx: &Ctx<'_>,
+    table: &str,
+    project_keys: &[&str],
+) -> Result<(), ParamError> {
+    let mut seen: std::collections::HashMap<&str, &Leaf<'_>> = std::collections::HashMap::new();
+    for leaf in leaves
+        .iter()
+        .filter(|l| !project_keys.contains(&l.key.as_str()))
+    {
+        let Some(def) = find(&leaf.key) else { continue };
+        if let Some(first) = seen.insert(def.id, leaf) {
+            return Err(ParamError::Config {
+                origin: ctx.at(leaf.line),
+                message: format!(
+                    "{table}: parameter {} ({}) is set twice, as '{}' (line {}) and as '{}' \
+                     (line {}); keep one",
+                    def.id, def.path, first.key, first.line, leaf.key, leaf.line
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn set_leaf(

@@ -1425,15 +1425,16 @@ pub fn load(path: impl AsRef<Path>) -> Result<Eds, EdsError> {
 pub fn load_with(path: impl AsRef<Path>, options: ParseOptions) -> Result<Eds, EdsError> {
     let path = path.as_ref();
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| EdsError {
-        file: file.clone(),
-        line: None,
-        column: None,
-        section: None,
-        key: None,
-        kind: EdsErrorKind::Io,
-        message: e.to_string(),
-    })?;
+    let bytes = crate::limits::read_file(path, "EDS file", crate::limits::MAX_EDS_FILE_BYTES)
+        .map_err(|e| EdsError {
+            file: file.clone(),
+            line: None,
+            column: None,
+            section: None,
+            key: None,
+            kind: EdsErrorKind::Io,
+            message: e.to_string(),
+        })?;
     let text = match String::from_utf8(bytes) {
         Ok(s) => s,
         Err(e) => e.into_bytes().iter().map(|&b| char::from(b)).collect(),
@@ -1972,6 +1973,14 @@ fn check_value(p: &Parser, s: &Section, k: &Key, data_type: DataType) -> Result<
     Ok(())
 }
 
+/// Communication objects whose data type CiA 301 fixes (§7.5.2): a master and the emulated
+/// node read them with that type, so an EDS declaring another type is refused.
+const FIXED_TYPES: &[(u16, u8, DataType, &str)] = &[
+    (0x1000, 0, DataType::Unsigned32, "device type"),
+    (0x1001, 0, DataType::Unsigned8, "error register"),
+    (0x1017, 0, DataType::Unsigned16, "producer heartbeat time"),
+];
+
 /// Builds the entry of a VAR section, a sub-index section or (with `compact_name`) a compact sub.
 fn entry(
     p: &Parser,
@@ -2017,6 +2026,30 @@ fn entry(
             ));
         }
     };
+    if let Some(&(_, _, expected, what)) = FIXED_TYPES
+        .iter()
+        .find(|(i, j, _, _)| (*i, *j) == (index, sub))
+    {
+        if data_type != expected {
+            let found = format!("{:#06x} ({data_type:?})", data_type.code());
+            let message = format!(
+                "object {index:#06x}:{sub:02x} ({what}) must have data type {:#06x} \
+                 ({expected:?}, CiA 301), found {found}",
+                expected.code()
+            );
+            return Err(match s.get("DataType") {
+                Some(k) => p.key_err(EdsErrorKind::BadValue, s, k, message),
+                None => p.err(
+                    EdsErrorKind::BadValue,
+                    Some(s.line),
+                    Some(s.name),
+                    Some("DataType"),
+                    None,
+                    message,
+                ),
+            });
+        }
+    }
     let access = match s.get("AccessType") {
         Some(k) => AccessType::parse(k.value).ok_or_else(|| {
             p.key_err(

@@ -527,7 +527,11 @@ pub struct OwnedRecord {
 
 /// Read every record of a capture file.
 pub fn read_file(path: impl AsRef<Path>) -> Result<Vec<OwnedRecord>, PcapError> {
-    let bytes = std::fs::read(path)?;
+    let bytes = crate::limits::read_file(
+        path.as_ref(),
+        "capture file",
+        crate::limits::MAX_CAPTURE_FILE_BYTES,
+    )?;
     CaptureReader::new(&bytes)?
         .map(|r| {
             r.map(|r| OwnedRecord {

@@ -276,10 +276,20 @@ fn eds_object(e: &eds::Entry, node: u8) -> Result<(ObjectEntry, Option<usize>), 
     let given = e.parameter_value.as_ref().or(e.default.as_ref());
     let value = match given {
         None => None,
-        Some(text) => Some(
-            e.value_bytes(node)
-                .ok_or_else(|| format!("value {:?} is not a valid {:?}", text.raw, e.data_type))?,
-        ),
+        Some(text) => Some(e.value_bytes(node).ok_or_else(|| match e.data_type {
+            T::Other(code) => format!(
+                "line {}: value {:?} of data type {code:#06x} ({code}): the emulated node \
+                 stores no complex or manufacturer-specific data type (CiA 301 codes \
+                 0x0020..=0x0023, 0x0040..=0x025F); use a basic type (0x0001..=0x001B)",
+                text.line, text.raw
+            ),
+            t => format!(
+                "line {}: value {:?} is not a valid {t:?} (data type {:#06x})",
+                text.line,
+                text.raw,
+                t.code()
+            ),
+        })?),
     };
     let numeric = match e.data_type {
         T::Boolean => Some(DataType::Bool),
@@ -411,8 +421,8 @@ impl EmulatedNode {
             }
             let (entry, fixed) = eds_object(e, id).map_err(|why| {
                 format!(
-                    "EDS {}: object {index:#06x}:{sub:02x} ({}): {why}",
-                    eds.file, e.parameter_name
+                    "EDS {}: object {index:#06x}:{sub:02x} ({}, section at line {}): {why}",
+                    eds.file, e.parameter_name, e.line
                 )
             })?;
             if let Some(n) = fixed {

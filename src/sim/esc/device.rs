@@ -56,6 +56,42 @@ use crate::units::Nanos;
 /// Cycle time [`emulated_servo`] uses for the model's `now`/`dt` (1 ms).
 pub const DEFAULT_CYCLE: Duration = Duration::from_millis(1);
 
+/// Smallest mailbox sync manager an emulated drive accepts: the 6-byte mailbox header, the
+/// 2-byte CoE header and an 8-byte SDO (ETG.1000.6 §5.6.2, the smallest SDO request).
+pub const MIN_MAILBOX_SIZE: u16 = 16;
+
+/// Largest mailbox sync manager: the data of one datagram in a maximum-size Ethernet frame
+/// (1500 − 2 frame header − 10 datagram header − 2 working counter, ETG.1000.4 §5.4); a master
+/// reads a mailbox in one datagram.
+pub const MAX_MAILBOX_SIZE: u16 = 1486;
+
+/// Why a device needing a mailbox has none usable: a mailbox sync manager with a missing or
+/// impossible size (named), or no mailbox sync managers at all.
+fn mailbox_error(device: &Device) -> ServoError {
+    use crate::esi::SmKind;
+    let bad = device
+        .sync_managers
+        .iter()
+        .enumerate()
+        .filter_map(|(i, sm)| match sm.kind {
+            SmKind::MBoxOut => Some((i, "MBoxOut", sm.default_size)),
+            SmKind::MBoxIn => Some((i, "MBoxIn", sm.default_size)),
+            _ => None,
+        })
+        .find(|(_, _, size)| {
+            !size.is_some_and(|n| (MIN_MAILBOX_SIZE..=MAX_MAILBOX_SIZE).contains(&n))
+        });
+    match bad {
+        Some((sm, kind, size)) => ServoError::MailboxSize {
+            device: device.type_name.clone(),
+            sm,
+            kind,
+            size,
+        },
+        None => ServoError::NoMailbox(device.type_name.clone()),
+    }
+}
+
 /// CiA 402 controlword *quick stop* (bit 1 set, bit 2 clear), the outputs' safe state.
 const CONTROLWORD_QUICK_STOP: u16 = 0x0002;
 
@@ -66,8 +102,25 @@ pub enum ServoError {
     #[error("SII image of the ESI device: {0}")]
     Sii(#[from] SiiError),
     /// The ESI device has no standard mailbox (no CoE possible).
-    #[error("ESI device {0} has no mailbox")]
+    #[error("ESI device {0} has no mailbox (no MBoxOut / MBoxIn sync managers)")]
     NoMailbox(String),
+    /// A mailbox sync manager's `DefaultSize` is missing or outside
+    /// [`MIN_MAILBOX_SIZE`]..=[`MAX_MAILBOX_SIZE`].
+    #[error(
+        "ESI device {device}: mailbox sync manager SM{sm} ({kind}) has {}; a mailbox sync \
+         manager needs a DefaultSize of {MIN_MAILBOX_SIZE}..={MAX_MAILBOX_SIZE} bytes",
+        size.map_or("no DefaultSize".to_string(), |n| format!("DefaultSize {n}"))
+    )]
+    MailboxSize {
+        /// Device type name.
+        device: String,
+        /// Sync manager index.
+        sm: usize,
+        /// `MBoxOut` or `MBoxIn`.
+        kind: &'static str,
+        /// The size found.
+        size: Option<u16>,
+    },
     /// The drive definition's PDO layout differs from the ESI mapping.
     #[error("{direction} PDO layout of drive '{drive}' differs from the ESI mapping: drive {drive_entries:x?} ({drive_bytes} bytes), ESI {esi_entries:x?} ({esi_bits} bits)")]
     PdoMismatch {
@@ -485,9 +538,12 @@ pub fn emulated_drive(
     let cfg = EscConfig::from_sii(sii::encode_padded(&content)?);
     let terminal = def.profile == crate::drive::catalogue::Profile::Terminal;
     let mbx = match cfg.mailbox {
+        Some(_) if !terminal && matches!(mailbox_error(device), ServoError::MailboxSize { .. }) => {
+            return Err(mailbox_error(device))
+        }
         Some(m) => Some(m),
         None if terminal => None,
-        None => return Err(ServoError::NoMailbox(device.type_name.clone())),
+        None => return Err(mailbox_error(device)),
     };
 
     let rx_pdos = assigned(&device.rx_pdos, cfg.output_sm);
