@@ -430,6 +430,14 @@ impl Machine {
         self.link.finish_cycle_log()
     }
 
+    /// Flush the frame capture (`--pcap`, `--candump`) after the run ([`Link::finish_capture`]).
+    ///
+    /// # Errors
+    /// The first write to it that failed, naming the option and the file.
+    pub fn finish_capture(&mut self) -> Result<(), String> {
+        self.link.finish_capture()
+    }
+
     /// The channel, mutable (manual mode, reset, referencing).
     pub fn channel_mut(&mut self) -> &mut Channel {
         &mut self.channel
