@@ -239,7 +239,18 @@ impl std::fmt::Debug for Machine {
     }
 }
 
-/// A recorded run: positions per cycle, probe edges and latched values (for `--trace`).
+/// Most position samples a [`Trace`] holds: beyond, it keeps every second sample and records
+/// every second cycle from then on, so a long run (a slow move of hours) costs at most this
+/// many samples in memory and in the picture (a `--trace` SVG of a few MB), the whole run
+/// still drawn. 10,000 is eight times the width of the picture in pixels.
+pub const MAX_TRACE_SAMPLES: usize = 10_000;
+
+/// Most probe edges and latched values a [`Trace`] holds; later ones are counted in
+/// [`Trace::dropped_marks`] (the CLI says so) instead of growing the trace without bound.
+pub const MAX_TRACE_MARKS: usize = 10_000;
+
+/// A recorded run: positions per cycle (decimated beyond [`MAX_TRACE_SAMPLES`]), probe edges
+/// and latched values (for `--trace`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Trace {
     /// Axis names.
@@ -255,6 +266,67 @@ pub struct Trace {
     /// Latched values that became measurement results: (time s, axis, position). An axis that
     /// was not in a measurement, or whose latch belongs to an incomplete probing signal, has none.
     pub latches: Vec<(f64, usize, f64)>,
+    /// One sample is kept every `stride` cycles (1 until the trace first reached
+    /// [`MAX_TRACE_SAMPLES`], then doubled each time).
+    pub stride: u64,
+    /// Edges and latches beyond [`MAX_TRACE_MARKS`], not kept.
+    pub dropped_marks: u64,
+    /// Cycles offered since the start.
+    cycles: u64,
+}
+
+impl Trace {
+    /// Offer the sample of one cycle; kept every [`stride`](Self::stride) cycles.
+    fn push_sample(&mut self, t: f64, axes: &[crate::axis::Axis]) {
+        let stride = self.stride.max(1);
+        let keep = self.cycles % stride == 0;
+        self.cycles += 1;
+        if !keep {
+            return;
+        }
+        if self.t.len() >= MAX_TRACE_SAMPLES {
+            // Keep samples 0, 2, 4, … (each a multiple of the doubled stride) and go on with it.
+            let halve = |v: &mut Vec<f64>| {
+                let mut k = 0;
+                v.retain(|_| {
+                    k += 1;
+                    k % 2 == 1
+                });
+            };
+            halve(&mut self.t);
+            self.command.iter_mut().for_each(halve);
+            self.actual.iter_mut().for_each(halve);
+            self.stride = stride * 2;
+            if (self.cycles - 1) % self.stride != 0 {
+                return;
+            }
+        }
+        self.t.push(t);
+        for (i, a) in axes.iter().enumerate() {
+            if let Some(c) = self.command.get_mut(i) {
+                c.push(a.command());
+            }
+            if let Some(c) = self.actual.get_mut(i) {
+                c.push(a.actual());
+            }
+        }
+    }
+
+    fn push_edge(&mut self, at: f64, rising: bool) {
+        if self.edges.len() < MAX_TRACE_MARKS {
+            self.edges.push((at, rising));
+        } else {
+            self.dropped_marks += 1;
+        }
+    }
+
+    fn push_latch(&mut self, at: f64, axis: usize, p: f64) {
+        if self.latches.len() < MAX_TRACE_MARKS {
+            self.latches.push((at, axis, p));
+        } else {
+            self.dropped_marks += 1;
+        }
+    }
 }
 
 impl Machine {
@@ -536,6 +608,7 @@ impl Machine {
             axes,
             command: vec![Vec::new(); n],
             actual: vec![Vec::new(); n],
+            stride: 1,
             ..Trace::default()
         });
         self.channel.record_latches(true);
@@ -607,18 +680,14 @@ impl Machine {
             self.channel.drive_emergency(e.device, e.code, e.text);
         }
         if let Some(tr) = self.trace.as_mut() {
-            tr.t.push(self.now.as_secs_f64());
-            for (i, a) in self.channel.axes().iter().enumerate() {
-                tr.command[i].push(a.command());
-                tr.actual[i].push(a.actual());
-            }
+            tr.push_sample(self.now.as_secs_f64(), self.channel.axes());
             if let Some(plant) = self.link.plant() {
                 for e in plant.last_edges() {
-                    tr.edges.push((e.at.as_secs_f64(), e.rising));
+                    tr.push_edge(e.at.as_secs_f64(), e.rising);
                 }
             }
             for (t, axis, p) in self.channel.take_latch_log() {
-                tr.latches.push((t.as_secs_f64(), axis, p));
+                tr.push_latch(t.as_secs_f64(), axis, p);
             }
         }
         // Acyclic requests (#DRIVE, #IDENT) go over the link's mailbox.

@@ -175,15 +175,7 @@ pub fn cap_echo(text: &str) -> std::borrow::Cow<'_, str> {
     std::borrow::Cow::Owned(out)
 }
 
-/// A number given by a user, for a message: as written for ordinary magnitudes, in exponent
-/// form beyond (so `1e300` does not become 301 digits).
-pub fn show_number(v: f64) -> String {
-    if v.is_finite() && v != 0.0 && !(1e-6..1e15).contains(&v.abs()) {
-        format!("{v:e}")
-    } else {
-        format!("{v}")
-    }
-}
+pub use fieldprobe::messages::show_number;
 
 /// Longest time a `--seconds` option takes: about 31.7 years, far beyond any test or
 /// commissioning session, and far inside what `Instant` and `Duration` hold.

@@ -135,6 +135,23 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         anyhow::bail!("--cycle-log {e}");
     }
     if let (Some(path), Some(format), Some(tr)) = (&a.trace, trace_format, machine.trace()) {
+        if tr.stride > 1 {
+            eprintln!(
+                "fieldprobe: --trace {}: {} cycles drawn with one sample every {} cycles ({} samples at most)",
+                path.display(),
+                report.cycles,
+                tr.stride,
+                fieldprobe::machine::MAX_TRACE_SAMPLES
+            );
+        }
+        if tr.dropped_marks > 0 {
+            eprintln!(
+                "fieldprobe: --trace {}: {} probe edges / latches beyond the first {} not drawn",
+                path.display(),
+                tr.dropped_marks,
+                fieldprobe::machine::MAX_TRACE_MARKS
+            );
+        }
         super::trace::write(tr, path, format)
             .with_context(|| format!("--trace {}", path.display()))?;
     }
