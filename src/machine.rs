@@ -279,7 +279,7 @@ impl Trace {
     /// Offer the sample of one cycle; kept every [`stride`](Self::stride) cycles.
     fn push_sample(&mut self, t: f64, axes: &[crate::axis::Axis]) {
         let stride = self.stride.max(1);
-        let keep = self.cycles % stride == 0;
+        let keep = self.cycles.is_multiple_of(stride);
         self.cycles += 1;
         if !keep {
             return;
@@ -287,17 +287,17 @@ impl Trace {
         if self.t.len() >= MAX_TRACE_SAMPLES {
             // Keep samples 0, 2, 4, … (each a multiple of the doubled stride) and go on with it.
             let halve = |v: &mut Vec<f64>| {
-                let mut k = 0;
+                let mut k: usize = 0;
                 v.retain(|_| {
                     k += 1;
-                    k % 2 == 1
+                    !k.is_multiple_of(2)
                 });
             };
             halve(&mut self.t);
             self.command.iter_mut().for_each(halve);
             self.actual.iter_mut().for_each(halve);
             self.stride = stride * 2;
-            if (self.cycles - 1) % self.stride != 0 {
+            if !(self.cycles - 1).is_multiple_of(self.stride) {
                 return;
             }
         }

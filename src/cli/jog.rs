@@ -60,7 +60,7 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
     // input, refused before the machine starts; a step inside this bound but beyond the
     // permitted range is the CNC's warning 150008.
     if let Some(d) = a.step {
-        if !(d.abs() <= MAX_STEP) {
+        if !(-MAX_STEP..=MAX_STEP).contains(&d) {
             anyhow::bail!(
                 "jog: --step {}: expected a distance in mm in -{} … {}",
                 super::show_number(d),
