@@ -273,6 +273,8 @@ pub struct Trace {
     pub dropped_marks: u64,
     /// Cycles offered since the start.
     cycles: u64,
+    /// Most samples kept ([`MAX_TRACE_SAMPLES`] unless [`Machine::enable_trace_with_limit`]).
+    limit: usize,
 }
 
 impl Trace {
@@ -284,7 +286,7 @@ impl Trace {
         if !keep {
             return;
         }
-        if self.t.len() >= MAX_TRACE_SAMPLES {
+        if self.t.len() >= self.limit.max(2) {
             // Keep samples 0, 2, 4, … (each a multiple of the doubled stride) and go on with it.
             let halve = |v: &mut Vec<f64>| {
                 let mut k: usize = 0;
@@ -595,8 +597,16 @@ impl Machine {
         Ok(())
     }
 
-    /// Start recording a [`Trace`] (every cycle from now on).
+    /// Start recording a [`Trace`]: every cycle from now on until [`MAX_TRACE_SAMPLES`] samples,
+    /// then decimated (see there), so a trace of any run stays bounded.
     pub fn enable_trace(&mut self) {
+        self.enable_trace_with_limit(MAX_TRACE_SAMPLES);
+    }
+
+    /// [`enable_trace`](Self::enable_trace) keeping up to `limit` samples before it
+    /// decimates (at least 2): for tests that look at every cycle of a run longer than
+    /// [`MAX_TRACE_SAMPLES`] cycles. Memory: 8 bytes × (1 + 2 × axes) per sample.
+    pub fn enable_trace_with_limit(&mut self, limit: usize) {
         let axes: Vec<String> = self
             .channel
             .axes()
@@ -609,6 +619,7 @@ impl Machine {
             command: vec![Vec::new(); n],
             actual: vec![Vec::new(); n],
             stride: 1,
+            limit,
             ..Trace::default()
         });
         self.channel.record_latches(true);
