@@ -239,7 +239,18 @@ impl std::fmt::Debug for Machine {
     }
 }
 
-/// A recorded run: positions per cycle, probe edges and latched values (for `--trace`).
+/// Most position samples a [`Trace`] holds: beyond, it keeps every second sample and records
+/// every second cycle from then on, so a long run (a slow move of hours) costs at most this
+/// many samples in memory and in the picture (a `--trace` SVG of a few MB), the whole run
+/// still drawn. 10,000 is eight times the width of the picture in pixels.
+pub const MAX_TRACE_SAMPLES: usize = 10_000;
+
+/// Most probe edges and latched values a [`Trace`] holds; later ones are counted in
+/// [`Trace::dropped_marks`] (the CLI says so) instead of growing the trace without bound.
+pub const MAX_TRACE_MARKS: usize = 10_000;
+
+/// A recorded run: positions per cycle (decimated beyond [`MAX_TRACE_SAMPLES`]), probe edges
+/// and latched values (for `--trace`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Trace {
     /// Axis names.
@@ -255,6 +266,69 @@ pub struct Trace {
     /// Latched values that became measurement results: (time s, axis, position). An axis that
     /// was not in a measurement, or whose latch belongs to an incomplete probing signal, has none.
     pub latches: Vec<(f64, usize, f64)>,
+    /// One sample is kept every `stride` cycles (1 until the trace first reached
+    /// [`MAX_TRACE_SAMPLES`], then doubled each time).
+    pub stride: u64,
+    /// Edges and latches beyond [`MAX_TRACE_MARKS`], not kept.
+    pub dropped_marks: u64,
+    /// Cycles offered since the start.
+    cycles: u64,
+    /// Most samples kept ([`MAX_TRACE_SAMPLES`] unless [`Machine::enable_trace_with_limit`]).
+    limit: usize,
+}
+
+impl Trace {
+    /// Offer the sample of one cycle; kept every [`stride`](Self::stride) cycles.
+    fn push_sample(&mut self, t: f64, axes: &[crate::axis::Axis]) {
+        let stride = self.stride.max(1);
+        let keep = self.cycles.is_multiple_of(stride);
+        self.cycles += 1;
+        if !keep {
+            return;
+        }
+        if self.t.len() >= self.limit.max(2) {
+            // Keep samples 0, 2, 4, … (each a multiple of the doubled stride) and go on with it.
+            let halve = |v: &mut Vec<f64>| {
+                let mut k: usize = 0;
+                v.retain(|_| {
+                    k += 1;
+                    !k.is_multiple_of(2)
+                });
+            };
+            halve(&mut self.t);
+            self.command.iter_mut().for_each(halve);
+            self.actual.iter_mut().for_each(halve);
+            self.stride = stride * 2;
+            if !(self.cycles - 1).is_multiple_of(self.stride) {
+                return;
+            }
+        }
+        self.t.push(t);
+        for (i, a) in axes.iter().enumerate() {
+            if let Some(c) = self.command.get_mut(i) {
+                c.push(a.command());
+            }
+            if let Some(c) = self.actual.get_mut(i) {
+                c.push(a.actual());
+            }
+        }
+    }
+
+    fn push_edge(&mut self, at: f64, rising: bool) {
+        if self.edges.len() < MAX_TRACE_MARKS {
+            self.edges.push((at, rising));
+        } else {
+            self.dropped_marks += 1;
+        }
+    }
+
+    fn push_latch(&mut self, at: f64, axis: usize, p: f64) {
+        if self.latches.len() < MAX_TRACE_MARKS {
+            self.latches.push((at, axis, p));
+        } else {
+            self.dropped_marks += 1;
+        }
+    }
 }
 
 impl Machine {
@@ -430,6 +504,14 @@ impl Machine {
         self.link.finish_cycle_log()
     }
 
+    /// Flush the frame capture (`--pcap`, `--candump`) after the run ([`Link::finish_capture`]).
+    ///
+    /// # Errors
+    /// The first write to it that failed, naming the option and the file.
+    pub fn finish_capture(&mut self) -> Result<(), String> {
+        self.link.finish_capture()
+    }
+
     /// The channel, mutable (manual mode, reset, referencing).
     pub fn channel_mut(&mut self) -> &mut Channel {
         &mut self.channel
@@ -515,8 +597,16 @@ impl Machine {
         Ok(())
     }
 
-    /// Start recording a [`Trace`] (every cycle from now on).
+    /// Start recording a [`Trace`]: every cycle from now on until [`MAX_TRACE_SAMPLES`] samples,
+    /// then decimated (see there), so a trace of any run stays bounded.
     pub fn enable_trace(&mut self) {
+        self.enable_trace_with_limit(MAX_TRACE_SAMPLES);
+    }
+
+    /// [`enable_trace`](Self::enable_trace) keeping up to `limit` samples before it
+    /// decimates (at least 2): for tests that look at every cycle of a run longer than
+    /// [`MAX_TRACE_SAMPLES`] cycles. Memory: 8 bytes × (1 + 2 × axes) per sample.
+    pub fn enable_trace_with_limit(&mut self, limit: usize) {
         let axes: Vec<String> = self
             .channel
             .axes()
@@ -528,6 +618,8 @@ impl Machine {
             axes,
             command: vec![Vec::new(); n],
             actual: vec![Vec::new(); n],
+            stride: 1,
+            limit,
             ..Trace::default()
         });
         self.channel.record_latches(true);
@@ -599,18 +691,14 @@ impl Machine {
             self.channel.drive_emergency(e.device, e.code, e.text);
         }
         if let Some(tr) = self.trace.as_mut() {
-            tr.t.push(self.now.as_secs_f64());
-            for (i, a) in self.channel.axes().iter().enumerate() {
-                tr.command[i].push(a.command());
-                tr.actual[i].push(a.actual());
-            }
+            tr.push_sample(self.now.as_secs_f64(), self.channel.axes());
             if let Some(plant) = self.link.plant() {
                 for e in plant.last_edges() {
-                    tr.edges.push((e.at.as_secs_f64(), e.rising));
+                    tr.push_edge(e.at.as_secs_f64(), e.rising);
                 }
             }
             for (t, axis, p) in self.channel.take_latch_log() {
-                tr.latches.push((t.as_secs_f64(), axis, p));
+                tr.push_latch(t.as_secs_f64(), axis, p);
             }
         }
         // Acyclic requests (#DRIVE, #IDENT) go over the link's mailbox.

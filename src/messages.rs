@@ -257,3 +257,14 @@ pub mod ids {
     /// area boundary (warning).
     pub const AREA_JOG_STOPPED: u32 = 900318;
 }
+
+/// A number from a user or a file, for a message: as Rust writes it for ordinary magnitudes,
+/// in exponent form beyond (`1e300`, not 301 digits; `1.5e-9`), so a message stays short
+/// whatever number it echoes.
+pub fn show_number(v: f64) -> String {
+    if v.is_finite() && v != 0.0 && !(1e-6..1e15).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}

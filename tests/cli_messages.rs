@@ -32,8 +32,8 @@ fn inconsistent_arc_gives_one_error_900022_only() {
 }
 
 /// A reader that goes away (`fieldprobe run … | head`) must not panic the tool: the failed
-/// write is reported once on stderr, the run goes on to its end (axes stopped as usual) and
-/// exits with the run's own status.
+/// write is reported once on stderr, the run goes on to its end (axes stopped as usual), and
+/// the command does not exit 0 — its result was not delivered (issue 15: exit 2).
 #[test]
 fn closed_stdout_is_reported_not_a_panic() {
     use std::process::{Command, Stdio};
@@ -54,5 +54,5 @@ fn closed_stdout_is_reported_not_a_panic() {
         1,
         "reported once: {err}"
     );
-    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert_eq!(out.status.code(), Some(2), "{err}");
 }

@@ -179,7 +179,8 @@ fn fixed_stop_program_latches_the_wall_with_a_0_1_mm_criterion_on_every_family_a
                 ],
             );
             m.add_fixed_stop("Z", 150.0).unwrap();
-            m.enable_trace();
+            // Every cycle of the program (longer than the CLI's 10,000-sample trace).
+            m.enable_trace_with_limit(1 << 20);
             let r = run(&mut m, &program);
             let what = format!("{link} {drive}");
             completed(&r, &what);

@@ -257,7 +257,8 @@ fn machine(case: &Case, link: &str) -> (Machine, Bounds) {
 /// Run the case on `link` and check every cycle; `Err` names the first violation.
 fn check(case: &Case, link: &str) -> Result<(), String> {
     let (mut m, b) = machine(case, link);
-    m.enable_trace();
+    // Every cycle is checked: no decimation within the programs' cycle budget (200,000 each).
+    m.enable_trace_with_limit(1 << 22);
     let cycle = m.channel().config().cycle.as_secs_f64();
     let mut texts = Vec::new();
     for (k, blocks) in case.programs.iter().enumerate() {

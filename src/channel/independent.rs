@@ -83,12 +83,24 @@ impl Channel {
         let start = self.command_positions();
         let mut end = start.clone();
         end[axis] = target;
-        let Ok(mut segment) = Segment::line(start, end) else {
-            self.report(CncMessage::error(
-                ids::NC_EVALUATION,
-                "independent motion: invalid path",
-            ));
-            return Prepared::Rejected;
+        let mut segment = match Segment::line(start, end) {
+            Ok(s) => s,
+            Err(_) => {
+                // Positions beyond the coordinate bound of every path (the only way a line of
+                // finite points fails): name the axis, the position and the bound.
+                let max = crate::messages::show_number(crate::core::path::MAX_COORDINATE);
+                self.report(
+                    CncMessage::error(
+                        ids::NC_EVALUATION,
+                        format!(
+                            "independent motion of axis {name}: position {} mm is outside the allowed range -{max} … {max} mm",
+                            crate::messages::show_number(target)
+                        ),
+                    )
+                    .on_axis(&name),
+                );
+                return Prepared::Rejected;
+            }
         };
         if segment.is_empty() {
             return Prepared::Empty;

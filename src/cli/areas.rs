@@ -42,7 +42,6 @@ use fieldprobe::machine::{LinkChoice, Machine, RunEvent, RunStatus};
 use fieldprobe::nc::exec::Executor;
 use plotters::coord::{CoordTranslate, Shift};
 use plotters::prelude::*;
-use std::io::Write;
 use std::path::PathBuf;
 
 /// Arguments of `fieldprobe areas`.
@@ -125,12 +124,8 @@ fn plot(a: PlotArgs) -> anyhow::Result<i32> {
         None => None,
     };
     machine.channel_mut().record_paths();
-    let stdout = std::io::stdout();
     let report = machine.run_program(&program, &mut |e| match e {
-        RunEvent::Output(line) => {
-            let mut o = stdout.lock();
-            let _ = writeln!(o, "{line}");
-        }
+        RunEvent::Output(line) => outln!("{line}"),
         RunEvent::Message(m) => eprintln!("{m}"),
     });
     let plane = given_plane.unwrap_or_else(|| default_plane(&machine, &names));

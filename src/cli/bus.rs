@@ -158,7 +158,8 @@ pub fn scan(a: ScanArgs) -> anyhow::Result<i32> {
         a.bus.link
     );
     a.bus.check_options("scan")?;
-    let s = a.bus.open()?;
+    let mut s = a.bus.open()?;
+    super::finish_capture(s.finish_capture());
     outln!("pos  address  vendor      product     revision    state    DC              name");
     for d in s.devices() {
         outln!(
@@ -302,8 +303,18 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
             let (index, sub) = parse_object(&r.object)?;
             let ty = r.ty.as_deref().map(str::to_ascii_lowercase);
             let result = match target(&r.to)? {
-                Target::Device(d) => r.to.bus.open()?.sdo_read(d, index, sub),
-                Target::Node(n) => r.to.bus.open_can()?.sdo_upload(n, index, sub),
+                Target::Device(d) => {
+                    let mut s = r.to.bus.open()?;
+                    let res = s.sdo_read(d, index, sub);
+                    super::finish_capture(s.finish_capture());
+                    res
+                }
+                Target::Node(n) => {
+                    let mut s = r.to.bus.open_can()?;
+                    let res = s.sdo_upload(n, index, sub);
+                    super::finish_capture(s.finish_capture());
+                    res
+                }
             };
             let bytes = match result {
                 Ok(b) => b,
@@ -400,8 +411,18 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
                 }
             };
             let result = match target(&w.to)? {
-                Target::Device(d) => w.to.bus.open()?.sdo_write(d, index, sub, &data),
-                Target::Node(n) => w.to.bus.open_can()?.sdo_download(n, index, sub, &data),
+                Target::Device(d) => {
+                    let mut s = w.to.bus.open()?;
+                    let res = s.sdo_write(d, index, sub, &data);
+                    super::finish_capture(s.finish_capture());
+                    res
+                }
+                Target::Node(n) => {
+                    let mut s = w.to.bus.open_can()?;
+                    let res = s.sdo_download(n, index, sub, &data);
+                    super::finish_capture(s.finish_capture());
+                    res
+                }
             };
             match result {
                 Ok(()) => {
@@ -471,7 +492,9 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
             );
             r.bus.check_options("idn")?;
             let mut s = r.bus.open()?;
-            match s.idn_read(r.device, idn) {
+            let res = s.idn_read(r.device, idn);
+            super::finish_capture(s.finish_capture());
+            match res {
                 Ok((v, name)) => {
                     let shown = fieldprobe::drive::sercos::idn_name(idn);
                     if name.is_empty() {
@@ -495,7 +518,9 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
             let v = parse_int(&w.value)
                 .with_context(|| format!("value '{}': not an integer", w.value))?;
             let mut s = w.bus.open()?;
-            match s.idn_write(w.device, idn, v) {
+            let res = s.idn_write(w.device, idn, v);
+            super::finish_capture(s.finish_capture());
+            match res {
                 Ok(()) => {
                     outln!("{} written", fieldprobe::drive::sercos::idn_name(idn));
                     Ok(EXIT_OK)
@@ -548,7 +573,9 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
             anyhow::ensure!(s.bus.is_can(), "--link {}: `can scan` needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)", s.bus.link);
             s.bus.check_options("can scan")?;
             let mut session = s.bus.open_can()?;
-            let nodes = session.scan().map_err(|e| anyhow::anyhow!("{e}"))?;
+            let nodes = session.scan().map_err(|e| anyhow::anyhow!("{e}"));
+            super::finish_capture(session.finish_capture());
+            let nodes = nodes?;
             outln!("node  state            device type  vendor      product     revision    name");
             let hex = |v: Option<u32>| v.map_or_else(|| "-".to_string(), |v| format!("{v:#010x}"));
             for n in nodes {
@@ -575,23 +602,23 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
             anyhow::ensure!(
                 d.seconds.is_finite() && (0.0..=86_400.0).contains(&d.seconds),
                 "--seconds {}: allowed 0 … 86400",
-                d.seconds
+                super::show_number(d.seconds)
             );
             let mut session = d.bus.open_can()?;
             let iface = session.log_interface();
             let plain = d.plain;
-            session
-                .listen(std::time::Duration::from_secs_f64(d.seconds), &mut |f| {
-                    let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
-                    let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
-                    let meaning = fieldprobe::bus::canopen::describe(f);
-                    if plain || meaning.is_empty() {
-                        outln!("{line}");
-                    } else {
-                        outln!("{line}  ; {meaning}");
-                    }
-                })
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let heard = session.listen(std::time::Duration::from_secs_f64(d.seconds), &mut |f| {
+                let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
+                let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
+                let meaning = fieldprobe::bus::canopen::describe(f);
+                if plain || meaning.is_empty() {
+                    outln!("{line}");
+                } else {
+                    outln!("{line}  ; {meaning}");
+                }
+            });
+            super::finish_capture(session.finish_capture());
+            heard.map_err(|e| anyhow::anyhow!("{e}"))?;
             Ok(EXIT_OK)
         }
     }

@@ -15,6 +15,10 @@ use fieldprobe::channel::ChannelState;
 use fieldprobe::machine::{Machine, RunStatus};
 use std::path::PathBuf;
 
+/// Largest `--step` distance (mm): the bound of every path coordinate
+/// ([`fieldprobe::core::path::MAX_COORDINATE`]).
+const MAX_STEP: f64 = fieldprobe::core::path::MAX_COORDINATE;
+
 /// Arguments of `fieldprobe jog`.
 #[derive(Debug, clap::Args)]
 pub struct JogArgs {
@@ -47,7 +51,23 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
         anyhow::bail!("jog: give --continuous + | - or --step DIST");
     }
     if !(a.feed > 0.0 && a.feed.is_finite()) {
-        anyhow::bail!("jog: --feed {} must be > 0 (mm/min)", a.feed);
+        anyhow::bail!(
+            "jog: --feed {} must be a number > 0 (mm/min)",
+            super::show_number(a.feed)
+        );
+    }
+    // A step no NC program could command (path coordinates are bounded the same way) is bad
+    // input, refused before the machine starts; a step inside this bound but beyond the
+    // permitted range is the CNC's warning 150008.
+    if let Some(d) = a.step {
+        if !(-MAX_STEP..=MAX_STEP).contains(&d) {
+            anyhow::bail!(
+                "jog: --step {}: expected a distance in mm in -{} … {}",
+                super::show_number(d),
+                super::show_number(MAX_STEP),
+                super::show_number(MAX_STEP)
+            );
+        }
     }
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
     let mut m = Machine::new(&cfg)?;

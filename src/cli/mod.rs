@@ -14,9 +14,11 @@
 //! see `docs/areas.md`).
 
 /// `println!` for the tool's results on stdout that survives a reader going away
-/// (`fieldprobe run … | head`): the first failed write is reported once on stderr and later
-/// output is dropped, while the command goes on to its end (a run still stops its axes and
-/// disables its drives as it would otherwise). `println!` would panic instead.
+/// (`fieldprobe run … | head`, `> /dev/full`): the first failed write is reported once on
+/// stderr and later output is dropped, while the command goes on to its end (a run still stops
+/// its axes and disables its drives as it would otherwise); [`main`] then exits with
+/// [`EXIT_BAD_INPUT`] instead of 0 (docs/cli.md "Exit codes"). `println!` would panic instead.
+/// Every write to stdout in the CLI goes through this macro.
 macro_rules! outln {
     () => {
         $crate::cli::write_stdout(format_args!("\n"))
@@ -95,7 +97,10 @@ pub fn main() -> i32 {
             } else {
                 EXIT_OK
             };
-            let _ = e.print();
+            if let Err(w) = e.print() {
+                eprintln!("fieldprobe: writing to stdout failed ({w})");
+                return EXIT_BAD_INPUT;
+            }
             return code;
         }
     };
@@ -112,13 +117,89 @@ pub fn main() -> i32 {
         Command::Can(a) => bus::can(a),
         Command::Idn(a) => bus::idn(a),
     };
-    match result {
+    let code = match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("fieldprobe: {e:#}");
+            eprintln!("fieldprobe: {}", cap_echo(&format!("{e:#}")));
             EXIT_BAD_INPUT
         }
+    };
+    exit_code_after_output(code)
+}
+
+/// A command whose stdout or capture file could not be written did not deliver its result: it
+/// never exits 0. A nonzero code the command chose (1: CNC error) stays; 0 becomes
+/// [`EXIT_BAD_INPUT`] — the output the caller gave us (a full disk, a closed pipe) could not
+/// take the result. The failure was reported on stderr ([`write_stdout`], [`finish_capture`]).
+fn exit_code_after_output(code: i32) -> i32 {
+    if code == EXIT_OK && stdout_failed() {
+        EXIT_BAD_INPUT
+    } else {
+        code
     }
+}
+
+/// Longest run of non-blank characters echoed into a message as given; a longer one (a
+/// 10-million-digit number in an NC program or a machine file, a runaway argument) is cut to
+/// [`ECHO_KEEP`] characters and `…`, with its length. File paths (at most 4096 bytes on Linux)
+/// of ordinary length pass unchanged.
+pub const ECHO_MAX: usize = 256;
+/// Characters kept of a cut token.
+pub const ECHO_KEEP: usize = 64;
+
+/// `text` with every run of non-blank characters longer than [`ECHO_MAX`] characters cut (see
+/// there). Applied to every error message the CLI prints from a parser or from `anyhow`.
+pub fn cap_echo(text: &str) -> std::borrow::Cow<'_, str> {
+    let too_long = text
+        .split(char::is_whitespace)
+        .any(|w| w.chars().nth(ECHO_MAX).is_some());
+    if !too_long {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut out = String::new();
+    let mut rest = text;
+    while !rest.is_empty() {
+        let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
+        let (word, tail) = rest.split_at(end);
+        let n = word.chars().count();
+        if n > ECHO_MAX {
+            out.extend(word.chars().take(ECHO_KEEP));
+            out.push_str(&format!("… ({n} characters)"));
+        } else {
+            out.push_str(word);
+        }
+        let blank = tail.len() - tail.trim_start().len();
+        out.push_str(&tail[..blank]);
+        rest = &tail[blank..];
+    }
+    std::borrow::Cow::Owned(out)
+}
+
+pub use fieldprobe::messages::show_number;
+
+/// Longest time a `--seconds` option takes: about 31.7 years, far beyond any test or
+/// commissioning session, and far inside what `Instant` and `Duration` hold.
+pub const MAX_SECONDS: f64 = 1e9;
+
+/// Check a `--seconds` value (`option` names it in the message): finite, 0 … [`MAX_SECONDS`].
+/// The caller exits 2 on the error.
+pub fn seconds_option(option: &str, s: f64) -> anyhow::Result<std::time::Duration> {
+    if !(0.0..=MAX_SECONDS).contains(&s) {
+        anyhow::bail!(
+            "{option} {}: expected a number of seconds in 0 … {}",
+            show_number(s),
+            show_number(MAX_SECONDS)
+        );
+    }
+    Ok(std::time::Duration::from_secs_f64(s))
+}
+
+/// The instant `d` after now; `option` names the option in the (unlikely) error of a clock
+/// that cannot reach it.
+pub fn deadline_after(option: &str, d: std::time::Duration) -> anyhow::Result<std::time::Instant> {
+    std::time::Instant::now()
+        .checked_add(d)
+        .ok_or_else(|| anyhow::anyhow!("{option}: {} s is beyond this system's clock", d.as_secs()))
 }
 
 /// Read and parse an NC program. A parse error is printed as `file:line:col: message` and gives
@@ -132,7 +213,7 @@ fn load_program(path: &std::path::Path) -> anyhow::Result<Option<fieldprobe::nc:
     match fieldprobe::nc::parser::parse(&src) {
         Ok(p) => Ok(Some(p)),
         Err(e) => {
-            eprintln!("{file}:{}:{}: {}", e.line, e.col, e.message);
+            eprintln!("{file}:{}:{}: {}", e.line, e.col, cap_echo(&e.message));
             Ok(None)
         }
     }
@@ -290,17 +371,38 @@ fn default_link(cfg: &fieldprobe::params::MachineConfig) -> &'static str {
     }
 }
 
+/// Set once a write to stdout failed.
+static STDOUT_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Set once an output file (`--pcap`, `--candump`) could not be written.
+static CAPTURE_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// A write to stdout or to a capture file failed (the command must not exit 0).
+pub(crate) fn stdout_failed() -> bool {
+    STDOUT_FAILED.load(std::sync::atomic::Ordering::Relaxed)
+        || CAPTURE_FAILED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// The end of a command that wrote a frame capture: a write that failed is reported on stderr
+/// (the message names the option and the file) and the command does not exit 0
+/// ([`exit_code_after_output`]); its own result (an SDO value, `#MSG` lines) is still given.
+pub(crate) fn finish_capture(result: Result<(), String>) {
+    if let Err(e) = result {
+        eprintln!("fieldprobe: {}", cap_echo(&e));
+        CAPTURE_FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// Write to stdout; see [`outln!`].
 pub(crate) fn write_stdout(args: std::fmt::Arguments<'_>) {
     use std::io::Write;
-    use std::sync::atomic::{AtomicBool, Ordering};
-    static FAILED: AtomicBool = AtomicBool::new(false);
-    if FAILED.load(Ordering::Relaxed) {
+    use std::sync::atomic::Ordering;
+    if STDOUT_FAILED.load(Ordering::Relaxed) {
         return;
     }
     let mut out = std::io::stdout().lock();
     if let Err(e) = out.write_fmt(args).and_then(|()| out.flush()) {
-        if !FAILED.swap(true, Ordering::Relaxed) {
+        if !STDOUT_FAILED.swap(true, Ordering::Relaxed) {
             eprintln!("fieldprobe: writing to stdout failed ({e}); further output is dropped");
         }
     }

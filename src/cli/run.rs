@@ -4,7 +4,6 @@ use super::{load_machine, load_program, LinkArgs, EXIT_BAD_INPUT, EXIT_CNC_ERROR
 use anyhow::Context;
 use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus};
 use fieldprobe::nc::exec::Executor;
-use std::io::Write;
 use std::path::PathBuf;
 
 /// Arguments of `fieldprobe run`.
@@ -109,12 +108,8 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         machine.enable_trace();
     }
     let json = a.json;
-    let stdout = std::io::stdout();
     let report = machine.run_program(&program, &mut |e| match e {
-        RunEvent::Output(line) if !json => {
-            let mut o = stdout.lock();
-            let _ = writeln!(o, "{line}");
-        }
+        RunEvent::Output(line) if !json => outln!("{line}"),
         RunEvent::Message(m) => eprintln!("{m}"),
         RunEvent::Output(_) => {}
     });
@@ -127,6 +122,9 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
     for m in machine.power_off() {
         eprintln!("{m}");
     }
+    // A capture (--pcap, --candump) that could not be written all through: an error of the
+    // command (not 0), reported now that the axes stopped.
+    super::finish_capture(machine.finish_capture());
     // The paced cycle of a link that leaves the process: one summary line, and the log.
     let cycle = machine.cycle_summary();
     if let Some(c) = &cycle {
@@ -137,6 +135,23 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         anyhow::bail!("--cycle-log {e}");
     }
     if let (Some(path), Some(format), Some(tr)) = (&a.trace, trace_format, machine.trace()) {
+        if tr.stride > 1 {
+            eprintln!(
+                "fieldprobe: --trace {}: {} cycles drawn with one sample every {} cycles ({} samples at most)",
+                path.display(),
+                report.cycles,
+                tr.stride,
+                fieldprobe::machine::MAX_TRACE_SAMPLES
+            );
+        }
+        if tr.dropped_marks > 0 {
+            eprintln!(
+                "fieldprobe: --trace {}: {} probe edges / latches beyond the first {} not drawn",
+                path.display(),
+                tr.dropped_marks,
+                fieldprobe::machine::MAX_TRACE_MARKS
+            );
+        }
         super::trace::write(tr, path, format)
             .with_context(|| format!("--trace {}", path.display()))?;
     }

@@ -318,8 +318,10 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
     }
     let deadline = match a.seconds {
         None => None,
-        Some(s) if s.is_finite() && s >= 0.0 => Some(Instant::now() + Duration::from_secs_f64(s)),
-        Some(s) => anyhow::bail!("--seconds {s}: expected a non-negative number"),
+        Some(s) => Some(super::deadline_after(
+            "--seconds",
+            super::seconds_option("--seconds", s)?,
+        )?),
     };
     let mut plant = Plant::new();
     for spec in &a.probes {
@@ -584,8 +586,10 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
     let bus_spec = parse_can_bus(&a.bus)?;
     let deadline = match a.seconds {
         None => None,
-        Some(s) if s.is_finite() && s >= 0.0 => Some(Instant::now() + Duration::from_secs_f64(s)),
-        Some(s) => anyhow::bail!("--seconds {s}: expected a non-negative number"),
+        Some(s) => Some(super::deadline_after(
+            "--seconds",
+            super::seconds_option("--seconds", s)?,
+        )?),
     };
     let heartbeat = a
         .heartbeat_ms

@@ -65,7 +65,7 @@ pub enum FrameError {
         what: &'static str,
     },
     /// A value lies beyond ±[`MAX_COORDINATE`].
-    #[error("{what} {value} is beyond ±{max}", max = MAX_COORDINATE)]
+    #[error("{what} {shown} is beyond ±{max}", shown = crate::messages::show_number(*value), max = MAX_COORDINATE)]
     OutOfRange {
         /// Which value.
         what: &'static str,

@@ -159,7 +159,7 @@ pub enum PathError {
         what: &'static str,
     },
     /// A coordinate or offset lies beyond ±[`MAX_COORDINATE`].
-    #[error("{what} {value} is beyond ±{max}", max = MAX_COORDINATE)]
+    #[error("{what} {shown} is beyond ±{max}", shown = crate::messages::show_number(*value), max = MAX_COORDINATE)]
     OutOfRange {
         /// Which input.
         what: &'static str,

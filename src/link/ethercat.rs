@@ -211,18 +211,45 @@ struct AxisDevice {
     name: String,
 }
 
-/// Frame tap: every frame sent and received goes into a pcap file.
+/// Frame tap: every frame sent and received goes into a pcap file (`--pcap`). A write that
+/// fails (a full disk, `/dev/full`) is not silent: the first error is kept, later frames are
+/// not written, and [`Tap::finish`] returns it at the end of the run, so the command exits 2
+/// after the axes stopped as usual.
 struct Tap {
     writer: PcapWriter<std::io::BufWriter<std::fs::File>>,
     t0: Instant,
+    path: std::path::PathBuf,
+    failed: Option<String>,
 }
 
 impl Tap {
     fn record(&mut self, frame: &[u8]) {
+        if self.failed.is_some() {
+            return;
+        }
         let t = self.t0.elapsed().as_nanos() as u64;
         if let Err(e) = self.writer.write_packet(t, frame) {
-            tracing::warn!(target: "fieldprobe::link::ethercat", "pcap write failed: {e}");
+            self.fail(&e);
         }
+    }
+
+    fn fail(&mut self, e: &dyn std::fmt::Display) {
+        let m = format!(
+            "--pcap {}: writing the capture failed ({e}); the capture is incomplete",
+            self.path.display()
+        );
+        tracing::warn!(target: "fieldprobe::link::ethercat", "{m}");
+        self.failed = Some(m);
+    }
+
+    /// Flush the file; the first write error of the capture, naming the option and the file.
+    fn finish(&mut self) -> Result<(), String> {
+        if self.failed.is_none() {
+            if let Err(e) = self.writer.flush() {
+                self.fail(&e);
+            }
+        }
+        self.failed.clone().map_or(Ok(()), Err)
     }
 }
 
@@ -242,6 +269,11 @@ struct WireEnd {
 }
 
 impl WireEnd {
+    /// See [`Tap::finish`]; `Ok` without `--pcap`.
+    fn finish_capture(&mut self) -> Result<(), String> {
+        self.tap.as_mut().map_or(Ok(()), Tap::finish)
+    }
+
     /// Send every queued frame; emulated: process and hand back at once; interface: send.
     fn pump(&mut self) {
         while let Some(frame) = self.tx.next_sendable_frame() {
@@ -988,6 +1020,14 @@ impl Session {
         &self.devices
     }
 
+    /// Flush the `--pcap` capture at the end of a command ([`Link::finish_capture`]).
+    ///
+    /// # Errors
+    /// The first write to the capture that failed, naming the option and the file.
+    pub fn finish_capture(&mut self) -> Result<(), String> {
+        self.wire.finish_capture()
+    }
+
     fn device(&self, position: usize) -> Result<&SubDeviceInfo, LinkError> {
         let d = self.devices.get(position).ok_or_else(|| {
             LinkError::Other(format!(
@@ -1106,6 +1146,8 @@ fn open_tap(path: &Path) -> Result<Tap, LinkError> {
     Ok(Tap {
         writer,
         t0: Instant::now(),
+        path: path.to_path_buf(),
+        failed: None,
     })
 }
 
@@ -1377,6 +1419,10 @@ impl Link for EthercatLink {
 
     fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {
         self.clock.as_ref().map(|c| c.stats().summary())
+    }
+
+    fn finish_capture(&mut self) -> Result<(), String> {
+        self.wire.finish_capture()
     }
 
     fn finish_cycle_log(&mut self) -> Result<(), String> {

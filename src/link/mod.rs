@@ -240,6 +240,16 @@ pub trait Link: Send {
         Ok(())
     }
 
+    /// Flush the frame capture (`--pcap`, `--candump`) at the end of a run; links without one:
+    /// `Ok`. A capture write that failed during the run (a full disk) was not fatal to the run
+    /// (the axes still stop as usual), but it is an error of the command.
+    ///
+    /// # Errors
+    /// The first write to the capture that failed, naming the option and the file.
+    fn finish_capture(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+
     /// The end of a run, after the drives were disabled: bring the bus to its documented end
     /// state at `now` (CANopen: NMT enter pre-operational to every axis's node, confirmed by
     /// their heartbeats; no process data any more). The other links have no such state: `Ok`.

@@ -132,10 +132,44 @@ impl std::fmt::Debug for CanopenLink {
 struct Transport {
     bus: Box<dyn CanBus>,
     emulated: Option<(CanopenSegment, VirtualEndpoint)>,
-    candump: Option<CandumpWriter<std::io::BufWriter<std::fs::File>>>,
+    candump: Option<Candump>,
+}
+
+/// The `--candump` log of a transport. A write that fails (a full disk, `/dev/full`) is not
+/// silent: the first error is kept, later frames are not written, and
+/// [`Transport::finish_capture`] returns it at the end of the command (exit 2, after the axes
+/// stopped as usual).
+struct Candump {
+    writer: CandumpWriter<std::io::BufWriter<std::fs::File>>,
+    path: std::path::PathBuf,
+    failed: Option<String>,
+}
+
+impl Candump {
+    fn fail(&mut self, e: &std::io::Error) {
+        let m = format!(
+            "--candump {}: writing the log failed ({e}); the log is incomplete",
+            self.path.display()
+        );
+        tracing::warn!(target: "fieldprobe::link::canopen", "{m}");
+        self.failed = Some(m);
+    }
 }
 
 impl Transport {
+    /// Flush the `--candump` log; the first write error, naming the option and the file.
+    fn finish_capture(&mut self) -> Result<(), String> {
+        let Some(c) = self.candump.as_mut() else {
+            return Ok(());
+        };
+        if c.failed.is_none() {
+            if let Err(e) = c.writer.flush() {
+                c.fail(&e);
+            }
+        }
+        c.failed.clone().map_or(Ok(()), Err)
+    }
+
     fn describe(&self) -> String {
         match &self.emulated {
             Some(_) => format!("{} with emulated nodes", self.bus.describe()),
@@ -340,10 +374,9 @@ impl Transport {
     }
 
     fn log(&mut self, f: &CanFrame) {
-        if let Some(w) = self.candump.as_mut() {
-            if let Err(e) = w.write_frame_now(f) {
-                tracing::warn!(target: "fieldprobe::link::canopen", "--candump write failed: {e}");
-                self.candump = None;
+        if let Some(c) = self.candump.as_mut().filter(|c| c.failed.is_none()) {
+            if let Err(e) = c.writer.write_frame_now(f) {
+                c.fail(&e);
             }
         }
     }
@@ -355,13 +388,14 @@ const RECV_POLL: Duration = Duration::from_micros(50);
 /// Longest wait for one SDO answer poll.
 const SDO_POLL: Duration = Duration::from_millis(5);
 
-fn open_candump(
-    path: &std::path::Path,
-    iface: &str,
-) -> Result<CandumpWriter<std::io::BufWriter<std::fs::File>>, LinkError> {
+fn open_candump(path: &std::path::Path, iface: &str) -> Result<Candump, LinkError> {
     let f = std::fs::File::create(path)
         .map_err(|e| other(format!("--candump {}: {e}", path.display())))?;
-    Ok(CandumpWriter::new(std::io::BufWriter::new(f), iface))
+    Ok(Candump {
+        writer: CandumpWriter::new(std::io::BufWriter::new(f), iface),
+        path: path.to_path_buf(),
+        failed: None,
+    })
 }
 
 fn other(m: String) -> LinkError {
@@ -1032,6 +1066,10 @@ impl Link for CanopenLink {
 
     fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {
         self.pacing.as_ref().map(|p| p.stats().summary())
+    }
+
+    fn finish_capture(&mut self) -> Result<(), String> {
+        self.bus.finish_capture()
     }
 
     fn finish_cycle_log(&mut self) -> Result<(), String> {

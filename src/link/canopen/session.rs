@@ -72,6 +72,14 @@ impl CanSession {
         self.bus.log_interface()
     }
 
+    /// Flush the `--candump` log at the end of a command.
+    ///
+    /// # Errors
+    /// The first write to the log that failed, naming the option and the file.
+    pub fn finish_capture(&mut self) -> Result<(), String> {
+        self.bus.finish_capture()
+    }
+
     fn wall(&self) -> Nanos {
         Nanos(self.t0.elapsed().as_nanos() as u64)
     }
