@@ -37,16 +37,17 @@ fn inconsistent_arc_gives_one_error_900022_only() {
 #[test]
 fn closed_stdout_is_reported_not_a_panic() {
     use std::process::{Command, Stdio};
-    let mut child = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+    // The reader is gone before the child starts (closing it after the spawn would race).
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
         .args(["run", "examples/nc/seed004/meas1.nc", "--link", "sim"])
         .args(["--probe-at", "Z=100", "--json"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(Stdio::piped())
+        .stdout(writer)
         .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn");
-    drop(child.stdout.take()); // the reader is gone before the first line
-    let out = child.wait_with_output().expect("wait");
+        .output()
+        .expect("run");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(

@@ -30,15 +30,17 @@ fn with_full_stdout(args: &[&str]) -> Output {
 /// Run `fieldprobe ARGS…` whose stdout reader is gone before the first line (`… | head`
 /// after head exited).
 fn with_closed_stdout(args: &[&str]) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+    // The reading end is closed before the child starts: closing it after the spawn raced
+    // with a fast child on a busy machine (`params` had written all into the pipe buffer).
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(Stdio::piped())
+        .stdout(writer)
         .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn");
-    drop(child.stdout.take());
-    child.wait_with_output().expect("wait")
+        .output()
+        .expect("run")
 }
 
 /// A program file in a temporary directory (kept alive by the returned guard).
