@@ -258,15 +258,23 @@ fn paced_cycle_keeps_the_period_and_a_stalled_master_is_reported() {
     // answer): the SYNC keeps running on the grid meanwhile, so nothing is missed and the node
     // does not lose its SYNC.
     deaf.store(true, Ordering::Relaxed);
+    let before = link.cycle_summary().unwrap();
     let t = Instant::now();
     let r = link.read_object(0, 0x6041, 0);
     let waited = t.elapsed();
     deaf.store(false, Ordering::Relaxed);
     assert!(r.is_err(), "{r:?}");
-    let keep_alive = link.cycle_summary().unwrap().cycles - 50;
-    // One SYNC per 4 ms of the wait (the first deadline may have been due at once).
+    let after = link.cycle_summary().unwrap();
+    let keep_alive = after.cycles - 50;
+    // One SYNC per 4 ms of the wait (the first deadline may have been due at once): every
+    // deadline of the wait is either a SYNC sent or an overrun counted (a loaded machine woke
+    // the thread late: 122 SYNCs in 504 ms in one saturated run), and most are sent.
     let want = (waited.as_nanos() as u64 / PERIOD).saturating_sub(1);
-    assert!(keep_alive >= want, "{keep_alive} SYNCs in {waited:?}");
+    let overrun = after.overruns - before.overruns;
+    assert!(
+        keep_alive + overrun >= want && keep_alive >= want * 3 / 4,
+        "{keep_alive} SYNCs and {overrun} overruns in {waited:?}"
+    );
     assert!(
         waited >= Duration::from_millis(400),
         "the SDO client waited {waited:?}"

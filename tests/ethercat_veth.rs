@@ -74,8 +74,13 @@ fn inner() {
         let r = futures_lite::future::block_on(async move {
             let md = MainDevice::new(
                 pdu_loop,
+                // Generous bounds: the frames cross a real interface to an emulator in another
+                // process, and a loaded CI machine delayed a reply past ethercrab's default
+                // 30 ms PDU timeout ("init_single_group: Timeout(Pdu)" in a saturated run).
                 Timeouts {
                     state_transition: Duration::from_secs(2),
+                    pdu: Duration::from_millis(500),
+                    eeprom: Duration::from_millis(500),
                     ..Timeouts::default()
                 },
                 MainDeviceConfig {
