@@ -187,6 +187,27 @@ pub fn drive_scaling(key: &str) -> f64 {
     v.split('#').next().unwrap().trim().parse().expect("number")
 }
 
+/// The one JSON line a python master prints last, after checking it exited 0 and said `ok`.
+#[track_caller]
+fn peer_report(
+    status: Option<std::process::ExitStatus>,
+    out: &str,
+    err: &str,
+) -> serde_json::Value {
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "python master: {status:?}\n{err}"
+    );
+    let line = out
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .expect("JSON line");
+    let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
+    assert_eq!(r["ok"], true, "{}", r["traceback"].as_str().unwrap_or(""));
+    r
+}
+
 // ------------------------------------------------------------------------------------------
 // (a) python-canopen master against `fieldprobe sim canopen`
 
@@ -230,17 +251,7 @@ pub fn python_master_drives_sim(python: &Path, bus: PeerBus) {
     drop(sim);
     let sim_log: Vec<String> = sim_err.try_iter().collect();
     println!("python master ({elapsed:?}):\n{out}\n{err}\nsim: {sim_log:?}");
-    assert!(
-        status.is_some_and(|s| s.success()),
-        "python master: {status:?}\n{err}"
-    );
-    let line = out
-        .lines()
-        .rev()
-        .find(|l| l.starts_with('{'))
-        .expect("JSON line");
-    let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
-    assert_eq!(r["ok"], true, "{}", r["traceback"].as_str().unwrap_or(""));
+    let r = peer_report(status, &out, &err);
 
     // NMT: boot-up `705 [1] 00` after the reset, then heartbeats 0x7F (PRE-OP), 0x05 (OP).
     assert_eq!(r["bootup"], true);
@@ -504,17 +515,7 @@ pub fn python_sdo_drives_eds_node(python: &Path, eds_path: &Path, bus: PeerBus) 
     drop(sim);
     let sim_log: Vec<String> = sim_err.try_iter().collect();
     println!("python master:\n{out}\n{err}\nsim: {sim_log:?}");
-    assert!(
-        status.is_some_and(|s| s.success()),
-        "python master: {status:?}\n{err}"
-    );
-    let line = out
-        .lines()
-        .rev()
-        .find(|l| l.starts_with('{'))
-        .expect("JSON line");
-    let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
-    assert_eq!(r["ok"], true, "{}", r["traceback"].as_str().unwrap_or(""));
+    let r = peer_report(status, &out, &err);
 
     // Expected values from the EDS text (minimal INI lookup) and CiA 402.
     let eds = std::fs::read(eds_path).expect("read EDS");
