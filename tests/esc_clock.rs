@@ -383,7 +383,21 @@ fn without_sync0_the_world_steps_per_process_data_frame() {
     assert_eq!(s[1].0, 2 * SEGMENT_CYCLE);
     assert_eq!(s[1].2, [2, 0]);
     assert_eq!(sync_errors(&seg), 0);
-    assert_eq!(seg.poll_timeout(MS + 20_000), Some(MS + 10_000 + 100 * MS));
+    // Next: the drive's own loop after ten cycles without process data (before the watchdog).
+    let free_run = MS + 10_000 + 10 * SEGMENT_CYCLE;
+    assert!(free_run < MS + 10_000 + 100 * MS);
+    assert_eq!(seg.poll_timeout(MS + 20_000), Some(free_run));
+    // From then on one step per cycle by itself, with the outputs held.
+    seg.handle_timeout(free_run + 4 * SEGMENT_CYCLE);
+    let s = steps(&seg);
+    assert_eq!(s.len(), 2 + 5);
+    assert_eq!(s[6].0, 7 * SEGMENT_CYCLE);
+    assert_eq!(s[6].2, [2, 0]);
+    // A frame ends the free run: the next self-step is ten cycles later again.
+    let frame = free_run + 4 * SEGMENT_CYCLE + SEGMENT_CYCLE / 2;
+    assert_eq!(lrw(&mut seg, frame, [3, 0]).0, 3);
+    assert_eq!(steps(&seg).len(), 8);
+    assert_eq!(seg.poll_timeout(frame), Some(frame + 10 * SEGMENT_CYCLE));
 }
 
 #[test]
@@ -538,7 +552,8 @@ fn sm_watchdog_needs_the_trigger_bit_of_the_output_sm() {
     // SM2 control 0x24: ECAT writes, no watchdog trigger (bit 6).
     let mut seg = op_segment(0, 0, 0x24, 0);
     assert_eq!(lrw(&mut seg, MS, [1, 0]).0, 3);
-    assert_eq!(seg.poll_timeout(MS), None);
+    // Only the drive's own loop is due (ten cycles without process data), no watchdog.
+    assert_eq!(seg.poll_timeout(MS), Some(MS + 10 * SEGMENT_CYCLE));
     seg.handle_timeout(1_000 * MS);
     assert_eq!(seg.esc(0).unwrap().al_state(), AlState::Op);
     // The watchdog counts from the OP entry when no process data come at all.

@@ -256,3 +256,102 @@ fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
     assert_eq!(sw & SW_MASK, OPERATION_ENABLED, "statusword {sw:#06x}");
     assert_eq!(seg.esc(0).unwrap().al_state(), AlState::Op);
 }
+
+/// A master without DC (SM-synchronous: the drive steps per process-data frame) moves the axis,
+/// then asks for INIT and sends nothing more. Leaving OP puts the controlword into its safe
+/// state (quick stop); the drive's own control loop carries it out although no frame and no
+/// SYNC0 comes any more: QUICK STOP ACTIVE, standing still where the quick stop ended.
+#[test]
+fn a_master_that_leaves_for_init_finds_the_drive_quick_stopped_not_frozen_enabled() {
+    let esi = fieldprobe::esi::load("esi/fieldprobe-cia402-servo.xml").unwrap();
+    let def = catalogue::load("cia402-generic").unwrap();
+    let esc = emulated_servo(&esi, &esi.devices[0], &def).unwrap();
+    let mbx = esc.config().mailbox.expect("the servo has a mailbox");
+    let mut seg = Segment::new(vec![esc], 0);
+    seg.set_world(World::new(Plant::new()), Nanos(MS));
+    seg.set_stepping(Stepping::OwnClock);
+    let r = exchange(
+        &mut seg,
+        0,
+        &[(
+            Command::Apwr,
+            physical_address(0, reg::STATION_ADDRESS),
+            STATION.to_le_bytes().to_vec(),
+        )],
+    );
+    assert_eq!(r[0].0, 1);
+    fpwr(
+        &mut seg,
+        0,
+        reg::sm(0),
+        &sm(mbx.rx_offset, mbx.rx_size, 0x26),
+    );
+    fpwr(
+        &mut seg,
+        0,
+        reg::sm(1),
+        &sm(mbx.tx_offset, mbx.tx_size, 0x22),
+    );
+    fpwr(&mut seg, 0, reg::AL_CONTROL, &[0x02, 0]);
+    fpwr(&mut seg, 0, reg::sm(2), &sm(SM2.0, SM2.1, SM2.2));
+    fpwr(&mut seg, 0, reg::sm(3), &sm(SM3.0, SM3.1, SM3.2));
+    fpwr(&mut seg, 0, reg::fmmu(0), &fmmu(0, SM2.1, SM2.0, 2));
+    fpwr(&mut seg, 0, reg::fmmu(1), &fmmu(9, SM3.1, SM3.0, 1));
+    fpwr(&mut seg, 0, reg::AL_CONTROL, &[0x04, 0]);
+    fpwr(&mut seg, MS, reg::AL_CONTROL, &[0x08, 0]);
+    assert_eq!(al_status(&mut seg, MS), (0x0008, 0));
+
+    // One frame per millisecond, no SYNC0: enable, then a ramp of 200 increments per cycle.
+    let mut k = 2u64;
+    let mut run = |seg: &mut Segment, cw: u16, target: i32| {
+        seg.handle_timeout(k * MS);
+        let r = cycle(seg, k * MS, cw, target);
+        k += 1;
+        assert_eq!(r.0, 3, "LRW working counter");
+        (r.1, r.2, k)
+    };
+    let mut sw = 0;
+    for (cw, want) in [
+        (0x06, READY_TO_SWITCH_ON),
+        (0x07, SWITCHED_ON),
+        (0x0F, OPERATION_ENABLED),
+    ] {
+        let mut n = 0;
+        while sw & SW_MASK != want {
+            sw = run(&mut seg, cw, 0).0;
+            n += 1;
+            assert!(n < 50, "controlword {cw:#x}: statusword {sw:#06x}");
+        }
+    }
+    let mut target = 0;
+    let mut last = 0;
+    for _ in 0..40 {
+        target += 200;
+        last = run(&mut seg, 0x0F, target).2;
+    }
+    assert_eq!(seg.model(0).unwrap().state(), PowerState::OperationEnabled);
+    let steps_before = seg.syncs();
+
+    // INIT, then silence.
+    let t = last * MS;
+    fpwr(&mut seg, t, reg::AL_CONTROL, &[0x01, 0]);
+    assert_eq!(al_status(&mut seg, t).0 & 0x0F, 0x01);
+    seg.handle_timeout(t + 100 * MS);
+    assert!(
+        seg.syncs() >= steps_before + 80,
+        "the drive's loop ran on its own clock: {} steps in 100 ms",
+        seg.syncs() - steps_before
+    );
+    assert_eq!(seg.model(0).unwrap().state(), PowerState::QuickStopActive);
+    // The ESC is in INIT (its process-data SMs are off): the model shows where the drive is.
+    let stopped = seg.model(0).unwrap().actual();
+    assert!(
+        stopped > f64::from(target) - 2000.0,
+        "the quick stop keeps the axis near where the frames stopped: {stopped} vs {target}"
+    );
+    // It stands still: another 100 ms on its own clock do not move it.
+    seg.handle_timeout(t + 200 * MS);
+    let later = seg.model(0).unwrap().actual();
+    assert!((later - stopped).abs() < 0.5, "{stopped} → {later}");
+    assert_eq!(seg.model(0).unwrap().state(), PowerState::QuickStopActive);
+}

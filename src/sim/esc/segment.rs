@@ -22,7 +22,9 @@
 //!   none: the same outputs again, and a device in OP counts a sync error,
 //!   [`Esc::sync_errors`]). While no hosted device has a SYNC0 (a master without DC, or before
 //!   the first pulse), the world steps per process-data frame as in `PerFrame` (SM-synchronous
-//!   drives). The sync-manager watchdogs run ([`Esc::tick`]).
+//!   drives). The sync-manager watchdogs run ([`Esc::tick`]). With neither SYNC0 nor process
+//!   data for [`FREE_RUN_AFTER_CYCLES`] cycles the world steps by itself once per cycle (a
+//!   drive's control loop keeps running when the master is gone).
 //!
 //! What the devices did by themselves (SYNC0 activation, watchdog expiry, …) is collected as
 //! [`SegmentEvent`]s ([`Segment::take_events`]) and logged with `tracing`.
@@ -71,6 +73,14 @@ pub const MAX_SYNC0_BACKLOG: u64 = 1000;
 /// At most this many SYNC0 / watchdog deadlines are handled per [`Segment::handle_timeout`].
 const MAX_DEADLINES_PER_CALL: usize = 4096;
 
+/// [`Stepping::OwnClock`]: a segment whose world saw neither a SYNC0 nor a process-data frame
+/// for this many cycles (the master left, or asked for INIT and switched SYNC0 off) steps the
+/// world on its own, once per cycle, until SYNC0 or process data come back: a drive's control
+/// loop never stops, so a drive whose outputs went to their safe state on leaving OP carries
+/// out its quick stop by itself (CiA 402 0x6007 option 3) instead of staying frozen in
+/// OPERATION ENABLED.
+pub const FREE_RUN_AFTER_CYCLES: u64 = 10;
+
 /// At most this many [`SegmentEvent`]s are kept for [`Segment::take_events`]; older ones are
 /// dropped.
 const MAX_SEGMENT_EVENTS: usize = 256;
@@ -91,6 +101,10 @@ pub struct Segment {
     syncs: u64,
     /// Own clock: time of the previous SYNC0 that stepped the world.
     last_world_sync0: Option<u64>,
+    /// Own clock: when the world last stepped (any cause), on the caller's clock.
+    last_step_at: Option<u64>,
+    /// Own clock: the world is stepping by itself ([`FREE_RUN_AFTER_CYCLES`]).
+    free_running: bool,
     events: VecDeque<SegmentEvent>,
     events_dropped: u64,
     drop_frames: std::collections::BTreeSet<u64>,
@@ -116,6 +130,8 @@ impl Segment {
             sync_time: Nanos::ZERO,
             syncs: 0,
             last_world_sync0: None,
+            last_step_at: None,
+            free_running: false,
             events: VecDeque::new(),
             events_dropped: 0,
             drop_frames: std::collections::BTreeSet::new(),
@@ -161,6 +177,8 @@ impl Segment {
     pub fn set_stepping(&mut self, stepping: Stepping) {
         self.stepping = stepping;
         self.last_world_sync0 = None;
+        self.last_step_at = None;
+        self.free_running = false;
     }
 
     /// How the world is stepped.
@@ -319,6 +337,7 @@ impl Segment {
         if logical_write && per_frame {
             let t = self.sync_time.saturating_add(self.cycle);
             self.sync0(t);
+            self.stepped_at(now_ns);
         }
         self.collect_events(now_ns);
         Ok(true)
@@ -348,8 +367,51 @@ impl Segment {
             .escs
             .iter()
             .flat_map(|e| [e.sync0_due_at(now), e.watchdog_deadline()])
+            .chain([self.free_run_due()])
             .flatten()
             .min()
+    }
+
+    /// Own clock: the world stepped at `now` (caller's clock) because of SYNC0 or process data.
+    fn stepped_at(&mut self, now: u64) {
+        if self.stepping == Stepping::OwnClock {
+            self.last_step_at = Some(now);
+            self.free_running = false;
+        }
+    }
+
+    /// Own clock: when the world steps by itself next ([`FREE_RUN_AFTER_CYCLES`]); `None` without
+    /// a world, before its first step, or while a hosted device has a SYNC0 scheduled.
+    fn free_run_due(&self) -> Option<u64> {
+        if self.world.is_none() || self.cycle.0 == 0 || self.hosted_sync0_scheduled() {
+            return None;
+        }
+        let gap = if self.free_running {
+            self.cycle.0
+        } else {
+            self.cycle.0.saturating_mul(FREE_RUN_AFTER_CYCLES)
+        };
+        self.last_step_at.map(|t| t.saturating_add(gap))
+    }
+
+    /// Own clock: one step of the world by itself at `t` (see [`FREE_RUN_AFTER_CYCLES`]). A
+    /// backlog (the emulator was stopped) is not caught up: time jumps to `now`.
+    fn free_run_step(&mut self, t: u64, now: u64) {
+        let cycle = self.cycle;
+        let at = if now.saturating_sub(t) > cycle.0.saturating_mul(MAX_SYNC0_BACKLOG) {
+            now
+        } else {
+            t
+        };
+        if !self.free_running {
+            tracing::info!(
+                "no SYNC0 and no process data for {FREE_RUN_AFTER_CYCLES} cycles: the drives run on their own clock"
+            );
+        }
+        let model_now = self.sync_time.saturating_add(cycle);
+        self.step_world(model_now, cycle);
+        self.last_step_at = Some(at);
+        self.free_running = true;
     }
 
     /// [`Stepping::OwnClock`]: run every SYNC0 pulse and watchdog expiry due at or before
@@ -377,16 +439,24 @@ impl Segment {
                 .iter()
                 .filter_map(Esc::watchdog_deadline)
                 .min();
-            match (pulse, watchdog) {
-                (_, Some(w)) if w <= now && pulse.is_none_or(|p| w <= p) => {
-                    for e in &mut self.chain.escs {
-                        if e.watchdog_deadline().is_some_and(|d| d <= w) {
-                            e.tick(w);
-                        }
+            let free = self.free_run_due();
+            // The earliest deadline first; at a tie the watchdog, then SYNC0, then the free run.
+            let first = [watchdog, pulse, free]
+                .into_iter()
+                .flatten()
+                .filter(|&t| t <= now)
+                .min();
+            let Some(t) = first else { break };
+            if watchdog == Some(t) {
+                for e in &mut self.chain.escs {
+                    if e.watchdog_deadline().is_some_and(|d| d <= t) {
+                        e.tick(t);
                     }
                 }
-                (Some(p), _) if p <= now => self.sync0_pulse(p, now),
-                _ => break,
+            } else if pulse == Some(t) {
+                self.sync0_pulse(t, now);
+            } else {
+                self.free_run_step(t, now);
             }
         }
         self.collect_events(now);
@@ -430,6 +500,7 @@ impl Segment {
         self.last_world_sync0 = Some(t);
         let model_now = self.sync_time.saturating_add(Nanos(dt));
         self.step_world(model_now, Nanos(dt));
+        self.stepped_at(t);
     }
 
     /// Move the devices' events into the segment's queue (and the log).
