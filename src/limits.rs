@@ -54,6 +54,13 @@ pub const MAX_EDS_FILE_BYTES: u64 = 16 * MIB;
 /// Largest capture file read back whole (pcap / pcapng): 256 MiB.
 pub const MAX_CAPTURE_FILE_BYTES: u64 = 256 * MIB;
 
+/// Largest object the EtherCAT mailbox clients accept from a device: a CoE SDO upload (its
+/// announced size, and the data of its segments) or an SoE element read joined from fragments:
+/// 1 MiB, the same as the CANopen SDO client's default ([`crate::bus::canopen::sdo::DEFAULT_MAX_SIZE`]).
+/// A larger CoE upload is aborted with 0x0504_0005 "out of memory"; both end with
+/// [`crate::bus::ethercat::mailbox::MailboxError::ObjectTooLarge`].
+pub const MAX_MAILBOX_OBJECT_BYTES: usize = MIB as usize;
+
 /// Most devices in one emulated EtherCAT segment (`sim ethercat --device FILE.xml:COUNT`):
 /// 1024. The protocol allows 65,535 (16-bit auto-increment address), but every emulated
 /// device holds its own 64 KiB ESC memory; 1024 devices are 64 MiB, and far more than any real

@@ -92,6 +92,8 @@ struct Outcome {
     emcy_value: Result<Vec<u8>, String>,
     emcy_codes: Vec<u16>,
     missing: Result<u32, String>,
+    too_large: Result<(usize, usize), String>,
+    after_too_large: Result<Vec<u8>, String>,
 }
 
 #[test]
@@ -103,6 +105,9 @@ fn own_coe_client_fixes_ethercrab_defects() {
         c.insert(ObjectEntry::bytes(0x2000, 0, Access::Rw, &long, 512));
         c.insert(ObjectEntry::bytes(0x2001, 0, Access::Rw, &[0; 8], 8));
         c.insert(ObjectEntry::bytes(0x2002, 0, Access::Rw, b"", 400));
+        // One byte more than the client accepts (1 MiB, limits::MAX_MAILBOX_OBJECT_BYTES).
+        let huge = vec![0xA5; (1 << 20) + 1];
+        c.insert(ObjectEntry::bytes(0x2003, 0, Access::Ro, &huge, huge.len()));
     }
     let seg = Arc::new(Mutex::new(Segment::new(vec![coupler(), servo], 500)));
     let (tx, rx, pdu_loop) = STORAGE.try_split().expect("split once");
@@ -156,7 +161,15 @@ fn own_coe_client_fixes_ethercrab_defects() {
                 Err(MailboxError::Abort { code, .. }) => Ok(code),
                 other => Err(format!("{other:?}")),
             };
+            let too_large = match c.sdo_upload(&md, 0x2003, 0).await {
+                Err(MailboxError::ObjectTooLarge { size, limit }) => Ok((size, limit)),
+                other => Err(format!("{:?}", other.map(|v| v.len()))),
+            };
+            // The client aborted the transfer: the server serves the next request.
+            let after_too_large = s(c.sdo_upload(&md, 0x1000, 0).await);
             Outcome {
+                too_large,
+                after_too_large,
                 device_type,
                 long_ours,
                 long_ethercrab_is_err,
@@ -191,4 +204,10 @@ fn own_coe_client_fixes_ethercrab_defects() {
     // A missing object: the server's abort (CoE service 2, command 0x80) comes back as
     // MailboxError::Abort with CiA 301 0x06020000 "object does not exist".
     assert_eq!(outcome.missing, Ok(0x0602_0000));
+    // A hostile or broken device announcing more than 1 MiB: refused before any segment.
+    assert_eq!(outcome.too_large, Ok(((1 << 20) + 1, 1 << 20)));
+    assert_eq!(
+        outcome.after_too_large,
+        Ok(0x0002_0192u32.to_le_bytes().to_vec())
+    );
 }

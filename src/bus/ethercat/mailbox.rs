@@ -54,6 +54,15 @@ pub enum MailboxError {
     /// Request does not fit the write mailbox.
     #[error("request does not fit the write mailbox ({0} bytes)")]
     TooLarge(usize),
+    /// The device offers an object larger than the client accepts
+    /// ([`crate::limits::MAX_MAILBOX_OBJECT_BYTES`]).
+    #[error("the device offers an object of {size} bytes; at most {limit} bytes are accepted")]
+    ObjectTooLarge {
+        /// Size announced or reached (bytes).
+        size: usize,
+        /// The cap (bytes).
+        limit: usize,
+    },
     /// SoE error reply (SoE header error bit; notes `ethercat.md` §7.3) with its SERCOS error
     /// code.
     #[error(
@@ -494,6 +503,13 @@ impl CoeClient {
             return Err(MailboxError::Protocol("missing size".into()));
         }
         let total = u32::from_le_bytes([f.data[0], f.data[1], f.data[2], f.data[3]]) as usize;
+        if total > crate::limits::MAX_MAILBOX_OBJECT_BYTES {
+            self.send_abort(md, index, sub, 0x0504_0005).await;
+            return Err(MailboxError::ObjectTooLarge {
+                size: total,
+                limit: crate::limits::MAX_MAILBOX_OBJECT_BYTES,
+            });
+        }
         let mut out = f.data[4..].to_vec();
         if out.len() >= total {
             out.truncate(total);

@@ -428,6 +428,12 @@ impl SoeClient {
                     h.elements
                 )));
             }
+            if out.len() + data.len() > crate::limits::MAX_MAILBOX_OBJECT_BYTES {
+                return Err(MailboxError::ObjectTooLarge {
+                    size: out.len() + data.len(),
+                    limit: crate::limits::MAX_MAILBOX_OBJECT_BYTES,
+                });
+            }
             out.extend_from_slice(&data);
             if h.incomplete {
                 // IDN field = fragments left; must count down (bounds the loop).
