@@ -325,11 +325,24 @@ impl Transport {
         mut pacing: Option<&mut Pacing>,
         other_frames: &mut dyn FnMut(Vec<CanFrame>) -> Result<(), LinkError>,
     ) -> Result<Vec<u8>, (Option<SdoError>, String)> {
-        let wall = || Nanos(t0.elapsed().as_nanos() as u64);
+        // The client's clock: the wall clock on a real bus; with in-process nodes virtual
+        // time, `now` plus one SDO_POLL per poll (they answer within the poll that carries the
+        // request, so no wall-clock time-out decides anything there).
+        let emulated = self.emulated.is_some();
+        let mut polls: u64 = 0;
+        let poll_ns = SDO_POLL.as_nanos() as u64;
+        let clock = |polls: u64| {
+            if emulated {
+                Nanos(now.0.saturating_add(polls.saturating_mul(poll_ns)))
+            } else {
+                Nanos(t0.elapsed().as_nanos() as u64)
+            }
+        };
         for f in &first {
             self.send(f).map_err(|e| (None, e.to_string()))?;
         }
-        let deadline = Instant::now() + Duration::from_secs(4);
+        let bound = Duration::from_secs(4);
+        let deadline = Instant::now() + bound;
         loop {
             if let Some(r) = client.take_result() {
                 return r.map_err(|e| {
@@ -337,14 +350,24 @@ impl Transport {
                     (Some(e), text)
                 });
             }
-            if Instant::now() > deadline {
+            let expired = if emulated {
+                polls.saturating_mul(poll_ns) > bound.as_nanos() as u64
+            } else {
+                Instant::now() > deadline
+            };
+            if expired {
                 return Err((None, "no answer".into()));
             }
+            polls += 1;
             self.run_nodes(now);
-            let wait = pacing
-                .as_ref()
-                .and_then(|p| p.until_due())
-                .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL));
+            let wait = if emulated {
+                Duration::ZERO
+            } else {
+                pacing
+                    .as_ref()
+                    .and_then(|p| p.until_due())
+                    .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL))
+            };
             let frames = self.receive_all(wait).map_err(|e| (None, e.to_string()))?;
             let mut replies = Vec::new();
             let mut rest = Vec::new();
@@ -352,13 +375,13 @@ impl Transport {
                 u32::from(crate::bus::canopen::sdo::SDO_TX_BASE) + u32::from(client.node());
             for f in frames {
                 if !f.extended && f.id == response {
-                    replies.extend(client.handle(&f, wall()));
+                    replies.extend(client.handle(&f, clock(polls)));
                 } else {
                     rest.push(f);
                 }
             }
             other_frames(rest).map_err(|e| (None, e.to_string()))?;
-            replies.extend(client.poll(wall()));
+            replies.extend(client.poll(clock(polls)));
             for f in &replies {
                 self.send(f).map_err(|e| (None, e.to_string()))?;
             }
@@ -628,17 +651,32 @@ impl CanopenLink {
 
     fn boot(&mut self) -> Result<(), LinkError> {
         self.send(&NmtCommand::ResetCommunication.frame(0))?;
+        // Two seconds: of the wall clock on a real bus, of 20 ms polls (virtual time) with
+        // in-process nodes.
+        let emulated = self.bus.emulated.is_some();
         let deadline = Instant::now() + Duration::from_secs(2);
+        let mut polls = 0u32;
         loop {
             self.run_nodes(self.now);
-            let frames = self.receive_all(Duration::from_millis(20))?;
+            let wait = if emulated {
+                Duration::ZERO
+            } else {
+                Duration::from_millis(20)
+            };
+            let frames = self.receive_all(wait)?;
             self.note(frames, self.now)?;
             if self.axes.iter().all(|a| {
                 a.state == Some(NmtState::PreOperational) || a.state == Some(NmtState::BootUp)
             }) {
                 break;
             }
-            if Instant::now() > deadline {
+            polls += 1;
+            let expired = if emulated {
+                polls >= 100
+            } else {
+                Instant::now() > deadline
+            };
+            if expired {
                 let missing: Vec<String> = self
                     .axes
                     .iter()
