@@ -11,8 +11,11 @@
 //!   `FIELDPROBE_REQUIRE_SOCKETCAN=1` (set by `.ci/run`), which makes that a failure.
 //!
 //! The guest's CPU is emulated (TCG), 10–30× slower than the host: there the paced runs use a
-//! 40 ms cycle (4 ms on a host), and timing windows of the python peers are widened
-//! ([`canopen_peers::slack`]). What is judged is the same: values, frames, states.
+//! 40 ms cycle (4 ms on a host), the master rides through up to 10 lost cycles instead of 3
+//! (`max_lost_cycles`; the emulated CPU stalls now and then for several cycles when the host
+//! is busy — measured: up to 2 lost cycles in a row and period errors up to 28 ms on a loaded
+//! host), and timing windows of the python peers are widened ([`canopen_peers::slack`]). What
+//! is judged is the same: values, frames, states.
 //!
 //! What runs:
 //! - `fieldprobe run` of meas1 and of the seed's §7.3.2 fixed-stop program over
@@ -83,6 +86,15 @@ fn vcan(test: &str) -> Option<MutexGuard<'static, ()>> {
             );
             None
         }
+    }
+}
+
+/// `max_lost_cycles` of the paced runs (module documentation): the default (3) on a host.
+fn lost_cycles_set() -> &'static str {
+    if in_guest() {
+        "max_lost_cycles=10"
+    } else {
+        "max_lost_cycles=3"
     }
 }
 
@@ -472,6 +484,8 @@ fn vcan_meas1_prints_what_sim_prints_and_candump_canplayer_agree() {
             "socketcan:vcan0",
             "--set",
             &cycle,
+            "--set",
+            lost_cycles_set(),
             "--candump",
             ours.to_str().unwrap(),
         ],
@@ -565,7 +579,7 @@ fn vcan_fixed_stop_program_prints_what_sim_prints() {
     let (code, want, err) = run(program, &args);
     assert_eq!(code, Some(0), "--link sim: {err}");
     let sim = sim_canopen(&["--fixed-stop-at", "3=150"]);
-    let mut args = vec!["--link", "socketcan:vcan0"];
+    let mut args = vec!["--link", "socketcan:vcan0", "--set", lost_cycles_set()];
     args.extend(common);
     let (code, got, err) = run(program, &args);
     drop(sim);
@@ -606,7 +620,7 @@ fn vcan_nmt_stop_from_cansend_is_reported_as_lost_node() {
                 "--link",
                 "socketcan:vcan0",
             ])
-            .args(["--set", &cycle])
+            .args(["--set", &cycle, "--set", lost_cycles_set()])
             .current_dir(env!("CARGO_MANIFEST_DIR"))
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
