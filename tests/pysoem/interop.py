@@ -66,6 +66,10 @@ def u16(b):
     return struct.unpack("<H", b[:2])[0]
 
 
+# Process-data receive bound of each cycle (µs), see Cyclic.exchange.
+RECEIVE_TIMEOUT_US = 500_000
+
+
 class Cyclic:
     """Cyclic process data with working-counter checks."""
 
@@ -82,7 +86,9 @@ class Cyclic:
         o = self.out
         s.output = struct.pack(OUT_FMT, o["cw"], o["target"], o["mode"], o["tp"])
         self.master.send_processdata()
-        wkc = self.master.receive_processdata(10_000)
+        # A generous bound (µs): the emulator is an ordinary process beside SOEM; on a loaded
+        # machine it may answer a frame tens of milliseconds late (a lost frame is then -1).
+        wkc = self.master.receive_processdata(RECEIVE_TIMEOUT_US)
         self.cycles += 1
         self.wkcs.add(wkc)
         if wkc != self.master.expected_wkc:
