@@ -230,7 +230,7 @@ pub fn python_master_drives_sim(python: &Path, bus: PeerBus) {
             .expect("spawn fieldprobe sim canopen"),
     );
     let sim_err = lines_of(sim.0.stderr.take().expect("stderr"));
-    let (ready, seen) = wait_line(&sim_err, "listening", Duration::from_secs(10));
+    let (ready, seen) = wait_line(&sim_err, "listening", Duration::from_secs(10) * slack());
     assert!(ready, "sim canopen not listening: {seen:?}");
 
     // Surface in increments, from the drive file's scaling (10000 inc/mm, offset 0).
@@ -337,7 +337,7 @@ impl Master {
         for f in &first {
             self.bus.send(f).expect("send");
         }
-        let hard_stop = Instant::now() + Duration::from_secs(10);
+        let hard_stop = Instant::now() + Duration::from_secs(10) * slack();
         while self.sdo.busy() {
             assert!(Instant::now() < hard_stop, "SDO transfer did not end");
             let got = self.bus.recv(Duration::from_millis(5)).expect("recv");
@@ -388,7 +388,7 @@ pub fn rust_master_against_local_node(python: &Path, eds_path: &Path, bus: PeerB
             .args(bus.python_args())
             .arg(LOCAL_ID.to_string())
             .arg(eds_path)
-            .arg("20")
+            .arg((20 * slack()).to_string())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
@@ -396,7 +396,9 @@ pub fn rust_master_against_local_node(python: &Path, eds_path: &Path, bus: PeerB
     );
     let node_out = lines_of(node.0.stdout.take().expect("stdout"));
     let node_err = lines_of(node.0.stderr.take().expect("stderr"));
-    let (ready, seen) = wait_line(&node_out, "READY", Duration::from_secs(20));
+    // Python with canopen imports and parses the EDS first: seconds on a host, tens of seconds
+    // in the emulated guest on a loaded machine.
+    let (ready, seen) = wait_line(&node_out, "READY", Duration::from_secs(20) * slack());
     assert!(
         ready,
         "LocalNode not ready: {seen:?} {:?}",
@@ -448,7 +450,7 @@ pub fn rust_master_against_local_node(python: &Path, eds_path: &Path, bus: PeerB
         .send(&NmtCommand::Start.frame(LOCAL_ID))
         .expect("send NMT start");
     let t_start = Instant::now();
-    let deadline = t_start + Duration::from_secs(5);
+    let deadline = t_start + Duration::from_secs(5) * slack();
     let mut states = Vec::new();
     while Instant::now() < deadline {
         if let Some(f) = m.bus.recv(Duration::from_millis(50)).expect("recv") {
