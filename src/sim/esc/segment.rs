@@ -302,6 +302,7 @@ impl Segment {
         // Own clock: what fell due before the frame arrived happens first.
         self.handle_timeout(now_ns);
         let chain = &mut self.chain;
+        chain.refresh_irq();
         let miscount = self.miscount.contains(&n);
         // End of this frame's logical writes (0: none).
         let mut write_end = 0u64;
@@ -314,14 +315,15 @@ impl Segment {
                 write_end = write_end.max(end);
             }
             let mut wkc = dg.wkc();
-            let new_addr = chain.process_raw(cmd, raw_addr, dg.data_mut(), &mut wkc, now_ns);
+            let (new_addr, devices_irq) =
+                chain.process_raw_with_irq(cmd, raw_addr, dg.data_mut(), &mut wkc, now_ns);
             if miscount && dg.command().addressing() == wire::Addressing::Logical {
                 // A device that did not take part: one count short.
                 wkc = wkc.saturating_sub(1);
             }
             dg.set_address(new_addr);
             dg.set_wkc(wkc);
-            let irq = dg.irq() | chain.irq();
+            let irq = dg.irq() | devices_irq;
             dg.set_irq(irq);
         })?;
         wire::mark_processed(frame);
