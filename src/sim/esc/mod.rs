@@ -261,6 +261,8 @@ pub struct Esc {
     events: Vec<EscEvent>,
     /// Reused buffer of the logical datagrams' write bytes.
     scratch: Vec<u8>,
+    /// [`Self::watchdog_guarded`], computed once per sync-manager configuration.
+    wd_guarded: std::cell::Cell<Option<bool>>,
 }
 
 /// Which bits of each byte of an FMMU segment are mapped: the FMMU's start bit on its first
@@ -339,6 +341,7 @@ impl Esc {
             sync_errors: 0,
             events: Vec::new(),
             scratch: Vec::new(),
+            wd_guarded: std::cell::Cell::new(None),
             cfg,
         };
         esc.power_on();
@@ -444,8 +447,15 @@ impl Esc {
         u64::from_le_bytes(self.peek_array(addr))
     }
 
+    /// A sync manager register or the AL state may have changed: forget what was derived from
+    /// them.
+    fn sm_config_changed(&self) {
+        self.wd_guarded.set(None);
+    }
+
     /// Write memory from the PDI side (no ECAT write protection, no side effects).
     pub fn poke(&mut self, addr: u16, bytes: &[u8]) {
+        self.sm_config_changed();
         for (i, b) in bytes.iter().enumerate() {
             if let Some(m) = self.mem.get_mut(usize::from(addr) + i) {
                 *m = *b;
@@ -972,6 +982,9 @@ impl Esc {
 
     fn after_write(&mut self, start: usize, inc: &[u8], old_act: &[u8], now: u64) {
         let len = inc.len();
+        if range_overlaps(start, len, 0x0800, 0x80) {
+            self.sm_config_changed();
+        }
         let byte_at = |a: u16| -> Option<u8> {
             let a = usize::from(a);
             (a >= start && a < start + len).then(|| inc[a - start])
@@ -1220,6 +1233,7 @@ impl Esc {
     /// SM PDI control bit 0 ("deactivate"): the firmware keeps the mailbox SMs off in INIT and
     /// the process-data SMs off below SAFE-OP.
     fn update_sm_pdi_control(&mut self) {
+        self.sm_config_changed();
         let mbx = self.cfg.mailbox.is_some();
         for n in 0..self.sm_count() {
             let mailbox_sm = mbx && n < 2;
