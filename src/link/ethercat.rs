@@ -346,6 +346,8 @@ struct WireEnd {
     frames: u64,
     /// The logical datagrams of the current process-data cycle, out and back.
     log: DatagramLog,
+    /// The buffer of the frame being sent.
+    buf: Vec<u8>,
 }
 
 impl WireEnd {
@@ -357,12 +359,15 @@ impl WireEnd {
     /// Send every queued frame; emulated: process and hand back at once; interface: send.
     fn pump(&mut self) {
         while let Some(frame) = self.tx.next_sendable_frame() {
-            let mut buf = Vec::with_capacity(1514);
+            // The frame buffer is kept (no allocation per frame).
+            let mut buf = std::mem::take(&mut self.buf);
+            buf.clear();
             let sent = frame.send_blocking(|b| {
                 buf.extend_from_slice(b);
                 Ok(b.len())
             });
             if sent.is_err() {
+                self.buf = buf;
                 continue;
             }
             if let Some(tap) = self.tap.as_mut() {
@@ -385,6 +390,7 @@ impl WireEnd {
             } else if let Some(port) = self.port.as_mut() {
                 let _ = port.send(&buf);
             }
+            self.buf = buf;
         }
     }
 
@@ -1222,6 +1228,7 @@ fn connect(
         lost: false,
         frames: 0,
         log: DatagramLog::default(),
+        buf: Vec::with_capacity(crate::bus::ethercat::wire::MAX_ETHERNET_FRAME),
     };
     let timeouts = if emulated {
         Timeouts {

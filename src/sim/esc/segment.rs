@@ -36,7 +36,7 @@ use std::collections::VecDeque;
 use super::{Esc, EscChain, EscEvent};
 use crate::bus::ethercat::wire::{self, Command, WireError};
 use crate::drive::model::DriveModel;
-use crate::sim::world::{Port, World};
+use crate::sim::world::{PortBuffer, World};
 use crate::units::Nanos;
 
 /// How the hosted drive models are stepped (see the module documentation).
@@ -102,6 +102,8 @@ pub struct Segment {
     drop_frames: std::collections::BTreeSet<u64>,
     miscount: std::collections::BTreeSet<u64>,
     offered: u64,
+    /// The hosted models' ports during a world step (kept: no allocation per step).
+    ports: PortBuffer,
     /// End (exclusive) of the highest logical address a logical write has reached so far: a
     /// frame whose logical write reaches it completes a process-data cycle (per-frame stepping).
     image_end: u64,
@@ -130,6 +132,7 @@ impl Segment {
             drop_frames: std::collections::BTreeSet::new(),
             miscount: std::collections::BTreeSet::new(),
             offered: 0,
+            ports: PortBuffer::default(),
             image_end: 0,
         }
     }
@@ -215,14 +218,12 @@ impl Segment {
         let Some(world) = self.world.as_mut() else {
             return;
         };
-        let mut ports: Vec<Port<'_>> = self
+        let ports = self
             .chain
             .escs
             .iter_mut()
-            .filter_map(|e| e.app_mut().port())
-            .collect();
-        world.step(now, cycle, &mut ports);
-        drop(ports);
+            .filter_map(|e| e.app_mut().port());
+        self.ports.with(ports, |p| world.step(now, cycle, p));
         for esc in &mut self.chain.escs {
             esc.poll_app_mailbox();
         }
