@@ -226,6 +226,8 @@ pub struct Machine {
     startup: Vec<CncMessage>,
     /// Recorded trace (`--trace`), when enabled.
     trace: Option<Trace>,
+    /// The machine's terminals by name, in `[[terminal]]` order (EtherCAT links).
+    terminals: Vec<String>,
 }
 
 impl std::fmt::Debug for Machine {
@@ -346,6 +348,12 @@ impl Machine {
             )));
         }
         choice.check_options().map_err(MachineError::Config)?;
+        if let Some(t) = cfg.terminals.first().filter(|_| !choice.is_ethercat()) {
+            return Err(MachineError::Config(format!(
+                "{}:{}: [[terminal]] {} is an EtherCAT SubDevice; --link {} has none (use ethercat-emu or ethercat:IFACE)",
+                cfg.source, t.line, t.name, choice.link
+            )));
+        }
         let cycle = Nanos::from_micros(u64::from(cfg.cycle_time_us));
         let mut axes = Vec::new();
         let mut models = Vec::new();
@@ -452,6 +460,8 @@ impl Machine {
                     drives: defs,
                     cycle,
                     pcap: choice.pcap.clone(),
+                    terminals: ethercat_terminals(cfg)?,
+                    emulated_extra: Vec::new(),
                 };
                 let link = EthercatLink::open(&wire, &spec)
                     .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?;
@@ -482,12 +492,36 @@ impl Machine {
             plcs: (0..cfg.axes.len()).map(|_| None).collect(),
             startup,
             trace: None,
+            terminals: cfg.terminals.iter().map(|t| t.name.clone()).collect(),
         })
     }
 
     /// The channel.
     pub fn channel(&self) -> &Channel {
         &self.channel
+    }
+
+    /// What the link reported when it came up (EtherCAT: the segment, SubDevices the machine
+    /// does not name, the wire time per cycle; info 900400 – 900402).
+    pub fn startup_report(&self) -> Vec<CncMessage> {
+        self.link.startup_report()
+    }
+
+    /// The names of the machine's terminals (`[[terminal]]`), in ring order.
+    pub fn terminal_names(&self) -> &[String] {
+        &self.terminals
+    }
+
+    /// The process inputs of terminal `name` after the last cycle (`None`: no such terminal).
+    pub fn terminal_inputs(&self, name: &str) -> Option<&[u8]> {
+        let i = self.terminals.iter().position(|t| t == name)?;
+        self.link.terminal_inputs(i)
+    }
+
+    /// The process outputs of terminal `name`, sent with the next cycle.
+    pub fn terminal_outputs_mut(&mut self, name: &str) -> Option<&mut [u8]> {
+        let i = self.terminals.iter().position(|t| t == name)?;
+        self.link.terminal_outputs_mut(i)
     }
 
     /// The statistics of the paced cycle (links that leave the process), see
@@ -1151,4 +1185,22 @@ fn check_probing_input(
         def.profile.name(),
         def.name
     )))
+}
+
+/// The machine's `[[terminal]]` tables with their ESI files loaded (relative paths from the
+/// machine file's directory).
+fn ethercat_terminals(
+    cfg: &MachineConfig,
+) -> Result<Vec<crate::link::ethercat::terminals::TerminalSpec>, MachineError> {
+    let base = std::path::Path::new(&cfg.source).parent();
+    cfg.terminals
+        .iter()
+        .map(|t| {
+            let mut spec =
+                crate::link::ethercat::terminals::TerminalSpec::resolve(&t.name, &t.esi, base)
+                    .map_err(|e| MachineError::Config(format!("{}:{}: {e}", cfg.source, t.line)))?;
+            spec.after_axes = t.after_axes;
+            Ok(spec)
+        })
+        .collect()
 }

@@ -9,6 +9,8 @@ use std::fmt;
 /// Severity of a [`CncMessage`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Severity {
+    /// A report at start-up (the EtherCAT segment and its wire time); nothing is wrong.
+    Info,
     /// Reported; the program goes on.
     Warning,
     /// The program is aborted (the seeds' "Reset the controller").
@@ -18,6 +20,7 @@ pub enum Severity {
 impl fmt::Display for Severity {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
+            Severity::Info => "info",
             Severity::Warning => "warning",
             Severity::Error => "error",
         })
@@ -58,6 +61,17 @@ pub struct CncMessage {
 }
 
 impl CncMessage {
+    /// A report (start-up information).
+    pub fn info(id: u32, text: impl Into<String>) -> Self {
+        CncMessage {
+            id,
+            severity: Severity::Info,
+            text: text.into(),
+            block: None,
+            axis: None,
+        }
+    }
+
     /// A warning.
     pub fn warning(id: u32, text: impl Into<String>) -> Self {
         CncMessage {
@@ -112,7 +126,8 @@ impl CncMessage {
 }
 
 impl fmt::Display for CncMessage {
-    /// `warning <ID>: <text> (N<block>)` — the CLI's stderr contract (DESIGN.md).
+    /// `warning <ID>: <text> (N<block>)` — the CLI's stderr contract (DESIGN.md); start-up
+    /// reports are `info <ID>: <text>`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} {}: {}", self.severity, self.id, self.text)?;
         if let Some(b) = self.block {
@@ -256,6 +271,19 @@ pub mod ids {
     /// Project (seed 000 §5, with P-MANU-00014): a jog stopped ahead of a workspace / protection
     /// area boundary (warning).
     pub const AREA_JOG_STOPPED: u32 = 900318;
+
+    /// Project (info, start-up): the EtherCAT segment — SubDevices in OP, how many are axis
+    /// drives, named terminals and not named, the process image and its datagrams.
+    pub const ETHERCAT_SEGMENT: u32 = 900400;
+    /// Project (info, start-up): one SubDevice the machine file does not name, taken to OP with
+    /// its default process data (position, name, identity, image sizes).
+    pub const ETHERCAT_NOT_NAMED: u32 = 900401;
+    /// Project (info, start-up): the wire time of one EtherCAT cycle (frames × bytes at
+    /// 100 Mbit/s plus the devices' forwarding delay) and its share of the cycle time.
+    pub const ETHERCAT_WIRE_TIME: u32 = 900402;
+    /// Project (error, start-up): the cycle time is shorter than the EtherCAT wire needs per
+    /// cycle; names the wire time and the shortest cycle the wire carries.
+    pub const ETHERCAT_CYCLE_TOO_SHORT: u32 = 900403;
 }
 
 /// A number from a user or a file, for a message: as Rust writes it for ordinary magnitudes,

@@ -11,11 +11,13 @@
 //! cia402-generic.toml`: 10000 increments / mm), so a latched value is the true crossing
 //! ± 0.05 µm; [`LATCH_TOL`] = 0.1 µm.
 
+#[path = "common/seed004.rs"]
+mod seed004;
 #[path = "common/test_data.rs"]
 mod test_data;
+use seed004::seed_annotations;
 
 use serde_json::Value;
-use std::path::PathBuf;
 #[path = "common/cli.rs"]
 mod cli;
 use cli::{fieldprobe, stderr, stdout};
@@ -86,45 +88,6 @@ fn completed_without_messages(r: &Value) {
 // ---------------------------------------------------------------------------------------------
 // The seed's annotations
 // ---------------------------------------------------------------------------------------------
-
-fn seed_path() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/seeds");
-    std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .find(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with("004_"))
-        })
-        .expect("seed 004 in ../shared/seeds")
-}
-
-/// The `-> NAME = VALUE` (or `\rightarrow NAME = VALUE`) annotations of the program `%name` in
-/// seed 004 §5, in order.
-fn seed_annotations(name: &str) -> Vec<(String, f64)> {
-    let text = std::fs::read_to_string(seed_path()).expect("read seed 004");
-    let start = text
-        .find(&format!("%{name}\n"))
-        .unwrap_or_else(|| panic!("%{name} not in seed 004"));
-    let block = &text[start..];
-    let block = &block[..block.find("```").expect("end of the program listing")];
-    let mut out = Vec::new();
-    for line in block.lines() {
-        let rest = if let Some(i) = line.find("\\rightarrow") {
-            &line[i + "\\rightarrow".len()..]
-        } else if let Some(i) = line.find("->") {
-            &line[i + 2..]
-        } else {
-            continue;
-        };
-        let (n, v) = rest.split_once('=').expect("NAME = VALUE");
-        let v: f64 = v.trim().parse().expect("a number");
-        out.push((n.trim().to_string(), v));
-    }
-    out
-}
 
 #[test]
 fn the_seed_annotations_are_parsed() {

@@ -784,8 +784,8 @@ fn machine_toml_syntax_errors_have_lines() {
 #[test]
 fn machine_structure_errors() {
     let cases = [
-        ("[foo]\nx = 1\n", "m.toml:1: unknown table [foo]; allowed tables are [channel], [manual], [[axis]], [tool.<D>] and [zero_offset.G54…G59]"),
-        ("cycle_time_us = 1000\n", "m.toml:1: 'cycle_time_us' is outside any table; allowed tables are [channel], [manual], [[axis]], [tool.<D>] and [zero_offset.G54…G59]; cycle_time_us belongs in [channel]"),
+        ("[foo]\nx = 1\n", "m.toml:1: unknown table [foo]; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>] and [zero_offset.G54…G59]"),
+        ("cycle_time_us = 1000\n", "m.toml:1: 'cycle_time_us' is outside any table; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>] and [zero_offset.G54…G59]; cycle_time_us belongs in [channel]"),
         ("[axis]\nname = \"X\"\n", "m.toml:1: 'axis' must be an array of tables: write [[axis]] once per axis"),
         ("[channel]\nmesstyp = 1\n", "m.toml: no [[axis]] table; a machine needs at least one axis (name = \"X\")"),
         ("[[axis]]\ndrive = \"x\"\n", "m.toml:1: [[axis]] without a name; expected e.g. name = \"X\""),

@@ -37,6 +37,7 @@ pub fn segment() -> Segment {
         drives,
         cycle: Nanos(1_000_000),
         pcap: None,
+        ..EthercatSpec::default()
     };
     emulated_segment(&spec).expect("emulated segment")
 }

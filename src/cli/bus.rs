@@ -115,15 +115,32 @@ impl BusArgs {
                 self.link
             )
         })?;
-        let drives = if wire == Wire::Emulated {
-            load_drives(&load_machine(self.machine.as_deref(), &self.sets)?)?
+        let (drives, terminals) = if wire == Wire::Emulated {
+            // The emulated segment of the machine: its axes' drives and its terminals.
+            let cfg = load_machine(self.machine.as_deref(), &self.sets)?;
+            let base = std::path::Path::new(&cfg.source).parent();
+            let terminals = cfg
+                .terminals
+                .iter()
+                .map(|t| {
+                    let mut spec = fieldprobe::link::ethercat::terminals::TerminalSpec::resolve(
+                        &t.name, &t.esi, base,
+                    )
+                    .map_err(|e| anyhow::anyhow!("{}:{}: {e}", cfg.source, t.line))?;
+                    spec.after_axes = t.after_axes;
+                    Ok(spec)
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            (load_drives(&cfg)?, terminals)
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new())
         };
         let spec = EthercatSpec {
             drives,
             cycle: fieldprobe::units::Nanos::from_micros(1000),
             pcap: self.pcap.clone(),
+            terminals,
+            emulated_extra: Vec::new(),
         };
         Session::open(&wire, &spec).map_err(|e| anyhow::anyhow!("--link {}: {e}", self.link))
     }

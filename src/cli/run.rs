@@ -69,6 +69,10 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         return Ok(EXIT_BAD_INPUT);
     }
     let mut machine = Machine::with_link(&cfg, &choice)?;
+    // The bus as it came up: EtherCAT segment, SubDevices not named, wire time per cycle.
+    for m in machine.startup_report() {
+        eprintln!("{m}");
+    }
     // The cyclic phase runs with the real-time options; the start-up (SII, mailbox, PDO
     // mapping) ran without them, as the masters' start-up threads do.
     match a.link.rt().apply() {

@@ -63,14 +63,14 @@ use anyhow::Context;
 use fieldprobe::bus::can::{CanBus, CanError};
 use fieldprobe::bus::canopen::eds;
 use fieldprobe::drive::catalogue;
-use fieldprobe::esi::{self, sii, to_sii, Device, EsiFile, SmKind};
+use fieldprobe::esi::{self, Device, EsiFile};
 use fieldprobe::limits::MAX_SEGMENT_DEVICES;
 use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
     device::{emulated_servo, DEFAULT_CYCLE},
     raw,
     segment::{Segment, Stepping},
-    EchoApp, Esc, EscApplication, EscConfig, NullApp,
+    terminal, Esc,
 };
 use fieldprobe::sim::plant::{FixedStop, Plant, ProbeSurface};
 use fieldprobe::sim::world::World;
@@ -160,25 +160,6 @@ fn split_count(spec: &str) -> anyhow::Result<(PathBuf, usize)> {
     Ok((PathBuf::from(spec), 1))
 }
 
-/// Process-data sizes (outputs, inputs) in bytes: the PDOs assigned by default.
-fn pd_sizes(device: &Device) -> (u16, u16) {
-    let bytes = |pdos: &[esi::Pdo], kind: SmKind| -> u16 {
-        let bits: u32 = pdos
-            .iter()
-            .filter(|p| {
-                p.sm.and_then(|n| device.sync_managers.get(usize::from(n)))
-                    .is_some_and(|sm| sm.kind == kind)
-            })
-            .map(|p| p.bit_len())
-            .sum();
-        u16::try_from(bits.div_ceil(8)).unwrap_or(u16::MAX)
-    };
-    (
-        bytes(&device.rx_pdos, SmKind::Outputs),
-        bytes(&device.tx_pdos, SmKind::Inputs),
-    )
-}
-
 /// `POS=VALUE` → (ring position, value).
 fn split_position<'a>(option: &str, spec: &'a str) -> anyhow::Result<(usize, &'a str)> {
     let (pos, value) = spec
@@ -210,11 +191,6 @@ enum Hosted {
     Timestamp,
 }
 
-/// An EL1252-kind terminal by its ESI type name.
-fn is_el1252(device: &Device) -> bool {
-    device.type_name.to_ascii_uppercase().contains("EL1252")
-}
-
 fn build_device(
     path: &Path,
     file: &EsiFile,
@@ -238,38 +214,21 @@ fn build_device(
         );
         return Ok((esc, Hosted::Servo(def.scaling)));
     }
-    if is_el1252(device) {
-        let esc = fieldprobe::sim::esc::device::emulated_el1252(
-            file,
-            device,
-            2,
-            fieldprobe::drive::el1252::LatchMode::Continuous,
-            fieldprobe::core::measure::timestamp::DcClock::default(),
-        )
+    let kind = terminal::terminal_kind(device);
+    let esc = terminal::emulated_terminal(file, device)
         .map_err(|e| anyhow::anyhow!("device {position} ({shown}): {e}"))?;
+    if kind == terminal::TerminalKind::Timestamp {
         eprintln!(
             "fieldprobe sim ethercat: device {position}: {} (timestamp terminal, 2 channels)",
             device.type_name
         );
         return Ok((esc, Hosted::Timestamp));
     }
-    let content = to_sii::sii_from_device(file, device)
-        .with_context(|| format!("--device {shown}: cannot build the SII image"))?;
-    let image = sii::encode(&content)
-        .with_context(|| format!("--device {shown}: cannot encode the SII image"))?;
-    let app: Box<dyn EscApplication> = match pd_sizes(device) {
-        (0, 0) => Box::new(NullApp),
-        (o, i) => {
-            let mut app = EchoApp::new(o, i);
-            app.loopback = true;
-            Box::new(app)
-        }
-    };
     eprintln!(
         "fieldprobe sim ethercat: device {position}: {}",
         device.type_name
     );
-    Ok((Esc::new(EscConfig::from_sii(image), app), Hosted::Nothing))
+    Ok((esc, Hosted::Nothing))
 }
 
 fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {

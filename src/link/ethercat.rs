@@ -18,14 +18,31 @@
 //!
 //! # One exchange at `now`
 //!
-//! Outputs go into ethercrab's PDI and one LRW carries them to the devices and brings back the
-//! inputs the devices latched at their previous SYNC0; on `ethercat-emu` the emulated segment
-//! then runs SYNC0 at `now` (every drive model steps once, with the plant — probe surfaces and
-//! fixed stops — exactly as [`SimLink`](super::sim::SimLink) does), filling the inputs the next
-//! frame reads. The actual values thus arrive one cycle after they were sampled: the link's dead
-//! time is two cycles ([`Link::dead_time_cycles`]), as over `--link sim`. On a real interface
-//! the same one LRW per cycle is sent (the devices' own SYNC0 decides when they sample). A wrong working counter or a frame that does not come back is
-//! [`LinkError::Lost`]; the inputs are then left untouched.
+//! Outputs go into ethercrab's PDI and the LRW datagrams carry them to the devices and bring
+//! back the inputs the devices latched at their previous SYNC0; on `ethercat-emu` the emulated
+//! segment then runs SYNC0 at `now` (every drive model steps once, with the plant — probe
+//! surfaces and fixed stops — exactly as [`SimLink`](super::sim::SimLink) does), filling the
+//! inputs the next exchange reads. The actual values thus arrive one cycle after they were
+//! sampled: the link's dead time is two cycles ([`Link::dead_time_cycles`]), as over `--link
+//! sim`. On a real interface the same datagrams are sent (the devices' own SYNC0 decides when
+//! they sample).
+//!
+//! A process image longer than a frame goes out as one LRW per frame (ethercrab 0.7.1 splits
+//! it, [`cycle_plan`]); every LRW's working counter is checked on its own against the one the
+//! devices' FMMU windows call for ([`datagrams`]), and a lost or miscounted one is named (its
+//! number in the cycle, logical range and devices) in [`LinkError::Lost`]; the inputs are then
+//! left untouched.
+//!
+//! # The segment
+//!
+//! Besides the axes' drives a machine names I/O terminals ([`terminals`]: `[[terminal]]` in the
+//! machine file), found on the bus by identity in ring order, their process data reachable
+//! through [`Link::terminal_inputs`] / [`Link::terminal_outputs_mut`]; every other SubDevice
+//! goes to OP with its default process data and is listed at start-up
+//! ([`Link::startup_report`], info 900401). Before SAFE-OP the link computes the wire time of
+//! one cycle ([`cycle_plan::WireTime`]: the frames at 100 Mbit/s with their Ethernet overhead,
+//! plus 1 µs per device and frame) and refuses a cycle time shorter than that (error 900403);
+//! the figure is reported at start-up (info 900402).
 //!
 //! # Acyclic access
 //!
@@ -36,8 +53,13 @@
 //!
 //! # Limits
 //!
+//! At most [`MAX_SUBDEVICES`] SubDevices and [`MAX_PDI`] bytes of process image per link.
 //! Each link leaks one ethercrab `PduStorage` (about 24 kB; ethercrab needs it `'static` and
 //! lets it be split once), which is fine for a process that opens a handful of links.
+
+pub mod cycle_plan;
+pub mod datagrams;
+pub mod terminals;
 
 use std::collections::BTreeSet;
 use std::future::Future;
@@ -51,6 +73,9 @@ use ethercrab::{
     DcSync, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceGroup, Timeouts,
 };
 
+use self::cycle_plan::{CyclePlan, WireTime};
+use self::datagrams::{DatagramLog, FmmuWindow, LogicalMap};
+use self::terminals::{BusDevice, Role, TerminalSpec};
 use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
 use crate::bus::ethercat::mailbox::{CoeClient, MailboxError};
 use crate::bus::ethercat::pcap::{PcapWriter, TimestampResolution};
@@ -58,6 +83,7 @@ use crate::bus::ethercat::soe::SoeClient;
 use crate::drive::catalogue::{DriveDefinition, Profile};
 use crate::drive::model::DriveModel;
 use crate::esi;
+use crate::messages::{ids, CncMessage};
 use crate::rt::{CycleClock, CycleRecord};
 use crate::sim::esc::device::emulated_drive;
 use crate::sim::esc::segment::Segment;
@@ -66,14 +92,18 @@ use crate::sim::plant::Plant;
 use crate::sim::world::World;
 use crate::units::Nanos;
 
-/// SubDevices a link can hold.
-pub const MAX_SUBDEVICES: usize = 64;
+/// SubDevices a link can hold (a channel of 32 axes with their I/O terminals and couplers:
+/// issue 16 runs 32 drives + 64 terminals + a coupler).
+pub const MAX_SUBDEVICES: usize = 128;
 /// Process data image bytes a link can hold (inputs and outputs of all devices).
-pub const MAX_PDI: usize = 4096;
+pub const MAX_PDI: usize = 8192;
 const MAX_FRAMES: usize = 16;
 /// Datagram bytes per frame: a full Ethernet frame (1514 bytes − 14 Ethernet − 2 EtherCAT header).
-const FRAME_DATA: usize = 1498;
-const PDU_DATA: usize = PduStorage::element_size(FRAME_DATA);
+pub const FRAME_DATA: usize = 1498;
+/// ethercrab's storage element is a whole Ethernet frame (its `element_size(n)` is the frame of
+/// one `n`-byte datagram, 28 + n): 1514 bytes, so a frame ethercrab fills (an LRW part takes the
+/// rest of its frame) carries [`FRAME_DATA`] datagram bytes and never exceeds the Ethernet MTU.
+const PDU_DATA: usize = crate::bus::ethercat::wire::MAX_ETHERNET_FRAME;
 
 type Storage = PduStorage<MAX_FRAMES, PDU_DATA>;
 
@@ -110,7 +140,7 @@ impl Wire {
 }
 
 /// What to build an EtherCAT link for: one entry per axis, in axis order.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct EthercatSpec {
     /// Drive definition per axis.
     pub drives: Vec<Arc<DriveDefinition>>,
@@ -118,6 +148,11 @@ pub struct EthercatSpec {
     pub cycle: Nanos,
     /// Write every frame (both directions) into this pcap file.
     pub pcap: Option<std::path::PathBuf>,
+    /// The SubDevices of the machine that are not axes (I/O terminals), in ring order.
+    pub terminals: Vec<TerminalSpec>,
+    /// `ethercat-emu` only: devices the emulated segment carries after the machine's, which the
+    /// machine does not name (as a real segment carries spare terminals).
+    pub emulated_extra: Vec<TerminalSpec>,
 }
 
 /// The ESI text the emulator uses for a drive, if it emulates that drive on EtherCAT: CiA 402
@@ -150,8 +185,11 @@ fn embedded(text: &'static str, name: &str) -> Result<&'static esi::EsiFile, Lin
     Ok(file)
 }
 
-/// The emulated segment for `spec`: a coupler, then one drive per axis (the ESI of its family,
-/// the model of its drive definition), with an empty plant, synchronised at SYNC0.
+/// The emulated segment for `spec`: a coupler, then the machine's SubDevices in ring order
+/// ([`terminals::ring_order`]) — one drive per axis (the ESI of its family, the model of its
+/// drive definition) and its terminals (each played as
+/// [`emulated_terminal`](crate::sim::esc::terminal::emulated_terminal) plays it) — then the
+/// extra devices, with an empty plant, synchronised at SYNC0.
 pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
     let other = |m: String| LinkError::Other(m);
     let coupler_esi = embedded(COUPLER_ESI, "esi/fieldprobe-ek1100.xml")?;
@@ -165,7 +203,27 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
         esi::sii::encode_padded(&content).map_err(|e| other(format!("coupler SII: {e}")))?;
     let mut escs = vec![Esc::new(EscConfig::from_sii(image), Box::new(NullApp))];
     let cycle = Duration::from_nanos(spec.cycle.0.max(1));
-    for (axis, def) in spec.drives.iter().enumerate() {
+    let terminal_esc = |t: &TerminalSpec| -> Result<Esc, LinkError> {
+        let device = t
+            .device()
+            .ok_or_else(|| other(format!("terminal {}: the ESI has no device", t.name)))?;
+        crate::sim::esc::terminal::emulated_terminal(&t.esi, device)
+            .map_err(|e| other(format!("terminal {} ({}): {e}", t.name, t.source)))
+    };
+    for d in terminals::ring_order(spec.drives.len(), &spec.terminals) {
+        let k = match d {
+            terminals::Declared::Axis(k) => k,
+            terminals::Declared::Terminal(k) => {
+                if let Some(t) = spec.terminals.get(k) {
+                    escs.push(terminal_esc(t)?);
+                }
+                continue;
+            }
+        };
+        let Some(def) = spec.drives.get(k) else {
+            continue;
+        };
+        let axis = k;
         let text = esi_for(def).ok_or_else(|| {
             other(format!(
                 "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives and EL5101 terminals only",
@@ -181,6 +239,15 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
         let esc = emulated_drive(file, device, def, cycle)
             .map_err(|e| other(format!("axis {axis}, drive '{}': {e}", def.name)))?;
         escs.push(esc);
+    }
+    for t in &spec.emulated_extra {
+        escs.push(terminal_esc(t)?);
+    }
+    if escs.len() > MAX_SUBDEVICES {
+        return Err(other(format!(
+            "the emulated segment would have {} SubDevices; the link holds at most {MAX_SUBDEVICES}",
+            escs.len()
+        )));
     }
     let mut seg = Segment::new(escs, HOP_DELAY_NS);
     seg.set_world(World::new(Plant::new()), spec.cycle);
@@ -209,6 +276,17 @@ struct AxisDevice {
     def: Arc<DriveDefinition>,
     mailbox: Mailbox,
     name: String,
+}
+
+/// One terminal of the machine on the bus, with its process images (copied to and from
+/// ethercrab's PDI at every exchange).
+#[derive(Debug)]
+struct TerminalDevice {
+    /// Index of the SubDevice in the group.
+    sub: usize,
+    name: String,
+    outputs: Vec<u8>,
+    inputs: Vec<u8>,
 }
 
 /// Frame tap: every frame sent and received goes into a pcap file (`--pcap`). A write that
@@ -266,6 +344,10 @@ struct WireEnd {
     lost: bool,
     /// Emulated wire: frames the current [`drive`] call has put through the segment.
     frames: u64,
+    /// The logical datagrams of the current process-data cycle, out and back.
+    log: DatagramLog,
+    /// The buffer of the frame being sent.
+    buf: Vec<u8>,
 }
 
 impl WireEnd {
@@ -277,17 +359,21 @@ impl WireEnd {
     /// Send every queued frame; emulated: process and hand back at once; interface: send.
     fn pump(&mut self) {
         while let Some(frame) = self.tx.next_sendable_frame() {
-            let mut buf = Vec::with_capacity(1514);
+            // The frame buffer is kept (no allocation per frame).
+            let mut buf = std::mem::take(&mut self.buf);
+            buf.clear();
             let sent = frame.send_blocking(|b| {
                 buf.extend_from_slice(b);
                 Ok(b.len())
             });
             if sent.is_err() {
+                self.buf = buf;
                 continue;
             }
             if let Some(tap) = self.tap.as_mut() {
                 tap.record(&buf);
             }
+            self.log.record(&buf, false);
             if let Some(seg) = self.segment.as_mut() {
                 let now = self.t0.elapsed().as_nanos() as u64;
                 // A dropped (fault knob) or invalid frame is lost on the wire.
@@ -296,6 +382,7 @@ impl WireEnd {
                     if let Some(tap) = self.tap.as_mut() {
                         tap.record(&buf);
                     }
+                    self.log.record(&buf, true);
                     let _ = self.rx.receive_frame(&buf);
                 } else {
                     self.lost = true;
@@ -303,6 +390,7 @@ impl WireEnd {
             } else if let Some(port) = self.port.as_mut() {
                 let _ = port.send(&buf);
             }
+            self.buf = buf;
         }
     }
 
@@ -317,6 +405,7 @@ impl WireEnd {
             if let Some(tap) = self.tap.as_mut() {
                 tap.record(&frame);
             }
+            self.log.record(&frame, true);
             let _ = self.rx.receive_frame(&frame);
         }
     }
@@ -340,6 +429,12 @@ const EMULATED_FRAMES_PER_CALL: u64 = 1_000_000;
 /// timeout there would only fire when the test machine is busy (it did, with 20 ms, under CPU
 /// load: "frame lost: timeout: PDU").
 const EMULATED_TIMEOUT: Duration = Duration::from_secs(24 * 3600);
+
+/// ethercrab's timeouts on the in-process wire ([`EMULATED_TIMEOUT`]'s reason): `Duration::MAX`,
+/// which ethercrab's std timer (`async_io::Timer::after`) turns into a timer that never fires
+/// and is never registered with the async-io reactor — a 24 h timer would be, once per frame
+/// (a syscall to wake the reactor thread, and its bookkeeping, per frame).
+const EMULATED_ETHERCRAB_TIMEOUT: Duration = Duration::MAX;
 
 /// The value a master future gives when [`drive`] ends it because the emulated wire lost one
 /// of its frames (or it exceeded [`EMULATED_FRAMES_PER_CALL`]), the in-process, virtual-time
@@ -402,11 +497,22 @@ pub struct EthercatLink {
     group: Group,
     wire: WireEnd,
     axes: Vec<AxisDevice>,
+    terminals: Vec<TerminalDevice>,
+    /// Every SubDevice in ring order with its role.
+    bus: Vec<BusDevice>,
+    /// The frames of one cycle and their wire time.
+    plan: CyclePlan,
+    wire_time: WireTime,
+    /// The devices' FMMU windows (per-datagram working counters).
+    map: LogicalMap,
+    /// Working counter of each planned LRW datagram.
+    lrw_expected: Vec<u16>,
     cycle: Nanos,
     expected_wkc: u16,
     exchanges: u64,
-    lose: BTreeSet<u64>,
-    miscount: BTreeSet<u64>,
+    /// Fault knobs: (exchange, process-data datagram) to drop / to miscount.
+    lose: BTreeSet<(u64, usize)>,
+    miscount: BTreeSet<(u64, usize)>,
     emulated: bool,
     /// The paced cycle on a network interface (`None` in-process: virtual time).
     clock: Option<CycleClock>,
@@ -453,12 +559,17 @@ impl EthercatLink {
         let (md, mut wire_end) = connect(wire, spec)?;
         let emulated = wire_end.segment.is_some();
         let now = ethercrab::std::ethercat_now;
-        let (group, axes) = drive(&mut wire_end, async {
+        let cycle_ns = spec.cycle.0;
+        let (group, axes, terminals, bus, map, plan) = drive(&mut wire_end, async {
             let mut group = md
                 .init_single_group::<MAX_SUBDEVICES, MAX_PDI>(now)
                 .await
-                .map_err(ec_err("init"))?;
-            let mut axes = assign_axes(md, &group, spec).await?;
+                .map_err(|e| {
+                    LinkError::Other(format!(
+                        "EtherCAT init: {e} (the link holds at most {MAX_SUBDEVICES} SubDevices)"
+                    ))
+                })?;
+            let (mut axes, terminals, bus) = assign_devices(md, &group, spec).await?;
             if emulated {
                 // In-process: the frame budget of `drive` bounds the mailbox polls, not a clock.
                 for ax in axes.iter_mut() {
@@ -482,10 +593,32 @@ impl EthercatLink {
                     any_dc = true;
                 }
             }
-            let pdi = group
-                .into_pre_op_pdi(md)
-                .await
-                .map_err(ec_err("PDO configuration"))?;
+            let pdi = group.into_pre_op_pdi(md).await.map_err(|e| {
+                LinkError::Other(format!(
+                    "EtherCAT PDO configuration: {e} (the link holds a process image of at most {MAX_PDI} bytes)"
+                ))
+            })?;
+            // The process image is laid out: read the FMMU windows, plan the frames of a
+            // cycle and refuse a cycle time the wire cannot carry, before any device is in
+            // SAFE-OP.
+            let addresses: Vec<u16> = pdi.iter(md).map(|sd| sd.configured_address()).collect();
+            let pdi_len: usize = pdi
+                .iter(md)
+                .map(|sd| {
+                    let io = sd.io_raw();
+                    io.inputs().len() + io.outputs().len()
+                })
+                .sum();
+            let map = read_logical_map(md, &addresses).await?;
+            let start = map.start().unwrap_or(0);
+            let plan = CyclePlan::ethercrab(start, pdi_len, addresses.len(), any_dc, FRAME_DATA);
+            check_wire_time(&plan.wire_time(), cycle_ns)?;
+            let mut bus = bus;
+            for (b, sd) in bus.iter_mut().zip(pdi.iter(md)) {
+                let io = sd.io_raw();
+                b.outputs = io.outputs().len();
+                b.inputs = io.inputs().len();
+            }
             let group = if any_dc && !emulated {
                 // As in the field: SYNC0 at the cycle period, starting well in the future (100 ms
                 // after the activation is written, as ethercrab's examples, SOEM and IgH do: the
@@ -524,7 +657,7 @@ impl EthercatLink {
                 let g = pdi.into_safe_op(md).await.map_err(ec_err("SAFE-OP"))?;
                 Group::NoDc(g.into_op(md).await.map_err(ec_err("OP"))?)
             };
-            Ok::<_, LinkError>((group, axes))
+            Ok::<_, LinkError>((group, axes, terminals, bus, map, plan))
         })?;
         // The DC devices whose clocks follow the reference (ethercrab takes the first DC device
         // as the reference clock; its own 0x092C is never updated by the FRMW it sources).
@@ -537,11 +670,22 @@ impl EthercatLink {
                 .collect(),
             Group::NoDc(_) => Vec::new(),
         };
+        let wire_time = plan.wire_time();
+        let lrw_expected = plan
+            .lrw_datagrams()
+            .map(|(_, a, n)| map.expected_wkc(crate::bus::ethercat::wire::Command::Lrw, a, n))
+            .collect();
         let mut link = EthercatLink {
             md,
             group,
             wire: wire_end,
             axes,
+            terminals,
+            bus,
+            plan,
+            wire_time,
+            map,
+            lrw_expected,
             cycle: spec.cycle,
             expected_wkc: 0,
             exchanges: 0,
@@ -641,63 +785,144 @@ impl EthercatLink {
         }
     }
 
-    /// Compare ethercrab's image sizes with the drive definitions; compute the expected WKC.
+    /// Compare ethercrab's image sizes with the drive definitions; size the terminals' images;
+    /// the expected working counter of a good cycle (the sum of its datagrams').
     fn check_images(&mut self) -> Result<(), LinkError> {
-        let mut wkc = 0u16;
-        let md = self.md;
-        let sizes: Vec<(usize, usize, String)> = match &self.group {
-            Group::Dc(g) => g
-                .iter(md)
-                .map(|sd| {
-                    let io = sd.io_raw();
-                    (io.outputs().len(), io.inputs().len(), sd.name().to_string())
-                })
-                .collect(),
-            Group::NoDc(g) => g
-                .iter(md)
-                .map(|sd| {
-                    let io = sd.io_raw();
-                    (io.outputs().len(), io.inputs().len(), sd.name().to_string())
-                })
-                .collect(),
-        };
-        for (o, i, _) in &sizes {
-            wkc += u16::from(*i > 0) + 2 * u16::from(*o > 0);
-        }
-        // One LRW (10 header + 2 WKC bytes) and the DC FRMW (12 + 8) must share one frame:
-        // ethercrab splits a larger image over several frames, whose working counters it adds
-        // up differently; the link refuses that instead of guessing.
-        let pdi: usize = sizes.iter().map(|(o, i, _)| o + i).sum();
-        let room = FRAME_DATA - 12 - 20;
-        if pdi > room {
-            return Err(LinkError::Other(format!(
-                "the process image of the bus is {pdi} bytes; one EtherCAT frame carries at most {room} (about 36 CiA 402 axes per link)"
-            )));
-        }
         for ax in &self.axes {
-            let (o, i, name) = &sizes[ax.sub];
+            let Some(b) = self.bus.get(ax.sub) else {
+                continue;
+            };
+            let (o, i) = (b.outputs, b.inputs);
             let (want_o, want_i) = image_lengths(&ax.def);
-            if (*o, *i) != (want_o, want_i) {
+            if (o, i) != (want_o, want_i) {
                 return Err(LinkError::Other(format!(
-                    "axis {}: SubDevice {} ({name}) has {o} output / {i} input bytes in OP, drive '{}' needs {want_o} / {want_i}",
-                    ax.name, ax.sub, ax.def.name
+                    "axis {}: SubDevice {} ({}) has {o} output / {i} input bytes in OP, drive '{}' needs {want_o} / {want_i}",
+                    ax.name, ax.sub, b.name, ax.def.name
                 )));
             }
         }
-        self.expected_wkc = wkc;
+        for t in &mut self.terminals {
+            if let Some(b) = self.bus.get(t.sub) {
+                t.outputs = vec![0; b.outputs];
+                t.inputs = vec![0; b.inputs];
+            }
+        }
+        self.expected_wkc = self
+            .lrw_expected
+            .iter()
+            .fold(0u16, |a, w| a.wrapping_add(*w));
         Ok(())
     }
 
-    /// Lose the `n`-th exchange (0-based): its frame is dropped on the wire, as a broken
+    /// Lose the `n`-th exchange (0-based): its first frame is dropped on the wire, as a broken
     /// cable would; the exchange returns [`LinkError::Lost`]. Emulated wire only.
     pub fn lose_exchange_at(&mut self, n: u64) {
-        self.lose.insert(n);
+        self.lose.insert((n, 0));
     }
 
-    /// Fault knob: the `n`-th exchange (0-based) comes back with a working counter one short
-    /// (emulated wire only); the exchange returns [`LinkError::Lost`].
+    /// Fault knob: the `n`-th exchange (0-based) comes back with the working counter of its
+    /// first process-data datagram one short (emulated wire only); the exchange returns
+    /// [`LinkError::Lost`].
     pub fn miscount_exchange_at(&mut self, n: u64) {
-        self.miscount.insert(n);
+        self.miscount.insert((n, 0));
+    }
+
+    /// Fault knob: in the `n`-th exchange (0-based) the frame that carries process-data
+    /// datagram `k` (0-based, in the order of [`Self::cycle_plan`]) is dropped on the wire
+    /// (emulated wire only). ethercrab sends the frames of a cycle one after the other, so the
+    /// datagrams after it are not sent either.
+    pub fn lose_datagram_at(&mut self, n: u64, k: usize) {
+        self.lose.insert((n, k));
+    }
+
+    /// Fault knob: in the `n`-th exchange (0-based) process-data datagram `k` comes back with a
+    /// working counter one short, as if one device had not processed it (emulated wire only).
+    pub fn miscount_datagram_at(&mut self, n: u64, k: usize) {
+        self.miscount.insert((n, k));
+    }
+
+    /// The frames of one process-data cycle.
+    pub fn cycle_plan(&self) -> &CyclePlan {
+        &self.plan
+    }
+
+    /// The time one cycle takes on the wire (the start-up report, info 900402).
+    pub fn wire_time(&self) -> WireTime {
+        self.wire_time
+    }
+
+    /// Every SubDevice of the segment in ring order, with its role.
+    pub fn bus_devices(&self) -> &[BusDevice] {
+        &self.bus
+    }
+
+    /// The working counter each process-data datagram of a good cycle returns (plan order).
+    pub fn datagram_wkcs(&self) -> &[u16] {
+        &self.lrw_expected
+    }
+
+    /// The messages of the start-up: the segment (info 900400), every SubDevice the machine
+    /// does not name (info 900401), the wire time of a cycle (info 900402).
+    pub fn startup_messages(&self) -> Vec<CncMessage> {
+        let unnamed: Vec<&BusDevice> = self
+            .bus
+            .iter()
+            .filter(|b| b.role == Role::NotNamed)
+            .collect();
+        let mut out = vec![CncMessage::info(
+            ids::ETHERCAT_SEGMENT,
+            format!(
+                "EtherCAT segment: {} SubDevices in OP: {} axis drive{}, {} terminal{} named in the machine, {} not named; process image {} bytes in {} LRW datagram{}",
+                self.bus.len(),
+                self.axes.len(),
+                plural(self.axes.len()),
+                self.terminals.len(),
+                plural(self.terminals.len()),
+                unnamed.len(),
+                self.plan
+                    .lrw_datagrams()
+                    .map(|(_, _, n)| n)
+                    .sum::<usize>(),
+                self.plan.lrw_count(),
+                plural(self.plan.lrw_count()),
+            ),
+        )];
+        for b in unnamed {
+            out.push(CncMessage::info(
+                ids::ETHERCAT_NOT_NAMED,
+                format!(
+                    "EtherCAT device {} ({}, vendor {:#010x} product {:#010x}): not named in the machine file; in OP with its default process data ({} output / {} input bytes)",
+                    b.position, b.name, b.vendor, b.product, b.outputs, b.inputs
+                ),
+            ));
+        }
+        out.push(CncMessage::info(
+            ids::ETHERCAT_WIRE_TIME,
+            format!(
+                "EtherCAT wire time per cycle {}: {:.0} % of the {} µs cycle",
+                self.wire_time,
+                self.wire_time.total_ns() as f64 * 100.0 / self.cycle.0.max(1) as f64,
+                self.cycle.0 / 1000
+            ),
+        ));
+        out
+    }
+
+    /// Inputs of terminal `index` (machine order) after the last exchange.
+    pub fn terminal_inputs(&self, index: usize) -> Option<&[u8]> {
+        self.terminals.get(index).map(|t| t.inputs.as_slice())
+    }
+
+    /// Outputs of terminal `index`, sent with the next exchange.
+    pub fn terminal_outputs_mut(&mut self, index: usize) -> Option<&mut [u8]> {
+        self.terminals
+            .get_mut(index)
+            .map(|t| t.outputs.as_mut_slice())
+    }
+
+    /// Name of terminal `index`.
+    pub fn terminal_name(&self, index: usize) -> Option<&str> {
+        self.terminals.get(index).map(|t| t.name.as_str())
     }
 
     /// Exchanges attempted so far.
@@ -793,62 +1018,180 @@ impl EthercatLink {
         Some(raw & 0x7FFF_FFFF)
     }
 
-    fn copy_outputs(&self, images: &[ProcessImage]) -> Result<(), LinkError> {
+    /// `data` into the outputs of SubDevice `sub` in ethercrab's PDI (as many bytes as fit).
+    fn put_outputs(&self, sub: usize, data: &[u8]) -> Result<(), LinkError> {
         let md = self.md;
-        for (ax, img) in self.axes.iter().zip(images) {
-            let put = |out: &mut [u8]| {
-                let n = out.len().min(img.outputs.len());
-                out[..n].copy_from_slice(&img.outputs[..n]);
-            };
-            match &self.group {
-                Group::Dc(g) => {
-                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
-                    put(&mut sd.outputs_raw_mut());
-                }
-                Group::NoDc(g) => {
-                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
-                    put(&mut sd.outputs_raw_mut());
-                }
-            }
+        let put = |out: &mut [u8]| {
+            let n = out.len().min(data.len());
+            out[..n].copy_from_slice(&data[..n]);
+        };
+        match &self.group {
+            Group::Dc(g) => put(&mut g
+                .subdevice(md, sub)
+                .map_err(ec_err("subdevice"))?
+                .outputs_raw_mut()),
+            Group::NoDc(g) => put(&mut g
+                .subdevice(md, sub)
+                .map_err(ec_err("subdevice"))?
+                .outputs_raw_mut()),
         }
         Ok(())
     }
 
-    fn copy_inputs(&self, images: &mut [ProcessImage]) -> Result<(), LinkError> {
+    /// The inputs of SubDevice `sub` from ethercrab's PDI into `data` (as many bytes as fit).
+    fn get_inputs(&self, sub: usize, data: &mut [u8]) -> Result<(), LinkError> {
         let md = self.md;
-        for (ax, img) in self.axes.iter().zip(images.iter_mut()) {
-            let mut get = |inp: &[u8]| {
-                let n = inp.len().min(img.inputs.len());
-                img.inputs[..n].copy_from_slice(&inp[..n]);
-            };
-            match &self.group {
-                Group::Dc(g) => {
-                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
-                    get(&sd.inputs_raw());
-                }
-                Group::NoDc(g) => {
-                    let sd = g.subdevice(md, ax.sub).map_err(ec_err("subdevice"))?;
-                    get(&sd.inputs_raw());
-                }
-            }
+        let mut get = |inp: &[u8]| {
+            let n = inp.len().min(data.len());
+            data[..n].copy_from_slice(&inp[..n]);
+        };
+        match &self.group {
+            Group::Dc(g) => get(&g
+                .subdevice(md, sub)
+                .map_err(ec_err("subdevice"))?
+                .inputs_raw()),
+            Group::NoDc(g) => get(&g
+                .subdevice(md, sub)
+                .map_err(ec_err("subdevice"))?
+                .inputs_raw()),
         }
         Ok(())
+    }
+
+    fn copy_outputs(&self, images: &[ProcessImage]) -> Result<(), LinkError> {
+        for (ax, img) in self.axes.iter().zip(images) {
+            self.put_outputs(ax.sub, &img.outputs)?;
+        }
+        for t in &self.terminals {
+            self.put_outputs(t.sub, &t.outputs)?;
+        }
+        Ok(())
+    }
+
+    fn copy_inputs(&mut self, images: &mut [ProcessImage]) -> Result<(), LinkError> {
+        for (ax, img) in self.axes.iter().zip(images.iter_mut()) {
+            self.get_inputs(ax.sub, &mut img.inputs)?;
+        }
+        let mut terminals = std::mem::take(&mut self.terminals);
+        let r = terminals
+            .iter_mut()
+            .try_for_each(|t| self.get_inputs(t.sub, &mut t.inputs));
+        self.terminals = terminals;
+        r
     }
 
     fn lost(&self, now: Nanos, reason: String) -> LinkError {
         LinkError::Lost { at: now, reason }
     }
 
-    fn cycle_frame(&mut self, now: Nanos) -> Result<Option<Duration>, LinkError> {
-        match self.tx_rx() {
-            Ok((w, next)) if w == self.expected_wkc => Ok(next),
-            Ok((w, _)) => Err(self.lost(
-                now,
-                format!("working counter {w}, expected {}", self.expected_wkc),
-            )),
-            Err(e) => Err(self.lost(now, format!("frame lost: {e}"))),
+    /// The emulated segment drops / miscounts the frames of exchange `n` the fault knobs name.
+    fn arm_fault_knobs(&mut self, n: u64) {
+        let Some(seg) = self.wire.segment.as_mut() else {
+            return;
+        };
+        let next = seg.offered_frames();
+        let frame_of = |k: usize| {
+            self.plan
+                .lrw_datagrams()
+                .nth(k)
+                .map_or(k as u64, |(f, _, _)| f as u64)
+        };
+        for &(_, k) in self.lose.range((n, 0)..=(n, usize::MAX)) {
+            seg.drop_frame_at(next + frame_of(k));
+        }
+        for &(_, k) in self.miscount.range((n, 0)..=(n, usize::MAX)) {
+            seg.miscount_frame_at(next + frame_of(k));
         }
     }
+
+    /// One cycle's frames; every process-data datagram is checked on its own (module
+    /// documentation). Returns ethercrab's wait to the next cycle start with DC.
+    fn cycle_frame(&mut self, now: Nanos) -> Result<Option<Duration>, LinkError> {
+        self.wire.log.start();
+        let result = self.tx_rx();
+        self.wire.log.stop();
+        let map = &self.map;
+        let plan = &self.plan;
+        let expected = &self.lrw_expected;
+        let checked = self.wire.log.check(plan.lrw_count(), |c, a, n| {
+            // The planned datagram's counter; another split (not ethercrab 0.7.1's) is
+            // computed from the map.
+            plan.lrw_datagrams()
+                .position(|(_, pa, pn)| pa == a && pn == n)
+                .and_then(|k| expected.get(k).copied())
+                .filter(|_| c == crate::bus::ethercat::wire::Command::Lrw)
+                .unwrap_or_else(|| map.expected_wkc(c, a, n))
+        });
+        match (result, checked) {
+            (Ok((_, next)), Ok(())) => Ok(next),
+            (r, Err(mut fault)) => {
+                fault.devices = self
+                    .map
+                    .devices_in(fault.datagram.start, fault.datagram.len);
+                let tail = match r {
+                    Err(e) => format!(" (ethercrab: {e})"),
+                    Ok(_) => String::new(),
+                };
+                Err(self.lost(now, format!("{fault}{tail}")))
+            }
+            (Err(e), Ok(())) => Err(self.lost(
+                now,
+                format!(
+                    "frame lost: {e} (all {} process-data datagram{} of the cycle came back: a frame of AL status checks)",
+                    self.plan.lrw_count(),
+                    plural(self.plan.lrw_count())
+                ),
+            )),
+        }
+    }
+}
+
+fn plural(n: usize) -> &'static str {
+    if n == 1 {
+        ""
+    } else {
+        "s"
+    }
+}
+
+/// The FMMU windows of the SubDevices at `addresses` (ring order): the number of FMMUs
+/// (0x0004), then their registers (0x0600 + 16 n).
+async fn read_logical_map(
+    md: &MainDevice<'static>,
+    addresses: &[u16],
+) -> Result<LogicalMap, LinkError> {
+    let mut windows = Vec::new();
+    for (position, &a) in addresses.iter().enumerate() {
+        let count = ethercrab::Command::fprd(a, 0x0004)
+            .receive::<u8>(md)
+            .await
+            .map_err(ec_err("FMMU count"))?;
+        for n in 0..u16::from(count.min(16)) {
+            let regs = ethercrab::Command::fprd(a, 0x0600 + 16 * n)
+                .receive::<[u8; 16]>(md)
+                .await
+                .map_err(ec_err("FMMU registers"))?;
+            if let Some(w) = FmmuWindow::from_registers(position, &regs) {
+                windows.push(w);
+            }
+        }
+    }
+    Ok(LogicalMap::new(windows))
+}
+
+/// Refuse a cycle time of `cycle_ns` the wire cannot carry (error 900403).
+fn check_wire_time(w: &WireTime, cycle_ns: u64) -> Result<(), LinkError> {
+    if w.total_ns() <= cycle_ns {
+        return Ok(());
+    }
+    Err(LinkError::Refused(CncMessage::error(
+        ids::ETHERCAT_CYCLE_TOO_SHORT,
+        format!(
+            "the EtherCAT wire needs {w} per cycle, more than the cycle time of {} µs (cycle_time_us); the shortest cycle the wire carries is {} µs",
+            cycle_ns / 1000,
+            w.shortest_cycle_us()
+        ),
+    )))
 }
 
 /// Leak a PDU storage and a MainDevice for `wire` (emulated segment per `spec`).
@@ -884,14 +1227,16 @@ fn connect(
         t0: Instant::now(),
         lost: false,
         frames: 0,
+        log: DatagramLog::default(),
+        buf: Vec::with_capacity(crate::bus::ethercat::wire::MAX_ETHERNET_FRAME),
     };
     let timeouts = if emulated {
         Timeouts {
-            pdu: EMULATED_TIMEOUT,
-            state_transition: EMULATED_TIMEOUT,
-            mailbox_echo: EMULATED_TIMEOUT,
-            mailbox_response: EMULATED_TIMEOUT,
-            eeprom: EMULATED_TIMEOUT,
+            pdu: EMULATED_ETHERCRAB_TIMEOUT,
+            state_transition: EMULATED_ETHERCRAB_TIMEOUT,
+            mailbox_echo: EMULATED_ETHERCRAB_TIMEOUT,
+            mailbox_response: EMULATED_ETHERCRAB_TIMEOUT,
+            eeprom: EMULATED_ETHERCRAB_TIMEOUT,
             ..Timeouts::default()
         }
     } else {
@@ -1151,10 +1496,12 @@ fn open_tap(path: &Path) -> Result<Tap, LinkError> {
     })
 }
 
-/// Match axes to SubDevices: axis `k` takes the next SubDevice (ring order) with the identity of
-/// its family's ESI device, or — for drives the emulator does not describe — the next SubDevice
-/// with process data. Mailbox clients from the SM0 / SM1 registers the MainDevice configured.
-async fn assign_axes(
+/// Match axes and terminals to SubDevices: axis `k` takes the next SubDevice (ring order) with
+/// the identity of its family's ESI device, or — for drives the emulator does not describe —
+/// the next SubDevice; then the terminals theirs ([`terminals::match_terminals`]). Mailbox
+/// clients from the SM0 / SM1 registers the MainDevice configured. Every SubDevice in ring
+/// order with its role (image sizes filled in later).
+async fn assign_devices(
     md: &MainDevice<'static>,
     group: &SubDeviceGroup<
         MAX_SUBDEVICES,
@@ -1163,7 +1510,7 @@ async fn assign_axes(
         ethercrab::subdevice_group::PreOp,
     >,
     spec: &EthercatSpec,
-) -> Result<Vec<AxisDevice>, LinkError> {
+) -> Result<(Vec<AxisDevice>, Vec<TerminalDevice>, Vec<BusDevice>), LinkError> {
     let subs: Vec<(u16, u32, u32, String)> = group
         .iter(md)
         .map(|sd| {
@@ -1176,25 +1523,59 @@ async fn assign_axes(
             )
         })
         .collect();
-    let mut next = 0usize;
+    // The declared SubDevices in ring order, each found by identity after the previous one.
+    let order = terminals::ring_order(spec.drives.len(), &spec.terminals);
+    let wants: Vec<Option<(u32, u32)>> = order
+        .iter()
+        .map(|d| match *d {
+            terminals::Declared::Axis(k) => spec.drives.get(k).and_then(|def| {
+                esi_for(def)
+                    .and_then(|t| embedded(t, "embedded ESI").ok())
+                    .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)))
+            }),
+            terminals::Declared::Terminal(k) => spec.terminals.get(k).and_then(|t| t.identity()),
+        })
+        .collect();
+    let ids: Vec<(u32, u32)> = subs.iter().map(|(_, v, p, _)| (*v, *p)).collect();
+    let found = terminals::match_ring(&wants, &ids).map_err(|(j, next)| {
+        let what = match order.get(j) {
+            Some(terminals::Declared::Axis(k)) => format!(
+                "axis {k} (drive '{}')",
+                spec.drives.get(*k).map_or("?", |d| d.name.as_str())
+            ),
+            Some(terminals::Declared::Terminal(k)) => spec.terminals.get(*k).map_or_else(
+                || "?".to_string(),
+                |t| {
+                    let (v, p) = t.identity().unwrap_or((0, 0));
+                    format!(
+                        "terminal {} ({}, {} vendor {v:#010x} product {p:#010x})",
+                        t.name,
+                        t.source,
+                        t.type_name()
+                    )
+                },
+            ),
+            None => "?".to_string(),
+        };
+        LinkError::Other(format!(
+            "{what}: no matching SubDevice on the bus after position {next} ({} SubDevices found)",
+            subs.len()
+        ))
+    })?;
+    let mut axis_pos = vec![0usize; spec.drives.len()];
+    let mut positions = vec![0usize; spec.terminals.len()];
+    for (d, &p) in order.iter().zip(&found) {
+        match *d {
+            terminals::Declared::Axis(k) => axis_pos[k] = p,
+            terminals::Declared::Terminal(k) => positions[k] = p,
+        }
+    }
     let mut axes = Vec::new();
     for (axis, def) in spec.drives.iter().enumerate() {
-        let want = esi_for(def)
-            .and_then(|t| embedded(t, "embedded ESI").ok())
-            .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)));
-        let found = subs
-            .iter()
-            .enumerate()
-            .skip(next)
-            .find(|(_, (_, v, p, _))| want.is_none_or(|(wv, wp)| (*v, *p) == (wv, wp)));
-        let Some((i, (station, _, _, name))) = found else {
-            return Err(LinkError::Other(format!(
-                "axis {axis} (drive '{}'): no matching SubDevice on the bus after position {next} ({} SubDevices found)",
-                def.name,
-                subs.len()
-            )));
+        let i = axis_pos[axis];
+        let Some((station, _, _, name)) = subs.get(i) else {
+            continue;
         };
-        next = i + 1;
         let regs = ethercrab::Command::fprd(*station, 0x0800)
             .receive::<[u8; 16]>(md)
             .await
@@ -1226,7 +1607,50 @@ async fn assign_axes(
             name: format!("{axis}:{name}"),
         });
     }
-    Ok(axes)
+    let terminals: Vec<TerminalDevice> = spec
+        .terminals
+        .iter()
+        .zip(&positions)
+        .map(|(t, &sub)| TerminalDevice {
+            sub,
+            name: t.name.clone(),
+            outputs: Vec::new(),
+            inputs: Vec::new(),
+        })
+        .collect();
+    let bus = subs
+        .iter()
+        .enumerate()
+        .map(|(position, (address, vendor, product, name))| {
+            let role = if let Some(k) = axes.iter().position(|a| a.sub == position) {
+                Role::Axis {
+                    index: k,
+                    drive: spec
+                        .drives
+                        .get(k)
+                        .map_or_else(String::new, |d| d.name.clone()),
+                }
+            } else if let Some(k) = positions.iter().position(|&p| p == position) {
+                Role::Terminal {
+                    index: k,
+                    name: spec.terminals[k].name.clone(),
+                }
+            } else {
+                Role::NotNamed
+            };
+            BusDevice {
+                position,
+                address: *address,
+                vendor: *vendor,
+                product: *product,
+                name: name.clone(),
+                role,
+                outputs: 0,
+                inputs: 0,
+            }
+        })
+        .collect();
+    Ok((axes, terminals, bus))
 }
 
 /// Write the drive definition's RxPDO / TxPDO as 0x1600 / 0x1A00 assigned to SM2 / SM3
@@ -1308,22 +1732,11 @@ impl Link for EthercatLink {
         }
         let n = self.exchanges;
         self.exchanges += 1;
-        if self.lose.contains(&n) {
-            if let Some(seg) = self.wire.segment.as_mut() {
-                let next = seg.offered_frames();
-                seg.drop_frame_at(next);
-            }
-        }
-        if self.miscount.contains(&n) {
-            if let Some(seg) = self.wire.segment.as_mut() {
-                let next = seg.offered_frames();
-                seg.miscount_frame_at(next);
-            }
-        }
-        // One frame per cycle, as on the bus: it carries this cycle's set-points and reads the
-        // inputs the devices latched at the previous SYNC0; the emulated segment's SYNC0 follows
-        // (a network interface's emulator steps after the frame by itself). The actual values
-        // thus arrive one exchange after they were sampled (dead time: docs/ethercat.md).
+        self.arm_fault_knobs(n);
+        // The frames of one cycle, as on the bus: they carry this cycle's set-points and read
+        // the inputs the devices latched at the previous SYNC0; the emulated segment's SYNC0
+        // follows (a network interface's emulator steps by itself). The actual values thus
+        // arrive one exchange after they were sampled (dead time: docs/ethercat.md).
         self.copy_outputs(images)?;
         if self.clock.is_some() {
             return self.paced_exchange(now, images);
@@ -1415,6 +1828,18 @@ impl Link for EthercatLink {
 
     fn exchanges(&self) -> u64 {
         self.exchanges
+    }
+
+    fn startup_report(&self) -> Vec<CncMessage> {
+        self.startup_messages()
+    }
+
+    fn terminal_inputs(&self, index: usize) -> Option<&[u8]> {
+        EthercatLink::terminal_inputs(self, index)
+    }
+
+    fn terminal_outputs_mut(&mut self, index: usize) -> Option<&mut [u8]> {
+        EthercatLink::terminal_outputs_mut(self, index)
     }
 
     fn cycle_summary(&self) -> Option<crate::rt::CycleSummary> {

@@ -90,6 +90,10 @@ pub enum LinkError {
         /// The code in words.
         text: &'static str,
     },
+    /// The configuration is refused with a CNC message (its ID and text, e.g. error 900403: a
+    /// cycle time the EtherCAT wire cannot carry).
+    #[error("{0}")]
+    Refused(crate::messages::CncMessage),
     /// Anything else (setup, configuration).
     #[error("{0}")]
     Other(String),
@@ -197,6 +201,25 @@ pub trait Link: Send {
     /// Exchanges attempted so far.
     fn exchanges(&self) -> u64 {
         0
+    }
+
+    /// What the link reports once it is up (EtherCAT: the segment, the SubDevices the machine
+    /// does not name, the wire time of a cycle; info messages). None by default.
+    fn startup_report(&self) -> Vec<crate::messages::CncMessage> {
+        Vec::new()
+    }
+
+    /// Inputs of the machine's terminal `index` (`[[terminal]]` order) after the last exchange;
+    /// `None` on links without terminals.
+    fn terminal_inputs(&self, index: usize) -> Option<&[u8]> {
+        let _ = index;
+        None
+    }
+
+    /// Outputs of the machine's terminal `index`, sent with the next exchange.
+    fn terminal_outputs_mut(&mut self, index: usize) -> Option<&mut [u8]> {
+        let _ = index;
+        None
     }
 
     /// The link's dead time in cycles: from the exchange after which a set-point is written to

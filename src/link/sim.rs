@@ -41,6 +41,8 @@ pub struct SimLink {
     world: World,
     /// Input images the models wrote at the last exchange: delivered with the next one.
     sampled: Vec<Vec<u8>>,
+    /// The models' ports during a world step (kept: no allocation per exchange).
+    ports: crate::sim::world::PortBuffer,
 }
 
 impl SimLink {
@@ -74,6 +76,7 @@ impl SimLink {
             lose: BTreeSet::new(),
             world: World::new(plant),
             sampled: Vec::new(),
+            ports: Default::default(),
         };
         let models = &mut link.models;
         link.world
@@ -174,7 +177,7 @@ impl Link for SimLink {
             s.resize(img.inputs.len(), 0);
             std::mem::swap(&mut img.inputs, s);
         }
-        let mut ports: Vec<Port<'_>> = self
+        let ports = self
             .models
             .iter_mut()
             .zip(images.iter())
@@ -183,9 +186,9 @@ impl Link for SimLink {
                 model: m.as_mut(),
                 outputs: &img.outputs,
                 inputs: s.as_mut_slice(),
-            })
-            .collect();
-        self.world.step(now, self.cycle, &mut ports);
+            });
+        let (world, cycle) = (&mut self.world, self.cycle);
+        self.ports.with(ports, |p| world.step(now, cycle, p));
         Ok(())
     }
 

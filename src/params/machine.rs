@@ -24,6 +24,12 @@
 //!                                      # before the table's own keys
 //! kenngr.swe_neg = -2000000            # dotted keys are flattened back to the name path
 //! "P-AXIS-00178" = 2000000
+//! [[terminal]]                         # an EtherCAT SubDevice that is not an axis; the [[axis]]
+//!                                      # and [[terminal]] tables list the SubDevices in ring order
+//! name = "ENC"                         # required: a letter, then letters, digits, '_' (≤ 32)
+//! esi = "fieldprobe-el5101"            # required: a built-in ESI (esi/*.xml) or an ESI file
+//!                                      # relative to this file
+//! count = 4                            # optional, 1 ..= 1024: ENC1 … ENC4 in a row
 //! ```
 //!
 //! Values are TOML integers, booleans or strings in the seeds' units; each one goes through
@@ -91,6 +97,24 @@ pub struct ToolData {
     pub length: f64,
 }
 
+/// One SubDevice of the machine that is not an axis (`[[terminal]]`): an I/O terminal on the
+/// EtherCAT segment, found by the identity of its ESI device in ring order.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TerminalConfig {
+    /// Its name (`count` > 1: the table's name with the number appended, `ENC1`).
+    pub name: String,
+    /// The ESI: a built-in name (`fieldprobe-el5101`) or a file, relative to the machine file.
+    pub esi: String,
+    /// Line of its `[[terminal]]` table.
+    pub line: usize,
+    /// Axes declared above it in the file: in the ring it stands after their drives (the file
+    /// lists the SubDevices in ring order).
+    pub after_axes: usize,
+}
+
+/// Most terminals a machine file may declare (counts expanded), the emulated segment's cap.
+pub const MAX_TERMINALS: usize = crate::limits::MAX_SEGMENT_DEVICES;
+
 /// A machine: channel, manual mode and axes, with their parameter lists.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MachineConfig {
@@ -111,6 +135,8 @@ pub struct MachineConfig {
     pub manual: ParamSet,
     /// The axes in file order.
     pub axes: Vec<AxisConfig>,
+    /// The SubDevices that are not axes, in file (= ring) order, counts expanded.
+    pub terminals: Vec<TerminalConfig>,
     /// Tool data by D number (`[tool.1] radius = 20000  # 0.1 µm`).
     pub tools: std::collections::BTreeMap<u32, ToolData>,
     /// Zero offsets G54 … G59 by G number, per axis name, in mm
@@ -135,6 +161,7 @@ impl MachineConfig {
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes: Vec::new(),
+            terminals: Vec::new(),
             tools: Default::default(),
             zero_offsets: Default::default(),
         };
@@ -176,6 +203,18 @@ impl MachineConfig {
                         cfg.parse_axis(&ctx, table, line, &mut axis_lines)?;
                     }
                 }
+                "terminal" => {
+                    let tables = item
+                        .as_array_of_tables()
+                        .ok_or_else(|| ParamError::Config {
+                            origin: ctx.at(line),
+                            message: "'terminal' must be an array of tables: write [[terminal]] once per terminal (or with count = N)"
+                                .to_string(),
+                        })?;
+                    for table in tables.iter() {
+                        cfg.parse_terminal(&ctx, table, line)?;
+                    }
+                }
                 "tool" => cfg.parse_tools(&ctx, item, line)?,
                 "zero_offset" => zero_items.push((item, line)),
                 other => return Err(outside_error(other, item, ctx.at(line))),
@@ -183,6 +222,10 @@ impl MachineConfig {
         }
         for (item, line) in zero_items {
             cfg.parse_zero_offsets(&ctx, item, line)?;
+        }
+        // Ring order: a terminal stands after the axes whose tables are above it in the file.
+        for t in &mut cfg.terminals {
+            t.after_axes = axis_lines.iter().filter(|&&l| l < t.line).count();
         }
         if cfg.axes.is_empty() {
             return Err(ParamError::Config {
@@ -244,6 +287,7 @@ impl MachineConfig {
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes,
+            terminals: Vec::new(),
             // D1: the measuring probe of seed 004 §5 "%meas_example" (ball radius 2 mm).
             tools: [(
                 1,
@@ -399,6 +443,100 @@ impl MachineConfig {
             .map(|a| a.name.as_str())
             .collect::<Vec<_>>()
             .join(", ")
+    }
+
+    fn parse_terminal(
+        &mut self,
+        ctx: &Ctx<'_>,
+        table: &Table,
+        fallback_line: usize,
+    ) -> Result<(), ParamError> {
+        let header = ctx
+            .line(table.span().map(|s| s.start))
+            .unwrap_or(fallback_line);
+        let (mut name, mut esi, mut count) = (None, None, 1usize);
+        for (key, item) in table.iter() {
+            let origin = ctx.at(ctx.key_line(table, key, item, header));
+            let text = item.as_str();
+            match key {
+                "name" => {
+                    let n = text.filter(|n| valid_terminal_name(n)).ok_or_else(|| {
+                        ParamError::Config {
+                            origin: origin.clone(),
+                            message: "[[terminal]] name: expected a string of a letter, then letters, digits or '_' (at most 32), e.g. name = \"ENC\"".to_string(),
+                        }
+                    })?;
+                    name = Some(n.to_string());
+                }
+                "esi" => {
+                    let e = text.filter(|e| !e.trim().is_empty()).ok_or_else(|| {
+                        ParamError::Config {
+                            origin: origin.clone(),
+                            message: "[[terminal]] esi: expected a string, a built-in ESI (fieldprobe-ek1100, fieldprobe-el1252, fieldprobe-el5101) or an ESI file".to_string(),
+                        }
+                    })?;
+                    esi = Some(e.to_string());
+                }
+                "count" => {
+                    let raw = item.as_integer().map_or(String::new(), |i| i.to_string());
+                    count =
+                        project_int(&raw, "count", 1, MAX_TERMINALS as u32, "terminals", &origin)?
+                            as usize;
+                }
+                other => {
+                    return Err(ParamError::Config {
+                        origin,
+                        message: format!(
+                            "unknown key '{other}' in [[terminal]]; allowed: name, esi, count"
+                        ),
+                    })
+                }
+            }
+        }
+        let missing = |what: &str| {
+            ParamError::Config {
+            origin: ctx.at(header),
+            message: format!("[[terminal]] without {what}; expected e.g. name = \"ENC\", esi = \"fieldprobe-el5101\""),
+        }
+        };
+        let name = name.ok_or_else(|| missing("a name"))?;
+        let esi = esi.ok_or_else(|| missing("an esi"))?;
+        if self.terminals.len() + count > MAX_TERMINALS {
+            return Err(ParamError::Config {
+                origin: ctx.at(header),
+                message: format!(
+                    "[[terminal]] {name}: more than {MAX_TERMINALS} terminals in the machine"
+                ),
+            });
+        }
+        for k in 1..=count {
+            let n = if count == 1 {
+                name.clone()
+            } else {
+                format!("{name}{k}")
+            };
+            if let Some(t) = self.terminals.iter().find(|t| t.name == n) {
+                return Err(ParamError::Config {
+                    origin: ctx.at(header),
+                    message: format!(
+                        "duplicate terminal name '{n}' (first defined at line {})",
+                        t.line
+                    ),
+                });
+            }
+            self.terminals.push(TerminalConfig {
+                name: n,
+                esi: esi.clone(),
+                line: header,
+                after_axes: 0,
+            });
+        }
+        Ok(())
+    }
+
+    /// The terminal with this name.
+    pub fn terminal(&self, name: &str) -> Option<&TerminalConfig> {
+        self.terminals.iter().find(|t| t.name == name)
     }
 
     fn parse_tools(&mut self, ctx: &Ctx<'_>, item: &Item, line: usize) -> Result<(), ParamError> {
@@ -833,7 +971,9 @@ fn flatten<'a>(
             Item::ArrayOfTables(_) => {
                 return Err(ParamError::Config {
                     origin: ctx.at(line),
-                    message: format!("'{full}' is an array of tables; only [[axis]] may be one"),
+                    message: format!(
+                        "'{full}' is an array of tables; only [[axis]] and [[terminal]] may be one"
+                    ),
                 })
             }
             Item::None => {}
@@ -949,8 +1089,7 @@ fn string_value<'a>(
 }
 
 fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
-    let allowed =
-        "allowed tables are [channel], [manual], [[axis]], [tool.<D>] and [zero_offset.G54…G59]";
+    let allowed = "allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>] and [zero_offset.G54…G59]";
     let message = if item.is_value() {
         let hint = if name == "cycle_time_us" {
             "; cycle_time_us belongs in [channel]".to_string()
@@ -1051,6 +1190,14 @@ fn cycle_time(raw: &str, origin: &Origin) -> Result<u32, ParamError> {
 }
 
 /// X Y Z A B C U V W, optionally followed by digits.
+/// A terminal name: an ASCII letter, then letters, digits or '_', at most 32 characters.
+fn valid_terminal_name(name: &str) -> bool {
+    let mut b = name.bytes();
+    name.len() <= 32
+        && b.next().is_some_and(|c| c.is_ascii_alphabetic())
+        && b.all(|c| c.is_ascii_alphanumeric() || c == b'_')
+}
+
 fn valid_axis_name(name: &str) -> bool {
     let mut chars = name.chars();
     chars.next().is_some_and(|c| AXIS_LETTERS.contains(c)) && chars.all(|c| c.is_ascii_digit())

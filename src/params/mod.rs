@@ -21,8 +21,8 @@ mod registry;
 
 pub use listfile::{apply_list, parse_list};
 pub use machine::{
-    AxisConfig, MachineConfig, ToolData, DEFAULT_CYCLE_TIME_US, DEFAULT_DRIVE,
+    AxisConfig, MachineConfig, TerminalConfig, ToolData, DEFAULT_CYCLE_TIME_US, DEFAULT_DRIVE,
     DEFAULT_IN_POSITION_TIMEOUT_MS, DEFAULT_IN_POSITION_WINDOW, DEFAULT_MAX_LOST_CYCLES,
-    MAX_CYCLE_TIME_US, MAX_DEAD_TIME_CYCLES, MIN_CYCLE_TIME_US,
+    MAX_CYCLE_TIME_US, MAX_DEAD_TIME_CYCLES, MAX_TERMINALS, MIN_CYCLE_TIME_US,
 };
 pub use registry::*;

@@ -36,6 +36,31 @@ pub struct Port<'a> {
     pub inputs: &'a mut [u8],
 }
 
+/// The ports of one world step, kept between steps so that a step allocates nothing: the ports
+/// borrow the models only for the step; between steps the buffer is empty and keeps its
+/// allocation (`Vec`'s in-place `collect` moves it from one lifetime to the other).
+#[derive(Debug, Default)]
+pub struct PortBuffer(Vec<Port<'static>>);
+
+impl PortBuffer {
+    /// Fill the buffer with `ports`, run `f` on them, empty it again.
+    pub fn with<'a, R>(
+        &mut self,
+        ports: impl Iterator<Item = Port<'a>>,
+        f: impl FnOnce(&mut [Port<'a>]) -> R,
+    ) -> R {
+        let mut v: Vec<Port<'a>> = std::mem::take(&mut self.0)
+            .into_iter()
+            .filter_map(|_| None)
+            .collect();
+        v.extend(ports);
+        let r = f(&mut v);
+        v.clear();
+        self.0 = v.into_iter().filter_map(|_| None).collect();
+        r
+    }
+}
+
 impl std::fmt::Debug for Port<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Port")

@@ -132,7 +132,8 @@ impl EscApplication for EchoApp {
     }
 
     fn outputs_written(&mut self, _sm: u8, data: &[u8]) {
-        self.outputs = data.to_vec();
+        self.outputs.clear();
+        self.outputs.extend_from_slice(data);
     }
 
     fn inputs(&mut self, _sm: u8, buf: &mut [u8]) {

@@ -86,18 +86,30 @@ impl Esc {
     /// device is in OP with an active output SM whose watchdog trigger (control bit 6) is on and
     /// a non-zero watchdog time.
     pub fn watchdog_deadline(&self) -> Option<u64> {
-        let wd = self.pd_watchdog_ns();
-        if wd == 0 || self.state != AlState::Op || !self.watchdog_guarded() {
+        // Cheapest checks first: a segment asks every device at every frame.
+        if self.state != AlState::Op {
             return None;
         }
-        Some(self.last_output_ns?.saturating_add(wd))
+        let last = self.last_output_ns?;
+        let wd = self.pd_watchdog_ns();
+        if wd == 0 || !self.watchdog_guarded() {
+            return None;
+        }
+        Some(last.saturating_add(wd))
     }
 
+    /// Is an active output SM's watchdog trigger on? Cached until a sync manager register or the
+    /// AL state changes ([`Esc::sm_config_changed`]).
     fn watchdog_guarded(&self) -> bool {
-        (0..self.sm_count()).any(|n| {
+        if let Some(g) = self.wd_guarded.get() {
+            return g;
+        }
+        let g = (0..self.sm_count()).any(|n| {
             self.active_sm(n)
                 .is_some_and(|sm| !sm.is_mailbox() && sm.ecat_writes() && sm.control & 0x40 != 0)
-        })
+        });
+        self.wd_guarded.set(Some(g));
+        g
     }
 
     /// Advance time without traffic: runs the process-data watchdog. If an output SM with the

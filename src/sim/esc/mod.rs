@@ -44,6 +44,7 @@ pub mod device;
 pub mod raw;
 pub mod segment;
 pub mod soe;
+pub mod terminal;
 pub mod types;
 
 use std::collections::VecDeque;
@@ -258,6 +259,45 @@ pub struct Esc {
     op_at_last_sync0: bool,
     sync_errors: u64,
     events: Vec<EscEvent>,
+    /// Reused buffer of the logical datagrams' write bytes.
+    scratch: Vec<u8>,
+    /// [`Self::watchdog_guarded`], computed once per sync-manager configuration.
+    wd_guarded: std::cell::Cell<Option<bool>>,
+}
+
+/// Which bits of each byte of an FMMU segment are mapped: the FMMU's start bit on its first
+/// byte, its stop bit on its last, every bit in between.
+#[derive(Debug, Clone, Copy, Default)]
+struct ByteMasks {
+    first: u8,
+    last: u8,
+    len: usize,
+}
+
+impl ByteMasks {
+    /// Mask of byte `i` of the segment.
+    fn at(&self, i: usize) -> u8 {
+        let mut m = 0xFF;
+        if i == 0 {
+            m &= self.first;
+        }
+        if i + 1 == self.len {
+            m &= self.last;
+        }
+        m
+    }
+}
+
+/// One FMMU's part of a logical datagram at one device.
+#[derive(Debug, Clone, Copy, Default)]
+struct LogicalSegment {
+    /// Offset in the datagram's data.
+    off: usize,
+    /// Physical address of its first byte.
+    phys: usize,
+    masks: ByteMasks,
+    /// Write FMMU (else read).
+    write: bool,
 }
 
 impl std::fmt::Debug for Esc {
@@ -300,6 +340,8 @@ impl Esc {
             op_at_last_sync0: false,
             sync_errors: 0,
             events: Vec::new(),
+            scratch: Vec::new(),
+            wd_guarded: std::cell::Cell::new(None),
             cfg,
         };
         esc.power_on();
@@ -405,8 +447,15 @@ impl Esc {
         u64::from_le_bytes(self.peek_array(addr))
     }
 
+    /// A sync manager register or the AL state may have changed: forget what was derived from
+    /// them.
+    fn sm_config_changed(&self) {
+        self.wd_guarded.set(None);
+    }
+
     /// Write memory from the PDI side (no ECAT write protection, no side effects).
     pub fn poke(&mut self, addr: u16, bytes: &[u8]) {
+        self.sm_config_changed();
         for (i, b) in bytes.iter().enumerate() {
             if let Some(m) = self.mem.get_mut(usize::from(addr) + i) {
                 *m = *b;
@@ -582,10 +631,12 @@ impl Esc {
         let writes = matches!(cmd, Command::Lwr | Command::Lrw);
         let dg_start = u64::from(la);
         let dg_end = dg_start + data.len() as u64;
-        // (datagram offset, physical address, masks, is_write)
-        let mut segs: Vec<(usize, usize, Vec<u8>, bool)> = Vec::new();
+        // At most two segments (read, write) per FMMU; kept on the stack (no allocation on the
+        // process-data path).
+        let mut segs = [LogicalSegment::default(); 32];
+        let mut nsegs = 0;
         for n in 0..u16::from(self.mem[0x0004].min(16)) {
-            let b = self.peek(reg::fmmu(n), 16);
+            let b: [u8; 16] = self.peek_array(reg::fmmu(n));
             if b[12] & 0x01 == 0 {
                 continue;
             }
@@ -600,49 +651,63 @@ impl Esc {
             }
             let count = (e - s) as usize;
             let fm_off = (s - log) as usize;
-            let masks: Vec<u8> = (0..count)
-                .map(|i| {
-                    let k = fm_off + i;
-                    let mut m = 0xFFu8;
-                    if k == 0 {
-                        m &= 0xFF << start_bit;
-                    }
-                    if k as u64 == flen - 1 {
-                        m &= 0xFF >> (7 - stop_bit);
-                    }
-                    m
-                })
-                .collect();
-            let dg_off = (s - dg_start) as usize;
-            if ty & 0x02 != 0 && writes {
-                segs.push((dg_off, phys + fm_off, masks.clone(), true));
+            // The FMMU's start / stop bits apply to its first / last byte only.
+            let masks = ByteMasks {
+                first: if fm_off == 0 { 0xFF << start_bit } else { 0xFF },
+                last: if s + count as u64 == log + flen {
+                    0xFF >> (7 - stop_bit)
+                } else {
+                    0xFF
+                },
+                len: count,
+            };
+            let seg = LogicalSegment {
+                off: (s - dg_start) as usize,
+                phys: phys + fm_off,
+                masks,
+                write: false,
+            };
+            if ty & 0x02 != 0 && writes && nsegs < segs.len() {
+                segs[nsegs] = LogicalSegment { write: true, ..seg };
+                nsegs += 1;
             }
-            if ty & 0x01 != 0 && reads {
-                segs.push((dg_off, phys + fm_off, masks, false));
+            if ty & 0x01 != 0 && reads && nsegs < segs.len() {
+                segs[nsegs] = seg;
+                nsegs += 1;
             }
         }
+        let segs = &segs[..nsegs];
         if segs.is_empty() {
             return;
         }
-        let incoming = data.to_vec();
+        // The bytes the writes take, as they arrived (a read through another FMMU may overwrite
+        // them in the datagram first), in a buffer the device keeps.
+        let mut incoming = std::mem::take(&mut self.scratch);
+        incoming.clear();
+        for seg in segs.iter().filter(|s| s.write) {
+            incoming.extend_from_slice(&data[seg.off..seg.off + seg.masks.len]);
+        }
         let (mut read_hit, mut write_hit) = (false, false);
         // Reads first: the datagram sees the memory as it was when it arrived (the PDI does not
         // run between the bytes of one datagram), then the outputs are written.
-        for (off, phys, masks, _) in segs.iter().filter(|s| !s.3) {
+        for seg in segs.iter().filter(|s| !s.write) {
             let (r, _) = self.phys_access(
-                *phys,
-                &mut data[*off..*off + masks.len()],
+                seg.phys,
+                &mut data[seg.off..seg.off + seg.masks.len],
                 Op::Read,
-                Some(masks),
+                Some(seg.masks),
                 now,
             );
             read_hit |= r;
         }
-        for (off, phys, masks, _) in segs.iter().filter(|s| s.3) {
-            let mut buf = incoming[*off..*off + masks.len()].to_vec();
-            let (_, w) = self.phys_access(*phys, &mut buf, Op::Write, Some(masks), now);
+        let mut at = 0;
+        for seg in segs.iter().filter(|s| s.write) {
+            let buf = &mut incoming[at..at + seg.masks.len];
+            at += seg.masks.len;
+            let (_, w) = self.phys_access(seg.phys, buf, Op::Write, Some(seg.masks), now);
             write_hit |= w;
         }
+        self.scratch = incoming;
         let mut inc = 0u16;
         if read_hit {
             inc += 1;
@@ -739,7 +804,7 @@ impl Esc {
         start: usize,
         data: &mut [u8],
         op: Op,
-        masks: Option<&[u8]>,
+        masks: Option<ByteMasks>,
         now: u64,
     ) -> (bool, bool) {
         let len = data.len();
@@ -771,7 +836,8 @@ impl Esc {
                 w_ok = false;
             }
         }
-        let incoming = w_ok.then(|| data.to_vec());
+        // A read-write access keeps the bytes to write before the read replaces them.
+        let incoming = (w_ok && r_ok).then(|| data.to_vec());
         if r_ok {
             self.refresh_before_read(start, len, now);
             for (i, d) in data.iter_mut().enumerate() {
@@ -780,24 +846,26 @@ impl Esc {
                 if op.ors() {
                     *d |= v;
                 } else {
-                    let m = masks.map_or(0xFF, |m| m[i]);
+                    let m = masks.map_or(0xFF, |m| m.at(i));
                     *d = (*d & !m) | (v & m);
                 }
             }
             self.after_read(start, len);
         }
-        if let Some(inc) = incoming {
-            let old_act: Vec<u8> = (0..self.sm_count())
-                .map(|n| self.mem[0x0806 + 8 * n])
-                .collect();
+        if w_ok {
+            let inc: &[u8] = incoming.as_deref().unwrap_or(data);
+            let mut old_act = [0u8; 16];
+            for (n, o) in old_act.iter_mut().enumerate().take(self.sm_count()) {
+                *o = self.mem[0x0806 + 8 * n];
+            }
             for (i, b) in inc.iter().enumerate() {
                 let a = start + i;
-                let m = self.writable_mask(a) & masks.map_or(0xFF, |m| m[i]);
+                let m = self.writable_mask(a) & masks.map_or(0xFF, |m| m.at(i));
                 if m != 0 {
                     self.mem[a] = (self.mem[a] & !m) | (b & m);
                 }
             }
-            self.after_write(start, &inc, &old_act, now);
+            self.after_write(start, inc, &old_act[..self.sm_count()], now);
         }
         (r_ok, w_ok)
     }
@@ -826,9 +894,7 @@ impl Esc {
                 if sm.start >= end {
                     continue;
                 }
-                let mut buf = self.mem[sm.start..end].to_vec();
-                self.app.inputs(n as u8, &mut buf);
-                self.mem[sm.start..end].copy_from_slice(&buf);
+                self.app.inputs(n as u8, &mut self.mem[sm.start..end]);
             }
         }
     }
@@ -916,6 +982,9 @@ impl Esc {
 
     fn after_write(&mut self, start: usize, inc: &[u8], old_act: &[u8], now: u64) {
         let len = inc.len();
+        if range_overlaps(start, len, 0x0800, 0x80) {
+            self.sm_config_changed();
+        }
         let byte_at = |a: u16| -> Option<u8> {
             let a = usize::from(a);
             (a >= start && a < start + len).then(|| inc[a - start])
@@ -1001,8 +1070,8 @@ impl Esc {
                     continue;
                 }
                 self.outputs_since_sync0 = true;
-                let out = self.mem[sm.start..sm.end()].to_vec();
-                self.app.outputs_written(n as u8, &out);
+                self.app
+                    .outputs_written(n as u8, &self.mem[sm.start..sm.end()]);
             }
         }
         if self.cfg.dc {
@@ -1164,6 +1233,7 @@ impl Esc {
     /// SM PDI control bit 0 ("deactivate"): the firmware keeps the mailbox SMs off in INIT and
     /// the process-data SMs off below SAFE-OP.
     fn update_sm_pdi_control(&mut self) {
+        self.sm_config_changed();
         let mbx = self.cfg.mailbox.is_some();
         for n in 0..self.sm_count() {
             let mailbox_sm = mbx && n < 2;
@@ -1339,6 +1409,9 @@ pub struct EscChain {
     pub escs: Vec<Esc>,
     /// Forwarding delay between neighbouring devices.
     pub hop_delay_ns: u64,
+    /// [`Esc::irq`] of every device as of the last [`Self::refresh_irq`], updated for the devices
+    /// a datagram touches (a configured-address datagram touches one device only).
+    irq_cache: Vec<u16>,
 }
 
 impl EscChain {
@@ -1350,7 +1423,18 @@ impl EscChain {
             let downstream = (n - 1 - i) as u64;
             e.set_port_link(1, downstream > 0, 2 * downstream * hop_delay_ns);
         }
-        Self { escs, hop_delay_ns }
+        Self {
+            escs,
+            hop_delay_ns,
+            irq_cache: Vec::new(),
+        }
+    }
+
+    /// Re-read every device's [`Esc::irq`] bits (call when the devices may have changed other
+    /// than by datagrams: a segment does at every frame).
+    pub fn refresh_irq(&mut self) {
+        self.irq_cache.clear();
+        self.irq_cache.extend(self.escs.iter().map(Esc::irq));
     }
 
     /// Pass one datagram through all devices; returns the working counter increment and the
@@ -1362,13 +1446,46 @@ impl EscChain {
         data: &mut [u8],
         now_ns: u64,
     ) -> (u16, Address) {
+        let (wkc, a, _) = self.process_with_irq(cmd, addr, data, now_ns);
+        (wkc, a)
+    }
+
+    /// [`Self::process`], also returning the OR of the devices' [`Esc::irq`] bits as each
+    /// device forwards the datagram (what the datagram's IRQ field collects on its way).
+    pub fn process_with_irq(
+        &mut self,
+        cmd: Command,
+        addr: Address,
+        data: &mut [u8],
+        now_ns: u64,
+    ) -> (u16, Address, u16) {
+        if self.irq_cache.len() != self.escs.len() {
+            self.refresh_irq();
+        }
         let mut a = addr;
         let mut wkc = 0u16;
-        for (i, e) in self.escs.iter_mut().enumerate() {
-            let t = now_ns + i as u64 * self.hop_delay_ns;
-            e.process(cmd, &mut a, data, &mut wkc, t);
+        match (cmd, addr) {
+            // Configured-address read / write: only the device with that station address (or
+            // alias) acts; the others forward the datagram unchanged (the address too).
+            (Command::Fprd | Command::Fpwr | Command::Fprw, Address::Physical { adp, .. }) => {
+                for (i, e) in self.escs.iter_mut().enumerate() {
+                    if e.matches_station(adp) {
+                        let t = now_ns + i as u64 * self.hop_delay_ns;
+                        e.process(cmd, &mut a, data, &mut wkc, t);
+                        self.irq_cache[i] = e.irq();
+                    }
+                }
+            }
+            _ => {
+                for (i, e) in self.escs.iter_mut().enumerate() {
+                    let t = now_ns + i as u64 * self.hop_delay_ns;
+                    e.process(cmd, &mut a, data, &mut wkc, t);
+                    self.irq_cache[i] = e.irq();
+                }
+            }
         }
-        (wkc, a)
+        let irq = self.irq_cache.iter().fold(0, |acc, b| acc | b);
+        (wkc, a, irq)
     }
 
     /// OR of the devices' [`Esc::irq`] bits (the datagram IRQ field after the ring).
@@ -1387,11 +1504,27 @@ impl EscChain {
         wkc: &mut u16,
         now_ns: u64,
     ) -> u32 {
+        self.process_raw_with_irq(cmd, raw_addr, data, wkc, now_ns)
+            .0
+    }
+
+    /// [`Self::process_raw`], also returning the devices' IRQ bits
+    /// ([`Self::process_with_irq`]); a reserved command code passes every device unprocessed,
+    /// which still ORs its bits in.
+    pub fn process_raw_with_irq(
+        &mut self,
+        cmd: u8,
+        raw_addr: u32,
+        data: &mut [u8],
+        wkc: &mut u16,
+        now_ns: u64,
+    ) -> (u32, u16) {
         let Some(cmd) = Command::from_u8(cmd) else {
-            return raw_addr;
+            return (raw_addr, self.irq());
         };
-        let (inc, a) = self.process(cmd, Address::from_raw(cmd, raw_addr), data, now_ns);
+        let (inc, a, irq) =
+            self.process_with_irq(cmd, Address::from_raw(cmd, raw_addr), data, now_ns);
         *wkc = wkc.wrapping_add(inc);
-        a.to_raw()
+        (a.to_raw(), irq)
     }
 }

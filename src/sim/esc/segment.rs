@@ -11,8 +11,12 @@
 //!
 //! * [`Stepping::External`] (default): the caller runs SYNC0 with [`Segment::sync0`] — the
 //!   in-process link does after every exchange, on virtual time.
-//! * [`Stepping::PerFrame`] ("lockstep"): the world steps after every frame that writes process
-//!   data, model time advancing by the cycle per step.
+//! * [`Stepping::PerFrame`] ("lockstep"): the world steps once per process-data cycle, after the
+//!   frame whose logical write (LWR / LRW) reaches the end of the process image written so far,
+//!   model time advancing by the cycle per step. A master that splits its image over several
+//!   datagrams and frames (inputs first, then outputs, as ethercrab does) thus steps the models
+//!   once, with every device's outputs of the cycle in place; a master with one LRW per cycle
+//!   steps them after every such frame.
 //! * [`Stepping::OwnClock`]: the segment keeps time like real devices do, on a clock the caller
 //!   owns (sans-IO: [`Segment::poll_timeout`] says when to call [`Segment::handle_timeout`], and
 //!   [`Segment::process_frame`] gets the same clock's `now`). Every device generates SYNC0 from
@@ -34,7 +38,7 @@ use std::collections::VecDeque;
 use super::{Esc, EscChain, EscEvent};
 use crate::bus::ethercat::wire::{self, Command, WireError};
 use crate::drive::model::DriveModel;
-use crate::sim::world::{Port, World};
+use crate::sim::world::{PortBuffer, World};
 use crate::units::Nanos;
 
 /// How the hosted drive models are stepped (see the module documentation).
@@ -43,7 +47,9 @@ pub enum Stepping {
     /// By the caller, with [`Segment::sync0`].
     #[default]
     External,
-    /// After every frame that writes process data (LWR / LRW), model time + one cycle per step.
+    /// Once per process-data cycle: after the frame whose logical write (LWR / LRW) reaches the
+    /// highest logical address written so far (the end of the master's image, however it is
+    /// split over datagrams and frames); model time + one cycle per step.
     PerFrame,
     /// At the devices' SYNC0 on the segment's own clock (per process-data frame while no
     /// hosted device has a SYNC0), with the sync-manager watchdogs running.
@@ -110,6 +116,11 @@ pub struct Segment {
     drop_frames: std::collections::BTreeSet<u64>,
     miscount: std::collections::BTreeSet<u64>,
     offered: u64,
+    /// The hosted models' ports during a world step (kept: no allocation per step).
+    ports: PortBuffer,
+    /// End (exclusive) of the highest logical address a logical write has reached so far: a
+    /// frame whose logical write reaches it completes a process-data cycle (per-frame stepping).
+    image_end: u64,
 }
 
 impl Segment {
@@ -137,6 +148,8 @@ impl Segment {
             drop_frames: std::collections::BTreeSet::new(),
             miscount: std::collections::BTreeSet::new(),
             offered: 0,
+            ports: PortBuffer::default(),
+            image_end: 0,
         }
     }
 
@@ -162,9 +175,9 @@ impl Segment {
         self.world.as_mut()
     }
 
-    /// `true`: [`Stepping::PerFrame`] — step the world after every frame that wrote process
-    /// data (a logical write: LWR / LRW), with the model time advancing by the cycle time per
-    /// step. `false`: [`Stepping::External`].
+    /// `true`: [`Stepping::PerFrame`] — step the world once per process-data cycle, after the
+    /// frame whose logical write (LWR / LRW) completes the image, with the model time advancing
+    /// by the cycle time per step. `false`: [`Stepping::External`].
     pub fn set_auto_sync(&mut self, on: bool) {
         self.set_stepping(if on {
             Stepping::PerFrame
@@ -223,14 +236,12 @@ impl Segment {
         let Some(world) = self.world.as_mut() else {
             return;
         };
-        let mut ports: Vec<Port<'_>> = self
+        let ports = self
             .chain
             .escs
             .iter_mut()
-            .filter_map(|e| e.app_mut().port())
-            .collect();
-        world.step(now, cycle, &mut ports);
-        drop(ports);
+            .filter_map(|e| e.app_mut().port());
+        self.ports.with(ports, |p| world.step(now, cycle, p));
         for esc in &mut self.chain.escs {
             esc.poll_app_mailbox();
         }
@@ -299,7 +310,8 @@ impl Segment {
     ///
     /// [`Stepping::OwnClock`]: SYNC0 pulses and watchdog expiries due at `now_ns` happen before
     /// the frame ([`Self::handle_timeout`]); the frame then steps the world only while no
-    /// hosted device has a SYNC0. [`Stepping::PerFrame`]: a frame with a logical write steps it.
+    /// hosted device has a SYNC0. [`Stepping::PerFrame`]: a frame whose logical write reaches the
+    /// end of the image written so far steps it (once per cycle however the master splits it).
     pub fn process_frame(&mut self, frame: &mut [u8], now_ns: u64) -> Result<bool, WireError> {
         let n = self.offered;
         self.offered += 1;
@@ -309,21 +321,28 @@ impl Segment {
         // Own clock: what fell due before the frame arrived happens first.
         self.handle_timeout(now_ns);
         let chain = &mut self.chain;
+        chain.refresh_irq();
         let miscount = self.miscount.contains(&n);
-        let mut logical_write = false;
+        // End of this frame's logical writes (0: none).
+        let mut write_end = 0u64;
         let count = wire::for_each_datagram_mut(frame, |mut dg| {
             let cmd = dg.command().code();
-            logical_write |= cmd == Command::Lwr.code() || cmd == Command::Lrw.code();
             let raw_addr = dg.address();
+            if cmd == Command::Lwr.code() || cmd == Command::Lrw.code() {
+                // A zero-length write still marks the frame as process data.
+                let end = u64::from(raw_addr) + dg.data().len().max(1) as u64;
+                write_end = write_end.max(end);
+            }
             let mut wkc = dg.wkc();
-            let new_addr = chain.process_raw(cmd, raw_addr, dg.data_mut(), &mut wkc, now_ns);
+            let (new_addr, devices_irq) =
+                chain.process_raw_with_irq(cmd, raw_addr, dg.data_mut(), &mut wkc, now_ns);
             if miscount && dg.command().addressing() == wire::Addressing::Logical {
                 // A device that did not take part: one count short.
                 wkc = wkc.saturating_sub(1);
             }
             dg.set_address(new_addr);
             dg.set_wkc(wkc);
-            let irq = dg.irq() | chain.irq();
+            let irq = dg.irq() | devices_irq;
             dg.set_irq(irq);
         })?;
         wire::mark_processed(frame);
@@ -334,7 +353,11 @@ impl Segment {
             Stepping::PerFrame => true,
             Stepping::OwnClock => !self.hosted_sync0_scheduled(),
         };
-        if logical_write && per_frame {
+        // The frame completes the cycle's image when its logical write reaches the highest end
+        // written so far (the image may grow: a frame beyond it sets the new end).
+        let completes = write_end > 0 && write_end >= self.image_end;
+        self.image_end = self.image_end.max(write_end);
+        if completes && per_frame {
             let t = self.sync_time.saturating_add(self.cycle);
             self.sync0(t);
             self.stepped_at(now_ns);
@@ -638,6 +661,54 @@ mod tests {
         assert_eq!(seg.frames, 0);
         let mut short = vec![0u8; 10];
         assert!(seg.process_frame(&mut short, 0).is_err());
+    }
+
+    /// Per-frame stepping: once per process-data cycle, however the master splits its image
+    /// over datagrams and frames.
+    #[test]
+    fn per_frame_stepping_steps_once_per_split_cycle() {
+        let mut seg = segment(3);
+        seg.set_world(
+            World::new(crate::sim::plant::Plant::new()),
+            Nanos(1_000_000),
+        );
+        seg.set_stepping(Stepping::PerFrame);
+        let lrw = |a: u32, n: usize| (Command::Lrw, a, vec![0u8; n]);
+        // One LRW per cycle: one step per frame.
+        for k in 1..=3 {
+            let mut f = frame(&[lrw(0, 100)]);
+            seg.process_frame(&mut f, 0).unwrap();
+            assert_eq!(seg.syncs(), k);
+        }
+        // The image split over two frames: the step follows the second.
+        for k in 0..3u64 {
+            let mut f = frame(&[lrw(0, 60)]);
+            seg.process_frame(&mut f, 0).unwrap();
+            assert_eq!(seg.syncs(), 3 + k, "no step after the first part");
+            let mut f = frame(&[lrw(60, 40)]);
+            seg.process_frame(&mut f, 0).unwrap();
+            assert_eq!(seg.syncs(), 4 + k, "one step after the last part");
+        }
+        // Two datagrams in one frame: one step; a frame without logical write: none.
+        let mut f = frame(&[lrw(0, 50), lrw(50, 50)]);
+        seg.process_frame(&mut f, 0).unwrap();
+        assert_eq!(seg.syncs(), 7);
+        let mut f = frame(&[(Command::Brd, 0, vec![0])]);
+        seg.process_frame(&mut f, 0).unwrap();
+        assert_eq!(seg.syncs(), 7);
+        // The image grows to three frames: from the next cycle on, one step per cycle again.
+        for part in [(0, 100), (100, 100), (200, 20)] {
+            let mut f = frame(&[lrw(part.0, part.1)]);
+            seg.process_frame(&mut f, 0).unwrap();
+        }
+        let grown = seg.syncs();
+        for k in 1..=2 {
+            for part in [(0, 100), (100, 100), (200, 20)] {
+                let mut f = frame(&[lrw(part.0, part.1)]);
+                seg.process_frame(&mut f, 0).unwrap();
+            }
+            assert_eq!(seg.syncs(), grown + k);
+        }
     }
 
     #[test]
