@@ -19,6 +19,7 @@ pub mod bus;
 pub mod channel;
 pub mod core;
 pub mod drive;
+#[cfg(feature = "ethercat")]
 pub mod esi;
 pub mod limits;
 pub mod link;

@@ -17,8 +17,6 @@ use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
 use crate::drive::catalogue;
 use crate::drive::DriveError;
 use crate::drive::ProbeEdge;
-use crate::link::ethercat::{EthercatLink, EthercatSpec, Wire};
-use crate::link::sim::SimLink;
 use crate::link::{Link, ProcessImage};
 use crate::messages::{ids, CncMessage};
 use crate::nc::ast::Program;
@@ -206,8 +204,8 @@ impl LinkChoice {
     }
 }
 
-/// `--link` values this build knows, for messages.
-pub const LINKS: &str = "sim (drive models in memory), canopen-emu (our CiA 301 master against emulated CiA 402 nodes on an in-process virtual CAN bus), canopen-udp[:GROUP:PORT] (python-can udp_multicast bus), socketcan:IF, ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
+/// `--link` values fieldprobe knows, for messages ([`crate::link::LINKS`]).
+pub const LINKS: &str = crate::link::LINKS;
 
 /// A machine: channel, axes, and the link to their drives.
 pub struct Machine {
@@ -424,40 +422,16 @@ impl Machine {
         } else {
             Vec::new()
         };
-        let link: Box<dyn Link> = match choice.link.as_str() {
-            "sim" => Box::new(SimLink::from_models(models, cycle)),
-            other
-                if other == "canopen-emu"
-                    || other.starts_with("canopen-udp")
-                    || other.starts_with("socketcan:") =>
-            {
-                Box::new(
-                    crate::link::canopen::CanopenLink::on_link(
-                        other,
-                        &defs,
-                        &node_ids,
-                        cycle,
-                        choice.candump.as_deref(),
-                    )
-                    .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?,
-                )
-            }
-            other => {
-                let wire = Wire::from_link(other).ok_or_else(|| {
-                    MachineError::Config(format!(
-                        "--link {other}: unknown link; available: {LINKS}"
-                    ))
-                })?;
-                let spec = EthercatSpec {
-                    drives: defs,
-                    cycle,
-                    pcap: choice.pcap.clone(),
-                };
-                let link = EthercatLink::open(&wire, &spec)
-                    .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?;
-                Box::new(link)
-            }
-        };
+        let link = crate::link::open(crate::link::LinkRequest {
+            link: &choice.link,
+            drives: &defs,
+            models,
+            node_ids: &node_ids,
+            cycle,
+            pcap: choice.pcap.as_deref(),
+            candump: choice.candump.as_deref(),
+        })
+        .map_err(|e| MachineError::Config(format!("--link {}: {e}", choice.link)))?;
         let mut link = link;
         if let Some(path) = &choice.cycle_log {
             let file = std::fs::File::create(path).map_err(|e| {

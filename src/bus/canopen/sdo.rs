@@ -47,8 +47,8 @@ use std::mem;
 
 use tracing::{debug, trace};
 
+use crate::bus::abort::abort_text;
 use crate::bus::can::CanFrame;
-use crate::bus::ethercat::mailbox::abort_text;
 use crate::units::Nanos;
 
 /// Server → client COB-ID base (SDO "tx" of the server): 0x580 + node.

@@ -591,7 +591,7 @@ impl SoeClient {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "sim"))]
 mod tests {
     use super::*;
     use crate::sim::esc::soe::{error, sercos_idns};
