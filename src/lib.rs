@@ -30,3 +30,11 @@ pub mod params;
 pub mod rt;
 pub mod sim;
 pub mod units;
+
+/// ethercrab, the EtherCAT MainDevice fieldprobe's EtherCAT side is built on (`ethercat`
+/// feature): use this re-export so that your `MainDevice` and fieldprobe's mailbox clients are
+/// of the same version.
+#[cfg(feature = "ethercat")]
+pub use ethercrab;
+
+pub mod prelude;
