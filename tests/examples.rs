@@ -212,3 +212,62 @@ fn canopen_touch_probe_latches_the_surface_and_writes_the_torque_limit() {
     let t = line(&out, "torque limit 0x6072:00 =");
     assert_eq!(number_after(t, "0x6072:00 ="), 550.0, "{t}");
 }
+
+/// The value of `NAME = VALUE` in `out`.
+fn value(out: &str, name: &str) -> f64 {
+    number_after(line(out, &format!("{name} =")), "=")
+}
+
+#[test]
+fn measurement_core_reports_the_results_the_stop_and_the_limits() {
+    let probe = 98.76543;
+    let out = run("measurement_core", &["--probe-at", "98.76543"]);
+    let setup = line(&out, "G54 zero offset Z =");
+    let offset = number_after(setup, "Z =");
+    let target_pcs = number_after(setup, "G100 Z");
+    let start = number_after(setup, "from ACS Z");
+    // The example's drive latches in increments of 0.1 µm.
+    let latched = (probe * 10_000.0_f64).round() / 10_000.0;
+    let near = |name: &str, want: f64| {
+        let got = value(&out, name);
+        assert!(
+            (got - want).abs() < 1e-6,
+            "{name} = {got}, want {want}\n{out}"
+        );
+    };
+    // FCT-C4 §5, 2.5D: MESS and the ACS value are the latched ACS position; the PCS value is
+    // it without the zero shift; MOFFS = MESS − programmed target − zero shifts.
+    near("V.A.MESS.Z", latched);
+    near("V.A.MEAS.ACS.VALUE.Z", latched);
+    near("V.A.MEAS.PCS.VALUE.Z", latched - offset);
+    near("V.A.MOFFS.Z", latched - target_pcs - offset);
+    near("V.A.MERF.Z", 1.0);
+    // The stop request came with the latch; the axis stopped past the surface, short of the
+    // target.
+    let stop = line(&out, "stop requested in cycle");
+    assert!(number_after(stop, "actual Z") <= probe, "{stop}");
+    let stopped = number_after(line(&out, "stopped in cycle"), "ACS Z");
+    assert!(stopped < probe && stopped > target_pcs + offset, "{out}");
+    assert!(start > probe);
+    assert!(
+        out.contains("software limits: actual positions inside"),
+        "{out}"
+    );
+    // FCT-A2: a command path below the negative limit switch is P-ERR-120003.
+    let refused = line(&out, "software limits: G01 Z");
+    assert!(refused.contains("error 120003"), "{refused}");
+
+    // A surface beyond the target: the motion reaches the target without a signal; type 1
+    // accepts that (P-CHAN-00176 = 0) and Z gets no result (MERF 0).
+    let out = run(
+        "measurement_core",
+        &["--probe-at", &format!("{}", offset + target_pcs - 5.0)],
+    );
+    assert_eq!(value(&out, "V.A.MERF.Z"), 0.0, "{out}");
+    assert!(!out.contains("V.A.MESS.Z"), "{out}");
+    assert!(!out.contains("stop requested"), "{out}");
+    assert!(
+        line(&out, "stopped in cycle").ends_with("(target)"),
+        "{out}"
+    );
+}

@@ -22,6 +22,9 @@ use crate::core::measure::plc::{
     BlockGate, EvaluatorConfig, ExtLatchClient, ExtLatchConfig, SignalEvaluator, SourceEvaluator,
     TimestampConfig,
 };
+use crate::core::measure::run::{
+    contact_path_position, latched_before_target, missing_signal_error,
+};
 use crate::core::measure::timestamp::{DcClock, DeadTimes};
 use crate::core::measure::{MeasType, MeasurementOutcome, SignalSource};
 use crate::core::path::Segment;
@@ -35,10 +38,6 @@ mod step;
 /// A lag below this (mm, one 0.1 µm increment) counts as none when an undetected type-7 run
 /// ends (P-CHAN-00266 = 1).
 const SETTLE_LAG: f64 = 1e-4;
-
-/// A contact closer to the programmed target than this (mm) counts as at the target (MERF 0):
-/// far below the 0.1 µm resolution of the drives' positions.
-const CONTACT_AT_TARGET: f64 = 1e-6;
 
 /// Cycles a measuring block may wait for its sources to confirm the arming (1 s at 1 ms).
 pub const ARMING_TIMEOUT_CYCLES: u32 = 1000;
@@ -168,36 +167,26 @@ impl MeasRun {
     }
 
     /// Path position (distance from the start along the measuring line) of the contact the
-    /// latched positions describe: the least-squares projection of the latched axes that move
-    /// along the line; `None` when no moving axis latched.
+    /// latched positions describe ([`contact_path_position`]).
     fn contact_s(&self) -> Option<f64> {
-        let (mut num, mut den) = (0.0, 0.0);
-        for a in &self.axes {
-            let (Some((p, _)), Some(&d), Some(&o)) =
-                (a.latched, self.dir.get(a.axis), self.origin.get(a.axis))
-            else {
-                continue;
-            };
-            if d.abs() > 1e-12 {
-                num += (p - o) * d;
-                den += d * d;
-            }
-        }
-        (den > 0.0).then(|| num / den)
+        contact_path_position(
+            self.axes
+                .iter()
+                .filter_map(|a| a.latched.map(|(p, _)| (a.axis, p))),
+            &self.origin,
+            &self.dir,
+        )
     }
 
-    /// V.A.MERF per axis: the contact lies on the path before the programmed target (seed 004
-    /// §8: "received before the target position is reached"), judged from where the latched
-    /// positions are, not from where the command was when the latch arrived (the command runs
-    /// the link's dead time ahead of the axis).
+    /// V.A.MERF per axis ([`latched_before_target`]): the contact lies on the path before the
+    /// programmed target (seed 004 §8), judged from where the latched positions are, not from
+    /// where the command was when the latch arrived (the command runs the link's dead time
+    /// ahead of the axis).
     fn decide_merf(&mut self) {
         let s = self.contact_s();
         let target = self.target_len;
         for a in &mut self.axes {
-            a.before_target = match (a.latched, s) {
-                (Some(_), Some(s)) => s < target - CONTACT_AT_TARGET,
-                _ => false,
-            };
+            a.before_target = a.latched.is_some() && latched_before_target(s, target);
         }
     }
 

@@ -215,29 +215,7 @@ impl Channel {
                 .map(|a| self.axes[a.axis].name())
                 .collect();
             let list = missing.join(", ");
-            let m = &self.cfg.meas;
-            let error = if run.limited_at_sls {
-                Some(CncMessage::error(
-                    ids::MEAS_PATH_LIMITED,
-                    format!("measurement run stopped at the software limit switch or control-area boundary (P-CHAN-00268) without probing signal (axes {list})"),
-                ))
-            } else {
-                match run.mtype {
-                    MeasType::Type2 => Some(CncMessage::error(
-                        ids::MEAS_NO_SIGNAL,
-                        format!("measurement type 2: probing signal missing (axes {list})"),
-                    )),
-                    MeasType::Type1 if m.error_no_signal_type1 => Some(CncMessage::error(
-                        ids::MEAS_NO_SIGNAL,
-                        format!("probing signal missing (axes {list}; P-CHAN-00176 = 1)"),
-                    )),
-                    MeasType::Type7 if !m.fixed_stop_no_error => Some(CncMessage::error(
-                        ids::MEAS_NO_FIXED_STOP,
-                        format!("measurement type 7: fixed stop not detected (axes {list}; P-CHAN-00266 = 0)"),
-                    )),
-                    _ => None,
-                }
-            };
+            let error = missing_signal_error(run.mtype, &self.cfg.meas, run.limited_at_sls, &list);
             if let Some(e) = error {
                 return Err(e);
             }

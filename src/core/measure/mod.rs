@@ -6,6 +6,8 @@
 //! | PLC interface (control units, external-latch handshake) | [`plc`] |
 //! | DC timestamp back-calculation | [`timestamp`] |
 //! | fixed-stop detection (type 7) | [`fixed_stop`] |
+//! | a measuring motion without the NC channel (types 1–4): signal, braking, MERF, errors | [`run`] |
+//! | `V.A.MESS`, `MOFFS`, `MEAS.ACS/PCS.VALUE`, G101 / G102 | [`results`] |
 //!
 //! Everything here is sans-IO: time comes in as [`Nanos`](crate::units::Nanos), positions in
 //! mm / ° (ACS).
@@ -13,6 +15,7 @@
 pub mod fixed_stop;
 pub mod plc;
 pub mod results;
+pub mod run;
 pub mod timestamp;
 
 use crate::drive::{ProbeEdge, TriggerSourceMode};
