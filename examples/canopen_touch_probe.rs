@@ -26,8 +26,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use fieldprobe::bus::can::{CanBus, VirtualCan, VirtualEndpoint};
-use fieldprobe::link::canopen::CanopenLink;
+use fieldprobe::bus::can::VirtualEndpoint;
 use fieldprobe::prelude::*;
 use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::plant::ProbeSurface;

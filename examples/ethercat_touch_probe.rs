@@ -20,7 +20,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use fieldprobe::bus::ethercat::mailbox::CoeClient;
 use fieldprobe::ethercrab::{
     std::ethercat_now, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, Timeouts,
 };

@@ -21,11 +21,7 @@
 //! follows the command one cycle late, and a drive latch (CiA 402 0x60BA, 10000 increments per
 //! mm) switches when the actual position passes the workpiece surface at `--probe-at` (ACS Z).
 
-use fieldprobe::core::frames::Frames;
-use fieldprobe::core::measure::results::{self, MeasuringBlock};
-use fieldprobe::core::measure::run::{Latch, MeasurementRun, RunStep};
-use fieldprobe::core::measure::{ChannelMeasConfig, MeasType};
-use fieldprobe::core::monitor::sls::{AxisLimitConfig, SoftLimits};
+use fieldprobe::core::measure::results;
 use fieldprobe::core::path::Segment;
 use fieldprobe::prelude::*;
 

@@ -1,5 +1,5 @@
 //! [`SocketCanBus`]: a Linux SocketCAN raw socket (`socketcan` 4 crate with its tokio
-//! `AsyncCanSocket`, driven by a current-thread runtime owned by the bus; notes `canopen.md` §1).
+//! `AsyncCanSocket`, driven by a current-thread runtime owned by the bus).
 //!
 //! Classic frames only. The socket receives every error class (`CAN_RAW_ERR_FILTER` = all) so
 //! error frames come out as [`CanFrame`]s with [`CanFrame::error`] set, like on

@@ -1,10 +1,10 @@
 //! CoE mailbox client on ethercrab's public raw command API (`Command::fprd` / `fpwr`).
 //!
-//! Works around the ethercrab 0.7.1 CoE defects (notes `ethercat.md` §0 point 4, §3.2):
+//! Works around the ethercrab 0.7.1 CoE defects (reproduced against the emulated servo):
 //! spec-conformant segmented upload with toggle check, normal and segmented download
 //! (> 4 bytes), and CoE emergency messages arriving instead of the SDO response are collected
 //! ([`CoeClient::take_emergencies`]) while the client keeps waiting for the real response.
-//! Mailbox handling follows notes §2.4: SM1 status (0x080D bit 3 = mailbox full) is read
+//! Mailbox handling (ETG.1000.4 mailbox, ETG.1000.6 CoE): SM1 status (0x080D bit 3 = mailbox full) is read
 //! before the read mailbox, requests are padded to the full SM0 length, the mailbox counter
 //! runs 1..7. Every wait is bounded by [`CoeClient::timeout`]. That mailbox handling is the
 //! protocol-neutral [`MailboxTransport`], shared with the SoE client ([`super::soe`]).
@@ -65,7 +65,7 @@ pub enum MailboxError {
         /// The cap (bytes).
         limit: usize,
     },
-    /// SoE error reply (SoE header error bit; notes `ethercat.md` §7.3) with its SERCOS error
+    /// SoE error reply (SoE header error bit, ETG.1000.6) with its SERCOS error
     /// code.
     #[error(
         "SoE {name} (drive {drive_no}): error {code:#06x} ({text})",
@@ -111,7 +111,7 @@ pub struct Emergency {
 /// CiA 301 SDO abort code in words (CoE uses the CiA 301 codes; defined in [`crate::bus::abort`]).
 pub use crate::bus::abort::abort_text;
 
-/// Standard mailbox transport to one SubDevice over ethercrab's raw commands (notes §2.4): the
+/// Standard mailbox transport to one SubDevice over ethercrab's raw commands (ETG.1000.4 mailbox): the
 /// write mailbox (SM0) and read mailbox (SM1) areas, the mailbox counter (1..7), a stale read
 /// mailbox flushed before each request, requests padded to the full SM0 length, replies
 /// awaited by polling the SM1 status (bit 3 = mailbox full) and read with the full SM1 length.

@@ -1,4 +1,4 @@
-//! Measurement runs in the channel (seed 004): a G100 / G210 / G310 block is a linear motion
+//! Measurement runs in the channel (FCT-C4): a G100 / G210 / G310 block is a linear motion
 //! that arms the probing-signal sources of its axes, collects their latches every cycle, brakes
 //! when the probing signal is complete and publishes a [`MeasurementOutcome`].
 //!
@@ -11,7 +11,7 @@
 //! braking ──(standstill)──► done
 //! ```
 //!
-//! Which axes take part (seed 004 §1): the measurement axes programmed in the block, with `#CS`
+//! Which axes take part (FCT-C4 §1): the measurement axes programmed in the block, with `#CS`
 //! the three main axes; no other axis's probe is armed. Which of them must latch (§4): in 2.5D
 //! every measurement axis the block moves; with `#CS` all three main axes. Braking uses the deceleration of the §2.1 table ("measurement
 //! signal active" column) for the non-linear slope parameter set our interpolator uses.
@@ -49,11 +49,11 @@ pub struct MeasureRequest {
     pub mtype: MeasType,
     /// The G code of the block: 100, 210 or 310.
     pub gcode: u32,
-    /// `#CS` is active: the three main axes must all latch (seed 004 §4).
+    /// `#CS` is active: the three main axes must all latch (FCT-C4 §4).
     pub cs_active: bool,
     /// Per channel axis: the axis is programmed in the measuring block. Only these (and with
     /// `#CS` the three main axes) take part: "The measuring function is initialised and
-    /// activated for the axes programmed in the measurement block" (seed 004 §1). A shorter
+    /// activated for the axes programmed in the measurement block" (FCT-C4 §1). A shorter
     /// list reads the missing axes as not programmed.
     pub programmed: Vec<bool>,
     /// Per-axis signal overrides from `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`.
@@ -179,7 +179,7 @@ impl MeasRun {
     }
 
     /// V.A.MERF per axis ([`latched_before_target`]): the contact lies on the path before the
-    /// programmed target (seed 004 §8), judged from where the latched positions are, not from
+    /// programmed target (FCT-C4 §8), judged from where the latched positions are, not from
     /// where the command was when the latch arrived (the command runs the link's dead time
     /// ahead of the axis).
     fn decide_merf(&mut self) {
@@ -322,7 +322,7 @@ pub(super) enum MeasStep {
 }
 
 impl Channel {
-    /// `#MEAS PREPARE [AXNR=..]` (seed 004 §7.2): ask the PLC to prepare the switchable probe of
+    /// `#MEAS PREPARE [AXNR=..]` (FCT-C4 §7.2): ask the PLC to prepare the switchable probe of
     /// axis `axis` ahead of the measuring block.
     pub fn prepare_probe(&mut self, axis: usize) -> Result<(), CncMessage> {
         if axis >= self.axes.len() {
@@ -363,7 +363,7 @@ impl Channel {
         self.cfg.meas.plc_cycle = cycle;
     }
 
-    /// Program end (seed 004 §7.2 Notice): the preparation of all prepared axes is reset.
+    /// Program end (FCT-C4 §7.2 Notice): the preparation of all prepared axes is reset.
     pub fn program_end(&mut self) {
         for c in self.ext_latch.iter_mut().flatten() {
             c.clear_preparation();
@@ -372,7 +372,7 @@ impl Channel {
     }
 
     /// Homing of axis `i` (G74): resets the preparation of every prepared axis when `i` was
-    /// prepared (seed 004 §7.2 Notice).
+    /// prepared (FCT-C4 §7.2 Notice).
     pub fn homing(&mut self, i: usize) {
         if self.prepared.get(i).copied().unwrap_or(false) {
             self.program_end();

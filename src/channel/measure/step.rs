@@ -156,7 +156,7 @@ impl Channel {
                             .as_mut()
                             .and_then(|d| d.update(now, k, travelled, a.lag(), a.actual()));
                         if detected.is_some() {
-                            // The measuring point is latched for each axis involved (seed 004
+                            // The measuring point is latched for each axis involved (FCT-C4
                             // §7.3): every axis of the run takes its actual position; the motion
                             // brakes, and at its end all axes move there ("reduce interpolation
                             // to measured value", `finish_measurement`).
@@ -222,7 +222,7 @@ impl Channel {
         }
         run.decide_merf();
         let settle: Vec<(usize, f64)> = match run.mtype {
-            // Detected: every axis of the run goes to its latched position (seed 004 §7.3).
+            // Detected: every axis of the run goes to its latched position (FCT-C4 §7.3).
             MeasType::Type7 if complete => run
                 .axes
                 .iter()
