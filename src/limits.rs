@@ -1,3 +1,5 @@
+//! **Internal** (used by fieldprobe's readers and binary; may change in any release).
+//!
 //! Limits as policy, in one place: every cap on what a user file or option may make fieldprobe
 //! allocate or compute, and the one helper through which every user file is read.
 //!
@@ -56,9 +58,9 @@ pub const MAX_CAPTURE_FILE_BYTES: u64 = 256 * MIB;
 
 /// Largest object the EtherCAT mailbox clients accept from a device: a CoE SDO upload (its
 /// announced size, and the data of its segments) or an SoE element read joined from fragments:
-/// 1 MiB, the same as the CANopen SDO client's default ([`crate::bus::canopen::sdo::DEFAULT_MAX_SIZE`]).
+/// 1 MiB, the same as the CANopen SDO client's default (`bus::canopen::sdo::DEFAULT_MAX_SIZE`).
 /// A larger CoE upload is aborted with 0x0504_0005 "out of memory"; both end with
-/// [`crate::bus::ethercat::mailbox::MailboxError::ObjectTooLarge`].
+/// `bus::ethercat::mailbox::MailboxError::ObjectTooLarge`.
 pub const MAX_MAILBOX_OBJECT_BYTES: usize = MIB as usize;
 
 /// Most devices in one emulated EtherCAT segment (`sim ethercat --device FILE.xml:COUNT`):

@@ -17,8 +17,6 @@ use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
 use crate::drive::catalogue;
 use crate::drive::DriveError;
 use crate::drive::ProbeEdge;
-use crate::link::ethercat::{EthercatLink, EthercatSpec, Wire};
-use crate::link::sim::SimLink;
 use crate::link::{Link, ProcessImage};
 use crate::messages::{ids, CncMessage};
 use crate::nc::ast::Program;
@@ -206,8 +204,8 @@ impl LinkChoice {
     }
 }
 
-/// `--link` values this build knows, for messages.
-pub const LINKS: &str = "sim (drive models in memory), canopen-emu (our CiA 301 master against emulated CiA 402 nodes on an in-process virtual CAN bus), canopen-udp[:GROUP:PORT] (python-can udp_multicast bus), socketcan:IF, ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
+/// `--link` values fieldprobe knows, for messages ([`crate::link::LINKS`]).
+pub const LINKS: &str = crate::link::LINKS;
 
 /// A machine: channel, axes, and the link to their drives.
 pub struct Machine {
@@ -385,7 +383,7 @@ impl Machine {
             models.push(model);
             let mut axis_cfg = channel_axis_config(a, cycle);
             axis_cfg.servo_lag_time = servo_lag_time(&defs[defs.len() - 1].model);
-            // Measurement type 6 needs a SERCOS axis (seed 004 §3 table).
+            // Measurement type 6 needs a SERCOS axis (FCT-C4 §3 table).
             axis_cfg.meas.sercos = sercos;
             axis_cfgs.push(axis_cfg);
         }
@@ -404,7 +402,7 @@ impl Machine {
             max_lost_cycles: cfg.max_lost_cycles,
             meas: channel_meas_config(&cfg.channel),
         };
-        // P-AXIS-00777 > 1000: warning 110757 at controller start (seed 004 §8.2.2).
+        // P-AXIS-00777 > 1000: warning 110757 at controller start (FCT-C4 §8.2.2).
         let startup: Vec<CncMessage> = ch_cfg
             .axes
             .iter()
@@ -432,42 +430,18 @@ impl Machine {
         } else {
             Vec::new()
         };
-        let link: Box<dyn Link> = match choice.link.as_str() {
-            "sim" => Box::new(SimLink::from_models(models, cycle)),
-            other
-                if other == "canopen-emu"
-                    || other.starts_with("canopen-udp")
-                    || other.starts_with("socketcan:") =>
-            {
-                Box::new(
-                    crate::link::canopen::CanopenLink::on_link(
-                        other,
-                        &defs,
-                        &node_ids,
-                        cycle,
-                        choice.candump.as_deref(),
-                    )
-                    .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?,
-                )
-            }
-            other => {
-                let wire = Wire::from_link(other).ok_or_else(|| {
-                    MachineError::Config(format!(
-                        "--link {other}: unknown link; available: {LINKS}"
-                    ))
-                })?;
-                let spec = EthercatSpec {
-                    drives: defs,
-                    cycle,
-                    pcap: choice.pcap.clone(),
-                    terminals: ethercat_terminals(cfg)?,
-                    emulated_extra: Vec::new(),
-                };
-                let link = EthercatLink::open(&wire, &spec)
-                    .map_err(|e| MachineError::Config(format!("--link {other}: {e}")))?;
-                Box::new(link)
-            }
-        };
+        let link = crate::link::open(crate::link::LinkRequest {
+            link: &choice.link,
+            drives: &defs,
+            models,
+            node_ids: &node_ids,
+            cycle,
+            pcap: choice.pcap.as_deref(),
+            candump: choice.candump.as_deref(),
+            #[cfg(feature = "sim")]
+            terminals: ethercat_terminals(cfg)?,
+        })
+        .map_err(|e| MachineError::Config(format!("--link {}: {e}", choice.link)))?;
         let mut link = link;
         if let Some(path) = &choice.cycle_log {
             let file = std::fs::File::create(path).map_err(|e| {
@@ -831,7 +805,7 @@ impl Machine {
         for m in std::mem::take(&mut self.startup) {
             emit(RunEvent::Message(m), &mut events);
         }
-        // Program start: configured SLS again (seed 001 §3.3), drives enabled.
+        // Program start: configured SLS again (FCT-A2 §3.3), drives enabled.
         if self.channel.state() != ChannelState::Enabling {
             self.channel.program_start();
         }
@@ -945,7 +919,7 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
         check: p.int("P-AXIS-00705").clamp(-1, 1) as i8,
         modulo: rotary && is_modulo(p),
         absolute_encoder: p.int("P-AXIS-00014") != 0,
-        // Seed 001 §4.3: axis types T only.
+        // FCT-A2 §4.3: axis types T only.
         check_pos_command: !rotary && p.int("P-AXIS-00520") != 0,
         check_neg_command: !rotary && p.int("P-AXIS-00521") != 0,
         emergency_decel: a_emergency,
@@ -965,7 +939,7 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
         stroke: param_pos_to_mm(p.int("P-AXIS-00086")),
         feed_type2: param_vel_to_mm_s(p.int("P-AXIS-00215")),
         overtravel: param_pos_to_mm(p.int("P-AXIS-00467")),
-        // P-AXIS-00467 replaces P-AXIS-00114, which stays available for type 2 only (seed 004
+        // P-AXIS-00467 replaces P-AXIS-00114, which stays available for type 2 only (FCT-C4
         // §8.2.2): the old value applies when the new parameter is not given.
         overtravel_type2: param_pos_to_mm(if p.is_set("P-AXIS-00467") {
             p.int("P-AXIS-00467")
@@ -1019,7 +993,7 @@ fn in_position_timeout_cycles(ms: u32, cycle: Nanos) -> u32 {
     u32::try_from(n).unwrap_or(u32::MAX).max(1)
 }
 
-/// The channel's measurement settings from its parameter list (seed 004 §8.2.1, seed 000 §6.2).
+/// The channel's measurement settings from its parameter list (FCT-C4 §8.2.1, FCT-C14 §6.2).
 pub fn channel_meas_config(p: &ParamSet) -> ChannelMeasConfig {
     ChannelMeasConfig {
         default_type: MeasType::from_number(p.int("P-CHAN-00057")).unwrap_or(MeasType::Type1),
@@ -1099,7 +1073,7 @@ pub struct AxisCheck {
 }
 
 impl Machine {
-    /// Commissioning check (seed 004 §6): read each drive's settings over the link and compare
+    /// Commissioning check (FCT-C4 §6): read each drive's settings over the link and compare
     /// them with the axis parameters of `cfg`; every mismatch in plain words.
     pub fn commissioning_check(&mut self, cfg: &MachineConfig) -> Vec<AxisCheck> {
         let mut out = Vec::new();
@@ -1154,7 +1128,7 @@ impl Machine {
     }
 }
 
-/// P-AXIS-00517 per the seed's table (seed 004 §8.2.2): PLC_EXT_LATCH_CONTROL 1 … 255,
+/// P-AXIS-00517 per the seed's table (FCT-C4 §8.2.2): PLC_EXT_LATCH_CONTROL 1 … 255,
 /// EXT_PROBE_WITH_DRIVE 1 … 2, DRIVE on SERCOS / CANopen / PROFIDRIVE 1 … 2, DRIVE on the other
 /// drive types (Lightbus, terminal) 1. 0 = not given (input 1).
 fn check_probing_input(
@@ -1189,6 +1163,7 @@ fn check_probing_input(
 
 /// The machine's `[[terminal]]` tables with their ESI files loaded (relative paths from the
 /// machine file's directory).
+#[cfg(feature = "sim")]
 fn ethercat_terminals(
     cfg: &MachineConfig,
 ) -> Result<Vec<crate::link::ethercat::terminals::TerminalSpec>, MachineError> {

@@ -139,34 +139,34 @@ impl fmt::Display for CncMessage {
 
 /// Message IDs. Seed IDs carry the seed section; project IDs (9xxxxx) say so.
 pub mod ids {
-    /// Seed 001 §3.1: G98 computes a negative SLS below P-AXIS-00177 (with P-CHAN-00498 = 1).
+    /// FCT-A2 §3.1: G98 computes a negative SLS below P-AXIS-00177 (with P-CHAN-00498 = 1).
     pub const G98_BELOW_CONFIGURED: u32 = 21648;
-    /// Seed 001 §3.1: G98 computes a negative SLS ≥ the positive SLS.
+    /// FCT-A2 §3.1: G98 computes a negative SLS ≥ the positive SLS.
     pub const G98_NOT_BELOW_POSITIVE: u32 = 21649;
-    /// Seed 001 §3.2: G99 computes a positive SLS above P-AXIS-00178 (with P-CHAN-00498 = 1).
+    /// FCT-A2 §3.2: G99 computes a positive SLS above P-AXIS-00178 (with P-CHAN-00498 = 1).
     pub const G99_ABOVE_CONFIGURED: u32 = 21650;
-    /// Seed 001 §3.2: G99 computes a positive SLS ≤ the negative SLS.
+    /// FCT-A2 §3.2: G99 computes a positive SLS ≤ the negative SLS.
     pub const G99_NOT_ABOVE_NEGATIVE: u32 = 21878;
-    /// Seed 001 §2: actual position beyond the positive SLS + tolerance (P-AXIS-00179).
+    /// FCT-A2 §2: actual position beyond the positive SLS + tolerance (P-AXIS-00179).
     pub const ACTUAL_POSITIVE_SLS: u32 = 70021;
-    /// Seed 001 §2: actual position beyond the negative SLS − tolerance (P-AXIS-00179).
+    /// FCT-A2 §2: actual position beyond the negative SLS − tolerance (P-AXIS-00179).
     pub const ACTUAL_NEGATIVE_SLS: u32 = 70022;
-    /// Seed 001 §2: a block's command path crosses the positive SLS (block not executed).
+    /// FCT-A2 §2: a block's command path crosses the positive SLS (block not executed).
     pub const COMMAND_POSITIVE_SLS: u32 = 120002;
-    /// Seed 001 §2: a block's command path crosses the negative SLS (block not executed).
+    /// FCT-A2 §2: a block's command path crosses the negative SLS (block not executed).
     pub const COMMAND_NEGATIVE_SLS: u32 = 120003;
-    /// Seed 001 §4.3 P-AXIS-00520/00521: the axis can no longer stop before the SLS with P-AXIS-00003.
+    /// FCT-A2 §4.3 P-AXIS-00520/00521: the axis can no longer stop before the SLS with P-AXIS-00003.
     pub const COMMAND_STOP_DISTANCE: u32 = 70195;
-    /// Seed 001 §2: continuous jog reached an SLS / offset limit (only with P-MANU-00014).
+    /// FCT-A2 §2: continuous jog reached an SLS / offset limit (only with P-MANU-00014).
     pub const JOG_LIMIT_REACHED: u32 = 50720;
-    /// Seed 001 §2: incremental jog step not executed, it would pass an SLS / offset limit.
+    /// FCT-A2 §2: incremental jog step not executed, it would pass an SLS / offset limit.
     pub const JOG_STEP_REFUSED: u32 = 150008;
-    /// Seed 000 §6.2 P-CHAN-00268: measurement run stopped at the end of the motion path.
+    /// FCT-C14 §6.2 P-CHAN-00268: measurement run stopped at the end of the motion path.
     pub const MEAS_PATH_LIMITED: u32 = 50706;
 
-    /// Seed 004 §8.2.2 P-AXIS-00777: per-mille start distance > 1000 at controller start.
+    /// FCT-C4 §8.2.2 P-AXIS-00777: per-mille start distance > 1000 at controller start.
     pub const FIXED_STOP_PER_MILLE_WARNING: u32 = 110757;
-    /// Seed 004 §8.2.2 P-AXIS-00777: per-mille start distance > 1000 at a measuring travel.
+    /// FCT-C4 §8.2.2 P-AXIS-00777: per-mille start distance > 1000 at a measuring travel.
     pub const FIXED_STOP_PER_MILLE_ERROR: u32 = 51026;
 
     /// Project: the measuring block is not allowed as programmed (type / G code / axes /
@@ -219,56 +219,56 @@ pub mod ids {
     /// not pre-operational). Warning; names the axes or nodes.
     pub const POWER_OFF: u32 = 900017;
 
-    /// Seed 000 §3.4 notice: CLEAR of an active workspace / protection area (warning; the area
+    /// FCT-C14 §3.4 notice: CLEAR of an active workspace / protection area (warning; the area
     /// stays active).
     pub const AREA_CLEAR_ACTIVE: u32 = 120499;
-    /// Seed 000 §5 case 2 (P-CHAN-00442 = 0): manual mode selected with the TCP outside the
+    /// FCT-C14 §5 case 2 (P-CHAN-00442 = 0): manual mode selected with the TCP outside the
     /// active workspace.
     pub const MANUAL_OUTSIDE_WORKSPACE: u32 = 50961;
-    /// Seed 000 §5 case 2 (P-CHAN-00442 = 0): manual mode selected with the TCP inside an active
+    /// FCT-C14 §5 case 2 (P-CHAN-00442 = 0): manual mode selected with the TCP inside an active
     /// protection area.
     pub const MANUAL_IN_PROTECTION: u32 = 50962;
-    /// Project (seed 000 §3, no ID given): `#CONTROL AREA` command text does not parse.
+    /// Project (FCT-C14 §3, no ID given): `#CONTROL AREA` command text does not parse.
     pub const AREA_SYNTAX: u32 = 900300;
-    /// Project (seed 000 §3.1 attention): area definition block not in G90.
+    /// Project (FCT-C14 §3.1 attention): area definition block not in G90.
     pub const AREA_NOT_ABSOLUTE: u32 = 900301;
-    /// Project (seed 000 §3.1): area definition block without a valid F.
+    /// Project (FCT-C14 §3.1): area definition block without a valid F.
     pub const AREA_NO_FEED: u32 = 900302;
-    /// Project (seed 000 §3.1.1 / §3.1.2): POLY takes G01 only, CIRC a G01 start and G02/G03.
+    /// Project (FCT-C14 §3.1.1 / §3.1.2): POLY takes G01 only, CIRC a G01 start and G02/G03.
     pub const AREA_WRONG_MOTION: u32 = 900303;
-    /// Project (seed 000 §2.3): more than 20 motion blocks in a polygon.
+    /// Project (FCT-C14 §2.3): more than 20 motion blocks in a polygon.
     pub const AREA_TOO_MANY_BLOCKS: u32 = 900304;
-    /// Project (seed 000 §3.1.1 notice): polygon first point ≠ last point.
+    /// Project (FCT-C14 §3.1.1 notice): polygon first point ≠ last point.
     pub const AREA_NOT_CLOSED: u32 = 900305;
-    /// Project (seed 000 §3.1.1): polygon with fewer than 3 distinct points.
+    /// Project (FCT-C14 §3.1.1): polygon with fewer than 3 distinct points.
     pub const AREA_TOO_FEW_POINTS: u32 = 900306;
-    /// Project (seed 000 §2.3 / §3.1.1): polygon edges cross or touch.
+    /// Project (FCT-C14 §2.3 / §3.1.1): polygon edges cross or touch.
     pub const AREA_SELF_INTERSECTION: u32 = 900307;
-    /// Project (seed 000 §3.1.2): CIRC geometry (no centre, not a full circle, radius 0, extra
+    /// Project (FCT-C14 §3.1.2): CIRC geometry (no centre, not a full circle, radius 0, extra
     /// or missing block).
     pub const AREA_CIRCLE: u32 = 900308;
-    /// Project (seed 000 §3.1): MIN_EXCUR not below MAX_EXCUR.
+    /// Project (FCT-C14 §3.1): MIN_EXCUR not below MAX_EXCUR.
     pub const AREA_EXCURSION: u32 = 900309;
-    /// Project (seed 000 §2.3): a 21st control area.
+    /// Project (FCT-C14 §2.3): a 21st control area.
     pub const AREA_TABLE_FULL: u32 = 900310;
-    /// Project (seed 000 §3.1 "Overwrite control areas"): redefinition of an active area.
+    /// Project (FCT-C14 §3.1 "Overwrite control areas"): redefinition of an active area.
     pub const AREA_OVERWRITE_ACTIVE: u32 = 900311;
-    /// Project (seed 000 §3.1): BEGIN / END out of sequence, command inside a definition.
+    /// Project (FCT-C14 §3.1): BEGIN / END out of sequence, command inside a definition.
     pub const AREA_SEQUENCE: u32 = 900312;
-    /// Project (seed 000 §3.2): ON of an undefined area, bare OFF with nothing selected.
+    /// Project (FCT-C14 §3.2): ON of an undefined area, bare OFF with nothing selected.
     pub const AREA_UNDEFINED: u32 = 900313;
-    /// Project (seed 000 §3.2): TCP not in a valid position when areas are activated.
+    /// Project (FCT-C14 §3.2): TCP not in a valid position when areas are activated.
     pub const AREA_TCP_INVALID: u32 = 900314;
-    /// Project (seed 000 §4): starting point incomplete, main and additional axes mixed, CIRC on
+    /// Project (FCT-C14 §4): starting point incomplete, main and additional axes mixed, CIRC on
     /// additional axes.
     pub const AREA_AXES: u32 = 900315;
-    /// Project (seed 000 §2.3 path check, no ID given): the programmed path of a block touches
+    /// Project (FCT-C14 §2.3 path check, no ID given): the programmed path of a block touches
     /// or enters an active protection area; the block is not executed, the program aborts.
     pub const AREA_PATH_PROTECTION: u32 = 900316;
-    /// Project (seed 000 §2.3 path check, no ID given): the programmed path of a block leaves
+    /// Project (FCT-C14 §2.3 path check, no ID given): the programmed path of a block leaves
     /// the active workspaces; the block is not executed, the program aborts.
     pub const AREA_PATH_WORKSPACE: u32 = 900317;
-    /// Project (seed 000 §5, with P-MANU-00014): a jog stopped ahead of a workspace / protection
+    /// Project (FCT-C14 §5, with P-MANU-00014): a jog stopped ahead of a workspace / protection
     /// area boundary (warning).
     pub const AREA_JOG_STOPPED: u32 = 900318;
 

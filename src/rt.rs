@@ -1,3 +1,5 @@
+//! **Internal** (used by fieldprobe's links and binary; may change in any release).
+//!
 //! Real-time cycles on the links that leave the process (`ethercat:IF`, `canopen-udp`,
 //! `socketcan:IF`): one exchange per period on absolute deadlines, the usual real-time knobs of
 //! EtherCAT masters, and the statistics of every cycle. The in-process links (`sim`,

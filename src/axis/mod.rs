@@ -265,7 +265,7 @@ impl Axis {
         self.feedback.is_some_and(|f| f.fault)
     }
 
-    /// Arm the drive's latch unit (seed 004 §6).
+    /// Arm the drive's latch unit (FCT-C4 §6).
     pub fn arm_probe(&mut self, request: &ProbeRequest) -> Result<(), DriveError> {
         self.adapter.arm_probe(request)
     }

@@ -1,4 +1,4 @@
-//! Acyclic drive access from the NC program (`#DRIVE WR/RD`, `#IDENT WR/RD`, seed 004 §7.3):
+//! Acyclic drive access from the NC program (`#DRIVE WR/RD`, `#IDENT WR/RD`, FCT-C4 §7.3):
 //! the channel queues object reads / writes, the machine carries them over the link's mailbox
 //! (SDO / CoE) and reports back. A waiting request (`WAIT`, `SYN`) keeps the channel busy until
 //! the answer arrives; a failure aborts the program.

@@ -1,9 +1,9 @@
-//! Workspace and protection areas in the channel (seed 000, FCT-C14): the channel's
+//! Workspace and protection areas in the channel (FCT-C14): the channel's
 //! [`AreaTable`], the `#CONTROL AREA` commands and definition blocks from the executor, the path
-//! check of block preparation, and the PLC datum / control unit of seed 000 §6.3.
+//! check of block preparation, and the PLC datum / control unit of FCT-C14 §6.3.
 //!
 //! The table lives as long as the channel: areas survive program end and program start, a
-//! controller reset ([`Channel::reset`]) deactivates them (seed 000 §3 notices), and no area
+//! controller reset ([`Channel::reset`]) deactivates them (FCT-C14 §3 notices), and no area
 //! exists at start-up. Definitions are MCS coordinates: the executor applies G54 / G92 and
 //! ignores `#CS` before it hands a [`DefBlock`] over.
 
@@ -32,7 +32,7 @@ pub(super) struct ChannelAreas {
     pub(super) table: AreaTable,
     pub(super) axes: ChannelAxes,
     pub(super) monitor: AreaMonitor,
-    /// PLC datum `area_mon_violation_detected_r` (seed 000 §6.3).
+    /// PLC datum `area_mon_violation_detected_r` (FCT-C14 §6.3).
     pub(super) violation_detected: bool,
     /// Control unit "suppress error output from working space monitoring in manual mode".
     pub(super) suppress_manual: bool,
@@ -91,7 +91,7 @@ impl Channel {
         &self.areas.axes
     }
 
-    /// PLC datum `area_mon_violation_detected_r` (seed 000 §6.3): a violation was detected by
+    /// PLC datum `area_mon_violation_detected_r` (FCT-C14 §6.3): a violation was detected by
     /// the workspace monitoring (a refused block, a jog stopped at an area, manual mode entered
     /// outside the permitted range). Cleared by a controller reset.
     pub fn area_mon_violation_detected_r(&self) -> bool {
@@ -124,7 +124,7 @@ impl Channel {
         self.areas.path_log.as_deref()
     }
 
-    /// Execute `#CONTROL AREA …` (seed 000 §3). Errors are reported and abort the program;
+    /// Execute `#CONTROL AREA …` (FCT-C14 §3). Errors are reported and abort the program;
     /// returns false then.
     pub fn area_command(&mut self, cmd: &AreaCommand) -> bool {
         let at = self.block;
@@ -223,7 +223,7 @@ impl Channel {
         self.areas.monitor = AreaMonitor::default();
     }
 
-    /// Block preparation: the whole path against the active areas (seed 000 §2.3). Returns the
+    /// Block preparation: the whole path against the active areas (FCT-C14 §2.3). Returns the
     /// error to report when the block must not run.
     pub(super) fn check_area_path(&mut self, segment: &Segment) -> Option<CncMessage> {
         if self.areas.monitor.is_empty() {

@@ -1,4 +1,4 @@
-//! Axis couplings (`#SET AX LINK`, `#ENABLE AX LINK`, seed 004 §7.3.1): a gantry slave follows
+//! Axis couplings (`#SET AX LINK`, `#ENABLE AX LINK`, FCT-C4 §7.3.1): a gantry slave follows
 //! its master with the offset it had when the coupling was enabled. Block preparation moves the
 //! slave along with its master (so its path is checked against its own software limit
 //! switches); a programmed move of a coupled slave is refused. In a measurement the master

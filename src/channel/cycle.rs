@@ -1,4 +1,4 @@
-//! The interpolation cycle (DESIGN.md "One interpolation cycle") and stopping.
+//! The interpolation cycle (order in [`crate::channel`]) and stopping.
 
 use super::manual;
 use super::measure::MeasStep;
@@ -122,7 +122,7 @@ impl Channel {
                 }
             }
         }
-        // 2. Actual positions against the SLS + tolerance (position controller, seed 001 §2).
+        // 2. Actual positions against the SLS + tolerance (position controller, FCT-A2 §2).
         for i in 0..self.axes.len() {
             let actual = self.axes[i].actual();
             if let Some(m) = self.sls.check_actual(i, actual) {
@@ -135,7 +135,7 @@ impl Channel {
             }
         }
         // 2b. CNC position lag monitoring (P-AXIS-00168), off for the axes of a measuring run to
-        //     a fixed stop (seed 004 §7.3.1 "Disable position lag monitoring in the position
+        //     a fixed stop (FCT-C4 §7.3.1 "Disable position lag monitoring in the position
         //     controller for all axes involved").
         if !matches!(
             self.mode,
@@ -228,7 +228,7 @@ impl Channel {
                 }
                 for e in events {
                     if let manual::Event::AreaStopped(..) = e {
-                        // PLC datum `area_mon_violation_detected_r` (seed 000 §6.3): set in the
+                        // PLC datum `area_mon_violation_detected_r` (FCT-C14 §6.3): set in the
                         // cycle the jog stops at the area.
                         self.areas.violation_detected = true;
                     }
@@ -446,7 +446,7 @@ impl Channel {
                         .filter(|(i, _)| only.is_none_or(|o| o == *i))
                         .collect();
                     if let Some(back) = self.follow_up(&settle, m.feed) {
-                        // "Reduce interpolation to measured value" (seed 004 §7.3): a move
+                        // "Reduce interpolation to measured value" (FCT-C4 §7.3): a move
                         // within the axes' dynamics, then the exact stop.
                         return MotionStep::Running(Box::new(back));
                     }
@@ -550,7 +550,7 @@ impl Channel {
     }
 
     /// Stop all axes: each decelerates linearly from its current command velocity with
-    /// P-AXIS-00003 (seed 001 §2: "decelerated by a linear velocity profile"; the contour may be
+    /// P-AXIS-00003 (FCT-A2 §2: "decelerated by a linear velocity profile"; the contour may be
     /// left when several axes move).
     pub(super) fn begin_stop(&mut self, then: ChannelState) {
         if matches!(self.mode, Mode::Stopping { .. }) {

@@ -1,4 +1,4 @@
-//! Independent-axis motions (`X[INDP_SYN G100 G90 POS100 FEED500]`, seed 004 §2): an axis moves
+//! Independent-axis motions (`X[INDP_SYN G100 G90 POS100 FEED500]`, FCT-C4 §2): an axis moves
 //! on its own profile, beside (or instead of) the path. With G100 it measures on its own: it arms
 //! its source, latches "for each axis involved" and stops on its own signal. Measurement types
 //! 1, 2 and 7 allow it (the seed table's `*`).
@@ -132,14 +132,14 @@ impl Channel {
             self.begin_stop(ChannelState::Aborted);
             return Prepared::Rejected;
         }
-        // Workspace / protection areas (seed 000 §2.3): the axis's own line.
+        // Workspace / protection areas (FCT-C14 §2.3): the axis's own line.
         if let Some(m) = self.check_area_path(&segment) {
             self.report(m);
             return Prepared::Rejected;
         }
         if measure.is_some() {
             // A path measurement of the same block must leave this axis's latch to this run
-            // (seed 004 §2: independent measurement "in parallel to a path motion of a G100").
+            // (FCT-C4 §2: independent measurement "in parallel to a path motion of a G100").
             let released = match &mut self.mode {
                 Mode::Moving(m) => m.meas.as_mut().is_none_or(|run| run.release_axis(axis)),
                 _ => true,

@@ -1,4 +1,4 @@
-//! Manual mode (HB): continuous and incremental jog with the limits of seed 001 §2 and §3.3.
+//! Manual mode (HB): continuous and incremental jog with the limits of FCT-A2 §2 and §3.3.
 //!
 //! On selection the channel records each axis's position; the permitted range of an axis is
 //! [`SoftLimits::jog_range`](crate::core::monitor::sls::SoftLimits::jog_range) around it (active
@@ -9,7 +9,7 @@
 //!   motion stops and, with P-MANU-00014, warning P-ERR-50720 is given.
 //! - An incremental step that would end outside the range is not executed: warning P-ERR-150008.
 //!
-//! # Workspace and protection areas (seed 000 §5, §6.2, §6.3)
+//! # Workspace and protection areas (FCT-C14 §5, §6.2, §6.3)
 //!
 //! Active control areas (`#CONTROL AREA ON`) are monitored in manual mode too, on the command
 //! positions (the TCP). Whether they are is decided by P-CHAN-00442 and the control unit
@@ -34,7 +34,7 @@
 //!   from the command position; the 1 µm tolerance band is not used, the jog stops at the
 //!   boundary itself). The trapezoid decelerates with P-AXIS-00002 so that the axis comes to rest
 //!   there: the start of the deceleration lies ahead of the limit by a distance that depends on
-//!   the jog velocity and the deceleration (seed 000 §5). At the stop only the motion stops (no
+//!   the jog velocity and the deceleration (FCT-C14 §5). At the stop only the motion stops (no
 //!   error, seed "only an axis motion stop occurs"); with P-MANU-00014 warning P-ERR-900318 names
 //!   the area. The PLC datum is set in the cycle the jog stops at the area (not if
 //!   [`Channel::jog_stop`] brakes it before it gets there).
@@ -81,7 +81,7 @@ struct Jog {
     continuous: bool,
     /// Jog ends at a range limit (not at an unlimited far end).
     to_limit: bool,
-    /// The limit is an area boundary (seed 000 §5).
+    /// The limit is an area boundary (FCT-C14 §5).
     area: Option<AreaStop>,
     /// Braking after a jog stop: (braking, cycle it began, path position then).
     braking: Option<(Braking, u64)>,
@@ -176,7 +176,7 @@ impl Channel {
     ///
     /// With active control areas, P-CHAN-00442 = 0 and the control unit
     /// [`set_area_mon_suppress_manual_w`](Channel::set_area_mon_suppress_manual_w) not set, the
-    /// TCP (command positions) must be in the permitted range (seed 000 §5 case 2): otherwise
+    /// TCP (command positions) must be in the permitted range (FCT-C14 §5 case 2): otherwise
     /// error P-ERR-50961 (outside the workspaces) or P-ERR-50962 (inside a protection area) is
     /// queued, the PLC datum [`area_mon_violation_detected_r`] is set, the channel stays idle and
     /// false is returned. Setting the control unit allows the selection. P-CHAN-00442 = 1 or 2:
@@ -262,7 +262,7 @@ impl Channel {
         if self.area_concurrent_jog(i, &jogging) {
             return false;
         }
-        // Workspace / protection areas (seed 000 §5).
+        // Workspace / protection areas (FCT-C14 §5).
         let range = if end.is_finite() {
             (end - pos) * sign
         } else {
@@ -340,7 +340,7 @@ impl Channel {
     }
 
     /// Incremental jog of axis `i` by `distance` (signed) at `velocity`. A step that would end
-    /// outside the range is not executed and gives warning P-ERR-150008 (seed 001 §2).
+    /// outside the range is not executed and gives warning P-ERR-150008 (FCT-A2 §2).
     ///
     /// While control areas are monitored ([`manual_area_monitoring`]) a step whose path would
     /// violate an area (or, from a violating position, one in a direction that does not lead

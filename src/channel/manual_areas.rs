@@ -1,6 +1,6 @@
-//! Workspace / protection-area monitoring while jogging (seed 000 §5, §6.2 P-CHAN-00442, §6.3).
+//! Workspace / protection-area monitoring while jogging (FCT-C14 §5, §6.2 P-CHAN-00442, §6.3).
 //!
-//! Everything here works on command positions (the TCP of seed 000 §5) and on the
+//! Everything here works on command positions (the TCP of FCT-C14 §5) and on the
 //! [`AreaMonitor`](crate::core::monitor::area_monitor::AreaMonitor) of the channel; see the
 //! module documentation of [`manual`](super) for the rules.
 
@@ -79,7 +79,7 @@ pub(super) fn area_name(kind: HitKind, id: Option<u32>) -> String {
 }
 
 impl Channel {
-    /// Are workspace / protection areas monitored for jogging right now (seed 000 §5)? True
+    /// Are workspace / protection areas monitored for jogging right now (FCT-C14 §5)? True
     /// when an area is active, P-CHAN-00442 is not 1 and the control unit "suppress error
     /// output from working space monitoring in manual mode"
     /// ([`set_area_mon_suppress_manual_w`](Channel::set_area_mon_suppress_manual_w)) is not
@@ -90,7 +90,7 @@ impl Channel {
             && !self.areas.monitor.is_empty()
     }
 
-    /// Selection of manual mode with P-CHAN-00442 = 0 (seed 000 §5 case 2): the TCP must be in
+    /// Selection of manual mode with P-CHAN-00442 = 0 (FCT-C14 §5 case 2): the TCP must be in
     /// the permitted range, else error 50961 / 50962, PLC datum set, and false.
     pub(super) fn manual_entry_allowed(&mut self) -> bool {
         if self.cfg.workspace_manual_mode == 2 || !self.manual_area_monitoring() {

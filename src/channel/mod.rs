@@ -1,6 +1,6 @@
 //! The CNC channel: block preparation, the interpolator and the per-cycle monitoring.
 //!
-//! One [`Channel::cycle`] is one interpolation cycle, in the order of DESIGN.md:
+//! One [`Channel::cycle`] is one interpolation cycle, in this order:
 //!
 //! ```text
 //! adapter.read_inputs ─► axis feedback ─► monitor (actual positions, P-AXIS-00179)
@@ -35,6 +35,7 @@ use crate::core::path::{Segment, MAX_AXES};
 
 use crate::messages::{BlockRef, CncMessage};
 use crate::units::Nanos;
+pub use cycle::LINK_LOST_GIVE_UP_CYCLES;
 pub use measure::{MeasureRequest, SignalOverride};
 use profile::{Braking, Trapezoid};
 
@@ -53,9 +54,9 @@ pub struct ChannelAxisConfig {
     pub a_rapid: f64,
     /// P-AXIS-00003 emergency deceleration (mm/s²): stops after errors.
     pub a_emergency: f64,
-    /// Software limit switch configuration (seed 001).
+    /// Software limit switch configuration (FCT-A2).
     pub limits: AxisLimitConfig,
-    /// Measurement configuration (seed 004).
+    /// Measurement configuration (FCT-C4).
     pub meas: AxisMeasConfig,
     /// In-position window of an exact stop (mm / °, machine key `in_position_window`): a block
     /// that ends at rest is over when |command − actual| of every moved axis is inside it.
@@ -78,7 +79,7 @@ pub struct ChannelConfig {
     pub display_pcs_limits: bool,
     /// P-MANU-00014 `move_limit_warning`.
     pub move_limit_warning: bool,
-    /// P-CHAN-00442 `suppress_workspace_monitoring_manual_mode` (seed 000 §5, §6.2): 0 areas
+    /// P-CHAN-00442 `suppress_workspace_monitoring_manual_mode` (FCT-C14 §5, §6.2): 0 areas
     /// monitored in manual mode, selection outside the permitted range is an error (50961 /
     /// 50962); 1 not monitored in manual mode; 2 monitored, selection outside allowed.
     pub workspace_manual_mode: u16,
@@ -90,7 +91,7 @@ pub struct ChannelConfig {
     /// Consecutive lost exchanges the channel rides through before error 900012 (machine key
     /// `max_lost_cycles`, see [`Channel::link_lost`]).
     pub max_lost_cycles: u32,
-    /// Channel measurement settings (seed 004 §8.2.1).
+    /// Channel measurement settings (FCT-C4 §8.2.1).
     pub meas: ChannelMeasConfig,
 }
 
@@ -144,7 +145,7 @@ pub enum Prepared {
 
 /// Operating mode of the channel (automatic program or manual block / MDI).
 ///
-/// Seed 001 §3.1 / §3.2: the programmed SLS (`V.A.-SWE`, `V.A.+SWE`) are pre-assigned from
+/// FCT-A2 §3.1 / §3.2: the programmed SLS (`V.A.-SWE`, `V.A.+SWE`) are pre-assigned from
 /// P-AXIS-00177 / 00178 "at a reset, mode change or axis change". Selecting *jog* (manual mode,
 /// [`Channel::enter_manual`]) is not such a change: §3.3 lets G98 / G99 programmed before manual
 /// mode extend the manual range.
@@ -157,9 +158,9 @@ pub enum OperationMode {
     ManualBlock,
 }
 
-/// CNC object index group of the GEO task axis data (seed 001 §4.5).
+/// CNC object index group of the GEO task axis data (FCT-A2 §4.5).
 pub const CNC_OBJECT_GROUP_GEO_AXIS: u32 = 0x0012_1301;
-/// Index offset of "Positive PCS limit" (seed 001 §4.5).
+/// Index offset of "Positive PCS limit" (FCT-A2 §4.5).
 pub const CNC_OBJECT_POSITIVE_PCS_LIMIT: u32 = 0x10096;
 /// Index offset of "Negative PCS limit".
 pub const CNC_OBJECT_NEGATIVE_PCS_LIMIT: u32 = 0x10097;
@@ -294,7 +295,7 @@ pub struct Channel {
     scratch: Vec<f64>,
     /// Axes whose switchable probe was prepared (`#MEAS PREPARE`).
     prepared: Vec<bool>,
-    /// PLC interface per axis (seed 004 §8.2.3 control units, §7.2 / §7.4 handshake).
+    /// PLC interface per axis (FCT-C4 §8.2.3 control units, §7.2 / §7.4 handshake).
     plc: Vec<crate::core::measure::plc::AxisPlc>,
     /// What the PLC interface showed in the last cycles, newest first (see
     /// [`Channel::plc_view`]).
@@ -305,7 +306,7 @@ pub struct Channel {
     now: Nanos,
     /// Latches recorded for a trace (`None`: not recording).
     latch_log: Option<Vec<(Nanos, usize, f64)>>,
-    /// Workspace and protection areas (seed 000).
+    /// Workspace and protection areas (FCT-C14).
     areas: areas::ChannelAreas,
 }
 
@@ -459,10 +460,10 @@ impl Channel {
         self.frames.pcs_offset(i)
     }
 
-    /// The four PCS CNC objects of seed 001 §4.5 for axis `i`; `None` unless P-CHAN-00489 is
+    /// The four PCS CNC objects of FCT-A2 §4.5 for axis `i`; `None` unless P-CHAN-00489 is
     /// set and an active software limit switch bounds the axis's PCS motion.
     ///
-    /// Seed 001 §2.1 transforms the active ACS limits into the PCS "considering all offsets …
+    /// FCT-A2 §2.1 transforms the active ACS limits into the PCS "considering all offsets …
     /// and Cartesian transformations (#CS)". With a rotating `#CS` a PCS axis may run along
     /// another ACS axis, or obliquely across several. The rule (interpretation S15): from the
     /// current PCS command position, move along PCS axis `i` alone; its PCS limits are where
@@ -495,7 +496,7 @@ impl Channel {
         })
     }
 
-    /// Read one of the four PCS-limit CNC objects of seed 001 §4.5 (`REAL64`, unit 0.1 µm or
+    /// Read one of the four PCS-limit CNC objects of FCT-A2 §4.5 (`REAL64`, unit 0.1 µm or
     /// 0.0001°) for axis `i`: index group [`CNC_OBJECT_GROUP_GEO_AXIS`], index offsets
     /// 0x10096 … 0x10099. `None` when the object does not exist or P-CHAN-00489 is not set.
     pub fn read_cnc_object(&self, i: usize, index_group: u32, index_offset: u32) -> Option<f64> {
@@ -519,7 +520,7 @@ impl Channel {
     }
 
     /// Change the operating mode (only when idle). A real change restores the configured SLS
-    /// (seed 001 §3.1 / §3.2 "mode change"). Returns false when the channel is busy or in jog.
+    /// (FCT-A2 §3.1 / §3.2 "mode change"). Returns false when the channel is busy or in jog.
     pub fn select_operation_mode(&mut self, mode: OperationMode) -> bool {
         if !matches!(self.mode, Mode::Idle | Mode::Aborted) {
             return false;
@@ -531,16 +532,16 @@ impl Channel {
         true
     }
 
-    /// Controller reset: restores the configured SLS (seed 001 §3.3), clears the error state,
+    /// Controller reset: restores the configured SLS (FCT-A2 §3.3), clears the error state,
     /// re-enables the drives (with fault reset) and deactivates every workspace / protection
-    /// area (kept for reactivation, seed 000 §3 notice "Controller reset").
+    /// area (kept for reactivation, FCT-C14 §3 notice "Controller reset").
     pub fn reset(&mut self) {
         self.reset_areas();
         self.program_start();
     }
 
     /// Program start: like a controller reset ([`Channel::reset`]) except that workspace and
-    /// protection areas stay active (seed 000 §3 notice "Program end": they "continue to be
+    /// protection areas stay active (FCT-C14 §3 notice "Program end": they "continue to be
     /// monitored at the next program start").
     pub fn program_start(&mut self) {
         self.sls.reset();
@@ -551,7 +552,7 @@ impl Channel {
         for a in &mut self.axes {
             a.set_fault_reset(true);
         }
-        // CNC reset: a pending PLC task is withdrawn and preparations cleared (seed 004 §7.2: "If
+        // CNC reset: a pending PLC task is withdrawn and preparations cleared (FCT-C4 §7.2: "If
         // a reset is executed between preparation and the actual measuring block, the probe is
         // enabled as normal at the start of the measuring block").
         for (c, p) in self.ext_latch.iter_mut().zip(self.plc.iter_mut()) {

@@ -14,7 +14,7 @@ impl Channel {
     // ----- block preparation -------------------------------------------------------------
 
     /// Block preparation of a motion block: build the path from the current command position,
-    /// check it completely against the software limit switches (seed 001 §2: P-ERR-120002 /
+    /// check it completely against the software limit switches (FCT-A2 §2: P-ERR-120002 /
     /// 120003, the block is not executed) and start it.
     pub fn start_motion(&mut self, req: &MotionRequest) -> Prepared {
         if !self.is_idle() || matches!(self.mode, Mode::Manual(_)) {
@@ -129,11 +129,11 @@ impl Channel {
         }
         self.violations = violations;
         if rejected {
-            // Interpolation stops, the program is aborted at this block (seed 001 §2).
+            // Interpolation stops, the program is aborted at this block (FCT-A2 §2).
             self.mode = Mode::Aborted;
             return Prepared::Rejected;
         }
-        // Workspace and protection areas: the whole path, exactly (seed 000 §2.3 "Path check").
+        // Workspace and protection areas: the whole path, exactly (FCT-C14 §2.3 "Path check").
         // A violating block is not executed; the program aborts at it.
         if let Some(m) = self.check_area_path(&segment) {
             self.push(m);
@@ -218,7 +218,7 @@ impl Channel {
         Trapezoid::plan(segment.length(), fin(v), fin(a_acc), fin(a_dec))
     }
 
-    /// The path of a measuring block (seed 004): a line, extended past the target by the
+    /// The path of a measuring block (FCT-C4): a line, extended past the target by the
     /// permitted overtravel P-AXIS-00467 (not for type 3) and, with P-CHAN-00268 = 1 (types 1–4),
     /// cut where it reaches a software limit switch. Returns (path, length up to the programmed
     /// target, cut at an SLS).
@@ -291,7 +291,7 @@ impl Channel {
                 total = s_cut;
             }
         }
-        // Workspace / protection areas bound it the same way (seed 000 §6.2 P-CHAN-00268: "the
+        // Workspace / protection areas bound it the same way (FCT-C14 §6.2 P-CHAN-00268: "the
         // CNC stops the movement before the software limit switch or … workspace or protection
         // area"), stopping one tolerance band ahead of the first violation; without P-CHAN-00268 a
         // programmed part that violates is refused by the area check of block preparation.
@@ -334,7 +334,7 @@ impl Channel {
         self.measuring_path(segment, mreq)
     }
 
-    /// Dynamics of a measuring block (seed 004 §2.1): G00 acceleration (P-AXIS-00004) unless
+    /// Dynamics of a measuring block (FCT-C4 §2.1): G00 acceleration (P-AXIS-00004) unless
     /// P-CHAN-00296 asks for G01 dynamics; the feed is F, or P-AXIS-00215 for type 2; types 2 and 4
     /// limit the feed so that braking stays inside the probe stroke P-AXIS-00086 (with a warning).
     pub(super) fn plan_measuring(
@@ -371,7 +371,7 @@ impl Channel {
                 && c.meas.stroke > 0.0
             {
                 // Axis velocity u, braking deceleration a and the time t the axis goes on at u
-                // after the contact: u·t + u²/(2a) ≤ stroke (seed 004 P-AXIS-00086, with the
+                // after the contact: u·t + u²/(2a) ≤ stroke (FCT-C4 P-AXIS-00086, with the
                 // "distance components in the buffer" of its remark included). t = the link's
                 // dead time (an edge just after a SYNC0 is latched in the cycle that follows,
                 // reported one exchange later, and the first braking set-point is reached one
@@ -408,7 +408,7 @@ impl Channel {
         Trapezoid::plan(segment.length(), fin(v), fin(a_acc), fin(a_dec))
     }
 
-    /// G98 (negative) / G99 (positive) for axis `i` (seed 001 §3). Errors abort the channel.
+    /// G98 (negative) / G99 (positive) for axis `i` (FCT-A2 §3). Errors abort the channel.
     pub fn program_limit(&mut self, i: usize, side: Side, value: f64, relative: bool) {
         let actual = self.axes.get(i).map(Axis::actual).unwrap_or(0.0);
         let update = self.sls.program_limit(i, side, value, relative, actual);

@@ -1,5 +1,5 @@
 //! `fieldprobe areas plot PROGRAM.nc --out FILE.svg|FILE.png`: draw the workspace and protection
-//! areas an NC program defines (seed 000 §3), the path it executed, and the first violation.
+//! areas an NC program defines (FCT-C14 §3), the path it executed, and the first violation.
 //!
 //! The program runs on the emulated `sim` link (virtual time, as `fieldprobe run --link sim`)
 //! with path recording on; the picture shows the state at the end of the run (program end or

@@ -1,5 +1,5 @@
 //! `fieldprobe check`: the commissioning check — reads the drives' settings over the link and
-//! reports, in plain words and per axis, every mismatch with the axis parameters (seed 004 §6:
+//! reports, in plain words and per axis, every mismatch with the axis parameters (FCT-C4 §6:
 //! the drive must be parameterised to match P-AXIS-00516 / 00517 / 00518 / 00060 / 00702).
 //!
 //! ```text

@@ -1,4 +1,4 @@
-//! `fieldprobe jog`: manual mode from the command line (seed 001 §2 "Manual mode").
+//! `fieldprobe jog`: manual mode from the command line (FCT-A2 §2 "Manual mode").
 //!
 //! ```text
 //! fieldprobe jog --axis X (--continuous +|- | --step DIST) [--feed MM_PER_MIN]

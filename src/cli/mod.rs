@@ -10,7 +10,7 @@
 //! after all of them, so their order does not matter.
 //!
 //! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `idn`,
-//! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (seed 000 control areas,
+//! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (FCT-C14 control areas,
 //! see `docs/areas.md`).
 
 /// `println!` for the tool's results on stdout that survives a reader going away

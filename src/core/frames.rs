@@ -1,5 +1,5 @@
 //! Coordinate frames: PCS, the CS frame, ACS; G92 / G54…G59 zero shifts, the measurement offset
-//! MEIN (G101 / G102), tool length and `#CS` (seed 004 §4, §5; DESIGN.md `core::frames`).
+//! MEIN (G101 / G102), tool length and `#CS` (FCT-C4 §4, §5).
 //!
 //! # The chain
 //!
@@ -12,14 +12,14 @@
 //!
 //! - **PCS**: the programmed coordinates (`V.A.PROG`).
 //! - **w**, the CS frame: `w = PCS + shifts + MEIN (+ tool length on the tool axis)`. This is
-//!   what `V.A.ABS` reports (seed 004 §5 meas3: `#CS ON[0,0,33,0,0,0]`, MEIN 47 after G101,
+//!   what `V.A.ABS` reports (FCT-C4 §5 meas3: `#CS ON[0,0,33,0,0,0]`, MEIN 47 after G101,
 //!   `G01 Z100` → `V.A.ABS.Z = 147` while the ACS is 180; meas2 without `#CS`, `G92 Z33`:
 //!   `V.A.ABS.Z = 180`, equal to the ACS).
 //! - **ACS**: axis coordinates. Without `#CS` (2.5D) the ACS equals `w`. With `#CS` the three
 //!   main axes are `ACS = offset + R · w` ([`CsTransform`]); the other axes are `ACS = w`.
 //!   There is no kinematic transformation (#TRAFO is out of scope), so the MCS is the ACS.
 //!
-//! Zero shifts: G92 is ISG's *additive* reference-point offset (`G92 Z33` shifts by +33, seed 004
+//! Zero shifts: G92 is ISG's *additive* reference-point offset (`G92 Z33` shifts by +33, FCT-C4
 //! §5 meas2); the active zero offset G54…G59 is a table value given by the machine. MEIN is "an
 //! additive offset of the programmed position: PCS' = PCS + measurement offset" (§5). The tool
 //! length is added on the tool axis in `w`, so under a rotating `#CS` it acts along the CS's
@@ -194,7 +194,7 @@ impl Frames {
         }
     }
 
-    /// `G92 <axis><value>`: the additive reference-point offset of `axis` (seed 004 §5 meas2:
+    /// `G92 <axis><value>`: the additive reference-point offset of `axis` (FCT-C4 §5 meas2:
     /// `G92 Z33` → +33). 0 clears it.
     pub fn set_g92(&mut self, axis: usize, value: f64) -> Result<(), FrameError> {
         self.check_axis(axis)?;
@@ -230,7 +230,7 @@ impl Frames {
         self.zero_offset.get(axis).copied().unwrap_or(0.0)
     }
 
-    /// Set the measurement offset MEIN of `axis` (`V.A.MEIN`, seed 004 §5; G101 / G102 in
+    /// Set the measurement offset MEIN of `axis` (`V.A.MEIN`, FCT-C4 §5; G101 / G102 in
     /// [`g101`](crate::core::measure::results::g101), [`g102`](crate::core::measure::results::g102)).
     pub fn set_mein(&mut self, axis: usize, value: f64) -> Result<(), FrameError> {
         self.check_axis(axis)?;
@@ -288,7 +288,7 @@ impl Frames {
         self.cs.as_ref()
     }
 
-    /// The seed's "zero shifts" of `axis`: G92 + the active zero offset (seed 004 §5 table).
+    /// The seed's "zero shifts" of `axis`: G92 + the active zero offset (FCT-C4 §5 table).
     pub fn shifts(&self, axis: usize) -> f64 {
         self.g92(axis) + self.zero_offset(axis)
     }

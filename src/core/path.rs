@@ -39,7 +39,7 @@
 //! # Arcs in a general plane
 //!
 //! [`Segment::transformed`] maps a segment through a rigid [`AffineMap`] (a `#CS` rotation and
-//! the frame offsets, seed 004 §4): lines stay lines, and a plane arc becomes an arc in a tilted
+//! the frame offsets, FCT-C4 §4): lines stay lines, and a plane arc becomes an arc in a tilted
 //! plane of the n-space, described by [`Arc::space`] (see [`space`] for the geometry and the
 //! exact extents).
 

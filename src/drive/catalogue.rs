@@ -2,7 +2,7 @@
 //!
 //! A drive definition says which adapter family a drive belongs to, how its process data is laid
 //! out, how increments scale to axis units, how the emulated drive behaves, which drive functions
-//! (seed 004 §7.3.2, `#DRIVE WR [KEY=TORQUE_LIMIT …]`) and which SERCOS IDNs (seed 004 §7.3.1,
+//! (FCT-C4 §7.3.2, `#DRIVE WR [KEY=TORQUE_LIMIT …]`) and which SERCOS IDNs (FCT-C4 §7.3.1,
 //! `#IDENT WR [… ID S-0-0092 …]`) map to which objects:
 //!
 //! ```toml
@@ -60,11 +60,11 @@ use toml_edit::{ImDocument, Item, TableLike, Value};
 pub enum Profile {
     /// CiA 402 (CANopen / CoE): [`super::ds402::Ds402Adapter`], [`super::model::ds402::Ds402Model`].
     Cia402,
-    /// SERCOS (SoE, AX5000 kind): real-time control / status bits, probe IDNs (seed 004 §6.1).
+    /// SERCOS (SoE, AX5000 kind): real-time control / status bits, probe IDNs (FCT-C4 §6.1).
     Sercos,
-    /// PROFIdrive (telegrams 3 / 5 / 102 / 105, encoder interface G1_STW / G1_ZSW, seed 004 §6.5).
+    /// PROFIdrive (telegrams 3 / 5 / 102 / 105, encoder interface G1_STW / G1_ZSW, FCT-C4 §6.5).
     Profidrive,
-    /// Beckhoff Lightbus (AX2000, digital input 2 as probe input, seed 004 §6.2).
+    /// Beckhoff Lightbus (AX2000, digital input 2 as probe input, FCT-C4 §6.2).
     Lightbus,
     /// Terminal drive with a KL5101 / EL5101 encoder terminal as position feedback (§6.3).
     Terminal,
@@ -165,8 +165,7 @@ pub const DEFAULT_ARM_TIMEOUT_CYCLES: u32 = 100;
 pub struct ProbeConfig {
     /// The drive re-arms a touch probe only when it sees 0x60B8's enable bit go 0 → 1, so the
     /// adapter always writes 0 first and waits for 0x60B9 to show the probe disabled (default
-    /// `false`; modelled on drives whose manuals demand 0x60B8 = 0 before a new configuration,
-    /// notes ethercat.md §6.1).
+    /// `false`; modelled on drives whose manuals demand 0x60B8 = 0 before a new configuration).
     pub rearm_requires_zero: bool,
     /// Cycles the adapter waits for 0x60B9 to confirm a step of the arming sequence before it
     /// reports the latch as failed (default 100).
@@ -183,7 +182,7 @@ impl Default for ProbeConfig {
 }
 
 impl Default for ModelConfig {
-    /// The Leadshine EL7 factory values for 0x6065 / 0x6066 (SDO dump in `shared/test-data`).
+    /// The Leadshine EL7 factory values for 0x6065 / 0x6066 (from an SDO dump of a real drive).
     fn default() -> Self {
         ModelConfig {
             kv: 40.0,
@@ -214,7 +213,7 @@ pub struct OutputDefault {
     pub value: i64,
 }
 
-/// One entry of the drive function table (seed 004 §7.3.2: `antr.function[i]`).
+/// One entry of the drive function table (FCT-C4 §7.3.2: `antr.function[i]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriveFunction {
     /// Key used by `#DRIVE … KEY=…` (upper case, e.g. `TORQUE_LIMIT`).
@@ -235,7 +234,7 @@ pub struct DriveFunction {
     /// Largest allowed wire value.
     pub max: i64,
     /// `commu = "CYCLIC"`: the value goes into the cyclic telegram through the adapter (e.g.
-    /// PROFIdrive MOMRED); default `"ACYCLIC"`: an object write over the mailbox (seed 004
+    /// PROFIdrive MOMRED); default `"ACYCLIC"`: an object write over the mailbox (FCT-C4
     /// §7.3.2 `antr.function[i].commu`).
     pub cyclic: bool,
 }
@@ -257,7 +256,7 @@ impl DriveFunction {
 }
 
 /// A SERCOS IDN mapped onto a CiA 402 object (`[idn]`), so that `#IDENT WR/RD [… ID S-0-0092 …]`
-/// (seed 004 §7.3.1) works on a CoE / CANopen drive.
+/// (FCT-C4 §7.3.1) works on a CoE / CANopen drive.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct IdnMapping {
     /// Normalised IDN (`S-0-0092`, see [`normalize_idn`]).
@@ -1115,7 +1114,7 @@ mod tests {
     #[test]
     fn generic_functions_and_defaults() {
         let def = builtin("cia402-generic").unwrap();
-        // seed 004 §7.3.2: antr.function[1] TORQUE_LIMIT, 6072 00, UNS16, LINEAR 10.0.
+        // FCT-C4 §7.3.2: antr.function[1] TORQUE_LIMIT, 6072 00, UNS16, LINEAR 10.0.
         let tl = def.function("TORQUE_LIMIT").unwrap();
         assert_eq!(
             (tl.index, tl.sub, tl.ty, tl.scale, tl.min, tl.max),

@@ -7,7 +7,7 @@
 //! listed in `[rxpdo] defaults` of the drive file; every other mapped output byte is left as the
 //! caller put it.
 //!
-//! # Controlword sequence (CiA 402 §6.3, notes/canopen.md §6.7)
+//! # Controlword sequence (CiA 402 §6.3)
 //!
 //! | last state | command | controlword |
 //! |---|---|---|
@@ -68,7 +68,7 @@
 //!   one event. Two latches within one cycle flip the toggle twice and cannot be seen; the first
 //!   latch after arming is cross-checked: a stored bit that rises without a toggle change (two
 //!   latches in the first cycle, or a drive without toggle bits) → `Failed`.
-//! - **`DRIVE_DEFINED`** (seed 004 §6.4: "a different evaluation of the latch status word"):
+//! - **`DRIVE_DEFINED`** (FCT-C4 §6.4: "a different evaluation of the latch status word"):
 //!   the trigger is whatever 0x60D0 says in the drive, which may have no polarity of its own, so
 //!   *either* stored bit (positive or negative) counts as the event and the value comes from the
 //!   object matching the bit that rose (0x60BA for bit 1, 0x60BB for bit 2). If both rise in the
@@ -115,7 +115,7 @@ pub mod controlword {
 pub const MODE_CSP: i8 = 8;
 
 /// Touch probe function 0x60B8, bits of one probe's byte (probe 1: low byte, probe 2: high
-/// byte; notes ethercat.md §6.1).
+/// byte; CiA 402).
 pub mod probe_function {
     /// Bit 0: enable the touch probe.
     pub const ENABLE: u8 = 0x01;
@@ -134,7 +134,7 @@ pub mod probe_function {
 }
 
 /// Touch probe status 0x60B9, bits of one probe's byte (probe 1: low byte, probe 2: high byte;
-/// notes ethercat.md §6.2).
+/// CiA 402).
 pub mod probe_status {
     /// Bit 0: touch probe enabled.
     pub const ENABLED: u8 = 0x01;
@@ -392,7 +392,7 @@ impl Ds402Adapter {
 
     /// The acyclic write (`index`, `sub`, `value`) a caller must make (SDO / CoE, e.g.
     /// [`Link::write_object`](crate::link::Link::write_object)) before arming `request`:
-    /// `CNC_DEFINED` needs 0x60D0 sub `probe` = `input` (seed 004 §6.4) unless 0x60D0:0n is
+    /// `CNC_DEFINED` needs 0x60D0 sub `probe` = `input` (FCT-C4 §6.4) unless 0x60D0:0n is
     /// mapped in the RxPDO, where the adapter writes it cyclically. `None` when nothing is
     /// needed.
     pub fn acyclic_probe_setup(&self, request: &ProbeRequest) -> Option<(u16, u8, i64)> {

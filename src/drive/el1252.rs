@@ -1,19 +1,19 @@
 //! EL1252-style two-channel timestamp input: process-data codec, master-side decoder and the
-//! PLC glue of `PLC_TIMESTAMP` (seed 004 §7.5: the terminal's input goes to the probing-signal
-//! control unit, its latched timestamp "LatchPos2" to the timestamp control unit; notes cnc.md
-//! §4.3). The device side is [`crate::drive::model::el1252::El1252Device`].
+//! PLC glue of `PLC_TIMESTAMP` (FCT-C4 §7.5: the terminal's input goes to the probing-signal
+//! control unit, its latched timestamp "LatchPos2" to the timestamp control unit; Beckhoff
+//! EL1252 documentation). The device side is [`crate::drive::model::el1252::El1252Device`].
 //!
 //! # Process image per channel ([`CHANNEL_LEN`] = 17 bytes, little-endian; layout assumption)
 //!
 //! | bytes | field |
 //! |---|---|
-//! | 0 | status: bit 0 rising edge seen, bit 1 falling edge seen (single-event mode only; notes §4.3 "1 = rising, 2 = falling seen"), bit 4 input level (assumption) |
+//! | 0 | status: bit 0 rising edge seen, bit 1 falling edge seen (single-event mode only: 1 = rising, 2 = falling seen), bit 4 input level (assumption) |
 //! | 1..9 | `LatchPosR` u64: DC time of the last kept rising edge, ns since 2000-01-01 |
 //! | 9..17 | `LatchNegR` u64: DC time of the last kept falling edge |
 //!
 //! Channels follow each other (channel 1 at 0, channel 2 at 17).
 //!
-//! # Modes (notes §4.3)
+//! # Modes (Beckhoff EL1252 documentation)
 //!
 //! - **Continuous** (default): the timestamp is updated on every change — the last edge of a
 //!   cycle wins; no edge flags.
@@ -196,7 +196,7 @@ impl Decoder {
     }
 }
 
-/// PLC glue (seed 004 §7.5 example): the channel's input level goes to the probing-signal
+/// PLC glue (FCT-C4 §7.5 example): the channel's input level goes to the probing-signal
 /// control unit, the timestamp of the latest edge of P-AXIS-00518's kind to the timestamp
 /// control unit, both by `plc_command` as a PLC program linking "Input" and "LatchPos2" would.
 pub fn feed_plc(plc: &mut AxisPlc, channel: u8, level: bool, edges: &[Edge], edge: ProbeEdge) {

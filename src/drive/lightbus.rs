@@ -1,6 +1,6 @@
 //! Beckhoff Lightbus drive family (AX2000 kind), master side (sans-IO).
 //!
-//! Seed 004 §6.2: digital input 2 of the drive is the probing input when the drive parameter
+//! FCT-C4 §6.2: digital input 2 of the drive is the probing input when the drive parameter
 //! IN2MODE = 26 (probe on X3 terminal 12); the edge comes from P-AXIS-00518
 //! (`kenngr.measure.edge` POS / NEG, [`ProbeRequest::edge`]). Notes cnc.md §4.2: AX2000 IN2MODE 26,
 //! the EtherCAT twin (AX2000-B110) has a 2-byte latch status word with positive / negative
@@ -9,7 +9,7 @@
 //! # Telegram (one definition, [`telegram`], shared by adapter and model)
 //!
 //! The Lightbus telegram layout below is **(assumption)**: the seeds and notes give no byte
-//! layout, so it is modelled on the AX2000-B110 latch status word (notes §4.2). Little-endian.
+//! layout, so it is modelled on the AX2000-B110 latch status word (Beckhoff AX2000 documentation). Little-endian.
 //!
 //! Command (master → drive, [`telegram::COMMAND_LEN`] = 12 bytes):
 //!
@@ -51,7 +51,7 @@ use super::{
 use crate::units::Nanos;
 use std::collections::VecDeque;
 
-/// IN2MODE value that makes digital input 2 the probing input (seed 004 §6.2).
+/// IN2MODE value that makes digital input 2 the probing input (FCT-C4 §6.2).
 pub const IN2MODE_PROBE: i64 = 26;
 
 /// Parameter index of IN2MODE in the model's `read_object` / `write_object` (sub 0) —
@@ -368,7 +368,7 @@ pub(crate) mod section {
 ///
 /// ```toml
 /// [lightbus]
-/// in2mode = 26               # IN2MODE of the (emulated) drive, seed 004 §6.2
+/// in2mode = 26               # IN2MODE of the (emulated) drive, FCT-C4 §6.2
 /// arm_timeout_cycles = 100   # cycles the adapter waits for the arming acknowledge
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -403,7 +403,7 @@ impl LightbusConfig {
     }
 }
 
-/// Plain-words check of the drive configuration for measuring (seed 004 §6.2): empty when the
+/// Plain-words check of the drive configuration for measuring (FCT-C4 §6.2): empty when the
 /// drive can measure; otherwise one line per problem.
 pub fn check_drive(in2mode: i64) -> Vec<String> {
     if in2mode == IN2MODE_PROBE {

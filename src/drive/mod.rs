@@ -103,7 +103,7 @@ pub enum ProbeTrigger {
     SourceObject,
 }
 
-/// P-AXIS-00702 `antr.canopen.probing_trigger_source` (seed 004 §6.4).
+/// P-AXIS-00702 `antr.canopen.probing_trigger_source` (FCT-C4 §6.4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum TriggerSourceMode {
     /// `DEFAULT`: probe 1 / 2 on its own input (0x60B8 source bits 00b).
@@ -336,7 +336,7 @@ pub fn adapter_for(
     }
 }
 
-/// Family-specific commissioning checks (seed 004 §6): the drive's own settings, read with
+/// Family-specific commissioning checks (FCT-C4 §6): the drive's own settings, read with
 /// `read(index, sub)` (acyclic access of its profile: CoE object, SERCOS IDN code, PROFIdrive
 /// PNU, Lightbus parameter; `None` = cannot be read), against the axis parameters, as
 /// plain-words findings. The CiA 402 PDO mapping checks need no drive access and are made by

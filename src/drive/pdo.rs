@@ -561,7 +561,7 @@ impl PdoLayout {
 /// Default CSP RxPDO (master → drive): controlword, target position, modes of operation, touch
 /// probe function (CiA 402-3 / ETG.6010 "CSP" example mapping plus 0x60B8).
 ///
-/// 0x6072 max torque is deliberately not mapped: torque limits are written acyclically (seed 004
+/// 0x6072 max torque is deliberately not mapped: torque limits are written acyclically (FCT-C4
 /// §7.3.2, `antr.function[1].commu ACYCLIC`), and a cyclic mapping would overwrite every SDO write
 /// in the next cycle. Drive files may still map it.
 pub const DEFAULT_RXPDO: &[&str] = &["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"];

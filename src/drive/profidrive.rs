@@ -1,9 +1,9 @@
 //! PROFIdrive adapter (master side, sans-IO) for standard telegrams 3, 5, 102 and 105, with the
 //! encoder interface probe (G1_STW / G1_ZSW / G1_XIST2) and MOMRED.
 //!
-//! Sources: seed 004 §6.5 (P0660 = 80, digital input I0.0, edge per P-AXIS-00518), §7.3 (fixed
-//! stop: torque limitation, drive lag monitoring off); notes `cnc.md` §3.1–§3.5 (G1_STW / G1_ZSW
-//! bits, telegram contents, MOMRED). The telegram definition ([`Telegram`]) is shared with the
+//! Sources: FCT-C4 §6.5 (P0660 = 80, digital input I0.0, edge per P-AXIS-00518), §7.3 (fixed
+//! stop: torque limitation, drive lag monitoring off); the PROFIdrive profile (PI order no. 3.172: G1_STW /
+//! G1_ZSW bits, telegram contents, MOMRED). The telegram definition ([`Telegram`]) is shared with the
 //! drive model [`crate::drive::model::profidrive::ProfidriveModel`].
 //!
 //! # Words (big-endian, as on PROFIBUS / PROFINET)
@@ -42,7 +42,7 @@
 //! # Probe (encoder interface, flying measurement)
 //!
 //! Probe `p` (P-AXIS-00517 via [`ProbeRequest::probe`]) and edge (P-AXIS-00518) select function
-//! `2·(p−1) + 1` (positive) or `2·(p−1) + 2` (negative) (assumption per notes `cnc.md` §3.1).
+//! `2·(p−1) + 1` (positive) or `2·(p−1) + 2` (negative) (assumption; PROFIdrive encoder interface).
 //! Arming: G1_STW "abort" (command 3) for the function until G1_ZSW shows neither "function
 //! active" nor "value available" (so a value of an earlier arming can never be reported), then
 //! "activate" (command 1, bit 7 flying measurement) until "function active" → `Armed`. When
@@ -60,7 +60,7 @@ use crate::units::Nanos;
 use std::collections::VecDeque;
 use toml_edit::{ImDocument, Item, Value};
 
-/// One word (or double word) of a PROFIdrive standard telegram (notes `cnc.md` §3.4).
+/// One word (or double word) of a PROFIdrive standard telegram (PROFIdrive profile).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Word {
     /// Control word 1.
@@ -69,7 +69,7 @@ pub enum Word {
     NsollB,
     /// Control word 2 (master sign of life in bits 12–15).
     Stw2,
-    /// Torque reduction (16 bit, 0x4000 = 100 % reduction, assumption per notes §3.5).
+    /// Torque reduction (16 bit, 0x4000 = 100 % reduction, assumption).
     Momred,
     /// Encoder 1 control word.
     G1Stw,
@@ -149,7 +149,7 @@ pub struct Telegram {
 pub const TELEGRAMS: [u16; 4] = [3, 5, 102, 105];
 
 impl Telegram {
-    /// Standard telegram 3, 5, 102 or 105 (notes `cnc.md` §3.4); `None` for others.
+    /// Standard telegram 3, 5, 102 or 105 (PROFIdrive profile); `None` for others.
     pub fn standard(number: u16) -> Option<Telegram> {
         let (setpoint, actual) = match number {
             3 => (SET_3, ACT_3),
@@ -262,7 +262,7 @@ pub mod zsw1 {
     pub const CONTROL_REQUESTED: u16 = 1 << 9;
 }
 
-/// G1_STW bits (notes `cnc.md` §3.1).
+/// G1_STW bits (PROFIdrive encoder interface).
 pub mod g1_stw {
     /// Bits 0–3: request function 1–4.
     pub const FUNCTIONS: u16 = 0x000F;
@@ -288,7 +288,7 @@ pub mod g1_stw {
     }
 }
 
-/// G1_ZSW bits (notes `cnc.md` §3.2).
+/// G1_ZSW bits (PROFIdrive encoder interface).
 pub mod g1_zsw {
     /// Bits 0–3: function 1–4 active.
     pub const ACTIVE: u16 = 0x000F;
@@ -332,8 +332,8 @@ pub fn decode_zsw1(zsw1: u16) -> PowerState {
     }
 }
 
-/// The encoder-interface function (1..=4) for a probe (1/2) and edge (assumption per notes
-/// `cnc.md` §3.1: 1/2 = probe 1 positive/negative, 3/4 = probe 2 positive/negative).
+/// The encoder-interface function (1..=4) for a probe (1/2) and edge (assumption, PROFIdrive
+/// encoder interface: 1/2 = probe 1 positive/negative, 3/4 = probe 2 positive/negative).
 pub fn function_for(probe: u8, edge: ProbeEdge) -> Option<u8> {
     if !(1..=2).contains(&probe) {
         return None;
@@ -341,12 +341,12 @@ pub fn function_for(probe: u8, edge: ProbeEdge) -> Option<u8> {
     Some(2 * (probe - 1) + if edge == ProbeEdge::Positive { 1 } else { 2 })
 }
 
-/// Value of P0660 that makes I0.0 the measuring input (seed 004 §6.5).
+/// Value of P0660 that makes I0.0 the measuring input (FCT-C4 §6.5).
 pub const P0660_MEASURING_INPUT: i64 = 80;
 /// PNU of P0660.
 pub const PNU_P0660: u16 = 660;
 
-/// Drive parameter requirements of seed 004 §6.5, read through `read_pnu(pnu, sub)`; one
+/// Drive parameter requirements of FCT-C4 §6.5, read through `read_pnu(pnu, sub)`; one
 /// plain-words finding per unmet requirement (empty = all met).
 pub fn check_drive(read_pnu: &dyn Fn(u16, u8) -> Option<i64>) -> Vec<String> {
     match read_pnu(PNU_P0660, 0) {
@@ -592,7 +592,7 @@ impl ProfidriveAdapter {
     }
 
     /// Cyclic torque reduction MOMRED in ‰ of the torque limit (0 = none, 1000 = full; written
-    /// as `‰ × 0x4000 / 1000`, assumption per notes §3.5). Refused on telegrams 3 / 5.
+    /// as `‰ × 0x4000 / 1000`, assumption). Refused on telegrams 3 / 5.
     pub fn set_torque_reduction(&mut self, permille: u16) -> Result<(), DriveError> {
         if !self.cfg.telegram.momred() {
             return Err(DriveError::Unsupported(format!(

@@ -1,7 +1,7 @@
 //! SERCOS (SoE) drive family, master side: the cyclic telegram shared with the drive model,
 //! the `[sercos]` section of drive files, [`SercosAdapter`] and the [`commissioning_check`].
 //!
-//! # Telegram (seed 004 §6.1, notes ethercat.md §7.1, §7.3)
+//! # Telegram (FCT-C4 §6.1; IEC 61800-7-204, ETG.1000.6 SoE)
 //!
 //! Both directions start with a fixed 16-bit word that is "always mapped but not in the list"
 //! (SOEM `ecx_readIDNmap`), followed by the IDNs of the file's `[sercos] mdt` / `at` lists in
@@ -18,7 +18,7 @@
 //! | AT | … | S-0-0130…0133 | probe value selected by S-0-0169 |
 //! | AT | … | S-0-0179 | probe status (optional) |
 //!
-//! # Drive control word S-0-0134 (notes ethercat.md §7.1, AX5000 `994816011.html`)
+//! # Drive control word S-0-0134 (IEC 61800-7-204; Beckhoff AX5000 documentation)
 //!
 //! bit 15 drive on, bit 14 drive enable, bit 13 halt/restart (1 = run: the drive follows the
 //! command values, 0 = halt), bit 6 real-time control bit 1, bit 7 real-time control bit 2.
@@ -26,7 +26,7 @@
 //! clears the drive's class 1 diagnostic (assumption: real drives reset C1D with the procedure
 //! command S-0-0099 over the service channel; the model accepts both).
 //!
-//! # Drive status word S-0-0135 (notes ethercat.md §7.1, AX5000 `969164683.html`)
+//! # Drive status word S-0-0135 (IEC 61800-7-204; Beckhoff AX5000 documentation)
 //!
 //! bits 15/14 ready to operate: 00 not ready, 01 ready for power-up (logic supply), 10 ready,
 //! main power on, 11 drive enabled (torque on); bit 13 drive shut-down error (C1D); bit 3
@@ -35,7 +35,7 @@
 //! 10 → `SwitchedOn`, 11 → `OperationEnabled` (the mapping onto the CiA 402 names is an
 //! assumption). `operational` = 11, no error and bit 3.
 //!
-//! # Probe by real-time bits (seed 004 §6.1 table of P-AXIS-00060)
+//! # Probe by real-time bits (FCT-C4 §6.1 table of P-AXIS-00060)
 //!
 //! | P-AXIS-00060 | enable (control) | measurement done (status) | probe activated (status) |
 //! |---|---|---|---|
@@ -59,7 +59,7 @@ use std::collections::VecDeque;
 use std::ops::Range;
 use toml_edit::{ImDocument, Item, TableLike, Value};
 
-/// IDN numbers used by the family (S-0-xxxx, parameter set 0; notes ethercat.md §7.2).
+/// IDN numbers used by the family (S-0-xxxx, parameter set 0; IEC 61800-7-204).
 pub mod idn {
     /// S-0-0011 class 1 diagnostic (C1D); bit 11 excessive position deviation.
     pub const C1D: u16 = 11;
@@ -388,7 +388,7 @@ pub fn config(def: &DriveDefinition) -> Result<SercosConfig, DriveError> {
     Ok(cfg)
 }
 
-/// Which real-time bits carry the probe signals (seed 004 §6.1 table of P-AXIS-00060).
+/// Which real-time bits carry the probe signals (FCT-C4 §6.1 table of P-AXIS-00060).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RtBits {
     /// P-AXIS-00060 in effect.
@@ -441,7 +441,7 @@ pub fn rt_bits(rt: i64, mask: Option<i64>) -> Result<RtBits, String> {
     }
 }
 
-/// S-0-0169 value for probe `probe` (1 / 2) and edge (seed 004 §6.1: 1, 2, 4, 8).
+/// S-0-0169 value for probe `probe` (1 / 2) and edge (FCT-C4 §6.1: 1, 2, 4, 8).
 pub fn probe_control_value(probe: u8, edge: ProbeEdge) -> u16 {
     1 << probe_slot(probe, edge)
 }
@@ -689,7 +689,7 @@ impl DriveAdapter for SercosAdapter {
 
     fn arm_probe(&mut self, request: &ProbeRequest) -> Result<(), DriveError> {
         if request.continuous {
-            return Err(DriveError::Unsupported("SERCOS probe by real-time bits latches once per enable; continuous mode is not offered (assumption, notes ethercat.md §7.2)".into()));
+            return Err(DriveError::Unsupported("SERCOS probe by real-time bits latches once per enable; continuous mode is not offered (assumption)".into()));
         }
         if request.trigger != ProbeTrigger::Input
             || request.source_mode != TriggerSourceMode::Default
@@ -748,7 +748,7 @@ impl DriveAdapter for SercosAdapter {
     }
 }
 
-/// Commissioning check (seed 004 §6.1, flowcharts Fig. 12 / 13 inferred): every mismatch
+/// Commissioning check (FCT-C4 §6.1, flowcharts Fig. 12 / 13 inferred): every mismatch
 /// between the drive's IDN settings (`drive_idns` answers an IDN code, `None` = cannot be read)
 /// and the axis parameters, in plain words; empty when all fits.
 ///

@@ -1,8 +1,8 @@
 //! Terminal drive family: a velocity output (±10 V analog terminal) as set-point and a Beckhoff
 //! KL5101 / EL5101 incremental encoder terminal as position feedback and latch unit, master side
-//! (sans-IO). Seed 004 §6.3 (probe on terminal 4 of the KL5101; P-AXIS-00518 positive edge only,
-//! "measurement at negative edge is not supported by the Encoder Interface"); notes cnc.md §4.1
-//! (control / status byte bits, 16-bit counter and latch, re-arm protocol).
+//! (sans-IO). FCT-C4 §6.3 (probe on terminal 4 of the KL5101; P-AXIS-00518 positive edge only,
+//! "measurement at negative edge is not supported by the Encoder Interface"); Beckhoff KL5101 /
+//! EL5101 documentation (control / status byte bits, 16-bit counter and latch, re-arm protocol).
 //!
 //! # Process image (one definition, [`image`], shared with the model; assumption: the seeds give
 //! the encoder bits, not the combined layout)
@@ -27,7 +27,7 @@
 //!
 //! # Position
 //!
-//! The 16-bit counter is extended to 64 bits with the `int16_t` delta method (notes §4.1,
+//! The 16-bit counter is extended to 64 bits with the `int16_t` delta method (Beckhoff EL5101 / KL5101 documentation,
 //! linuxcnc-ethercat `lcec_el5101.c`): `ext += (counter − last) as i16`; the latch value is
 //! extended relative to the counter of the same cycle: `ext + (latch − counter) as i16`. Both are
 //! exact while the axis moves less than 32767 increments per cycle. The position after
@@ -43,7 +43,7 @@
 //! `1 / ((1 + d)·T)` so that the delayed loop stays damped at long cycles. The output is
 //! `round(v / full_scale · 32767)` clipped to ±32767. Disabled: output 0.
 //!
-//! # Latch (re-arm protocol, notes §4.1)
+//! # Latch (re-arm protocol, Beckhoff EL5101 / KL5101 documentation)
 //!
 //! Arming: clear the enable bit → wait for its *_VAL = 0 → set the enable bit → armed. A *_VAL
 //! bit is accepted only after it was seen 0 under this arming, so a stale latch value is never
@@ -266,7 +266,7 @@ impl TerminalConfig {
     }
 }
 
-/// Parameter check for a terminal axis (seed 004 §6.3): P-AXIS-00518 must be POS on a KL5101.
+/// Parameter check for a terminal axis (FCT-C4 §6.3): P-AXIS-00518 must be POS on a KL5101.
 /// Returns the parameter errors in plain words (empty = fine).
 pub fn check_edge(variant: Variant, edge: ProbeEdge) -> Vec<String> {
     if variant == Variant::Kl5101 && edge == ProbeEdge::Negative {
@@ -377,7 +377,7 @@ pub struct TerminalAdapter {
 
 impl TerminalAdapter {
     /// The adapter for `def` (reads `[terminal]`); refuses a KL5101 axis whose P-AXIS-00518 is
-    /// NEG (seed 004 §6.3) with the parameter error.
+    /// NEG (FCT-C4 §6.3) with the parameter error.
     pub fn new(def: &DriveDefinition, axis: &crate::params::ParamSet) -> Result<Self, DriveError> {
         let config = TerminalConfig::from_definition(def)?;
         let problems = check_axis_params(config.variant, axis);
@@ -650,7 +650,7 @@ impl DriveAdapter for TerminalAdapter {
         if request.continuous {
             return Err(DriveError::Unsupported(
                 "encoder terminal: one edge per arming; continuous mode is not supported \
-                 (notes cnc.md §4.1)"
+                 (Beckhoff EL5101 / KL5101 documentation)"
                     .into(),
             ));
         }

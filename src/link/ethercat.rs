@@ -1262,7 +1262,7 @@ fn connect(
     Ok((md, wire_end))
 }
 
-/// One SubDevice as [`Session::scan`] reports it.
+/// One SubDevice as [`Session::devices`] reports it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SubDeviceInfo {
     /// Ring position (0 = next to the MainDevice).

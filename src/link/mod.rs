@@ -1,12 +1,18 @@
 //! Links bind axes to a bus: each cycle they move every axis's output image to its drive and bring
-//! back the input image.
+//! back the input image. [`Link`] is the seam; [`open`] builds the link a `--link` value names.
 //!
-//! | link | where |
-//! |---|---|
-//! | `sim` | [`sim::SimLink`]: drive models in memory, images laid out as the PDO mapping |
-//! | `ethercat-emu`, `ethercat:IFACE` | [`ethercat::EthercatLink`]: ethercrab MainDevice, emulated segment in-process or a raw socket |
+//! | link | type | feature |
+//! |---|---|---|
+//! | `sim` | [`sim::SimLink`]: drive models in memory, images laid out as the PDO mapping | — |
+//! | `ethercat-emu`, `ethercat:IFACE` | `ethercat::EthercatLink`: ethercrab MainDevice, emulated segment in-process or a raw socket | `sim` |
+//! | `canopen-emu`, `canopen-udp[:GROUP:PORT]`, `socketcan:IF` | `canopen::CanopenLink`: fieldprobe's CiA 301 master on a CAN bus | `sim` (`socketcan:IF` also `socketcan`) |
+//!
+//! The EtherCAT and CANopen links are built with `sim` because each serves its emulated bus as
+//! well as the real one (and the raw-socket wire of `ethercat:IFACE` is the emulator's).
 
+#[cfg(feature = "sim")]
 pub mod canopen;
+#[cfg(feature = "sim")]
 pub mod ethercat;
 pub mod sim;
 
@@ -64,7 +70,7 @@ pub enum LinkError {
         images: usize,
     },
     /// An acyclic access was refused by the device (CiA 301 SDO abort code).
-    #[error("{device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x} ({})", crate::bus::ethercat::mailbox::abort_text(*code))]
+    #[error("{device}: access to {index:#06x}:{sub:02x} refused, abort code {code:#010x} ({})", crate::bus::abort::abort_text(*code))]
     Abort {
         /// Who refused: a device position on the link, or a CANopen node id.
         device: Peer,
@@ -286,6 +292,80 @@ pub trait Link: Send {
     }
 }
 
+/// `--link` values fieldprobe knows, for messages (whether this build has them: [`open`]).
+pub const LINKS: &str = "sim (drive models in memory), canopen-emu (our CiA 301 master against emulated CiA 402 nodes on an in-process virtual CAN bus), canopen-udp[:GROUP:PORT] (python-can udp_multicast bus), socketcan:IF, ethercat-emu (ethercrab against emulated EtherCAT drives in-process), ethercat:IFACE (ethercrab on a network interface)";
+
+/// What [`open`] builds a link for: one entry per axis, in axis order.
+pub struct LinkRequest<'a> {
+    /// The `--link` value (see [`LINKS`]).
+    pub link: &'a str,
+    /// Drive definition per axis.
+    pub drives: &'a [std::sync::Arc<crate::drive::catalogue::DriveDefinition>],
+    /// Drive model per axis (used by `sim`, which hosts them in memory).
+    pub models: Vec<Box<dyn DriveModel>>,
+    /// CANopen node id per axis (CAN links).
+    pub node_ids: &'a [u8],
+    /// Interpolation cycle.
+    pub cycle: Nanos,
+    /// Capture every EtherCAT frame into this pcap file (EtherCAT links).
+    pub pcap: Option<&'a std::path::Path>,
+    /// Log every CAN frame into this file, candump -L format (CAN links).
+    pub candump: Option<&'a std::path::Path>,
+    /// EtherCAT SubDevices that are not axes (I/O terminals), in ring order after the drives.
+    #[cfg(feature = "sim")]
+    pub terminals: Vec<ethercat::terminals::TerminalSpec>,
+}
+
+/// Open the link `req.link` names, brought up to cyclic operation.
+///
+/// # Errors
+/// An unknown link, a link this build has no feature for (naming the feature), or the link's
+/// own start-up error.
+pub fn open(req: LinkRequest<'_>) -> Result<Box<dyn Link>, LinkError> {
+    let link = req.link;
+    if link == "sim" {
+        return Ok(Box::new(sim::SimLink::from_models(req.models, req.cycle)));
+    }
+    let can =
+        link == "canopen-emu" || link.starts_with("canopen-udp") || link.starts_with("socketcan:");
+    if can {
+        #[cfg(feature = "sim")]
+        {
+            return Ok(Box::new(canopen::CanopenLink::on_link(
+                link,
+                req.drives,
+                req.node_ids,
+                req.cycle,
+                req.candump,
+            )?));
+        }
+        #[cfg(not(feature = "sim"))]
+        return Err(LinkError::Other(
+            "this build of fieldprobe has no CANopen link (Cargo feature `sim`)".into(),
+        ));
+    }
+    if link == "ethercat-emu" || link.starts_with("ethercat:") {
+        #[cfg(feature = "sim")]
+        if let Some(wire) = ethercat::Wire::from_link(link) {
+            let spec = ethercat::EthercatSpec {
+                drives: req.drives.to_vec(),
+                cycle: req.cycle,
+                pcap: req.pcap.map(std::path::Path::to_path_buf),
+                terminals: req.terminals,
+                emulated_extra: Vec::new(),
+            };
+            return Ok(Box::new(ethercat::EthercatLink::open(&wire, &spec)?));
+        }
+        #[cfg(not(feature = "sim"))]
+        return Err(LinkError::Other(
+            "this build of fieldprobe has no EtherCAT link (Cargo feature `sim`)".into(),
+        ));
+    }
+    Err(LinkError::Other(format!(
+        "unknown link; available: {LINKS}"
+    )))
+}
+
 /// Dead time of every link fieldprobe has, in cycles ([`Link::dead_time_cycles`]).
 pub const DEFAULT_DEAD_TIME_CYCLES: u32 = 2;
 
@@ -299,6 +379,7 @@ impl<'a> dyn Link + 'a {
 /// (size in bytes, signed) of object `index:sub` for drive `def`: its function / IDN tables,
 /// then the CiA 402 object table, then the CiA 301 communication objects (0x1001, 0x100C,
 /// 0x1017, PDO parameters); 4 bytes unsigned otherwise.
+#[cfg_attr(not(feature = "sim"), allow(dead_code))] // used by the bus links
 pub(crate) fn object_type(
     def: &crate::drive::catalogue::DriveDefinition,
     index: u16,
@@ -323,6 +404,7 @@ pub(crate) fn object_type(
 }
 
 /// Little-endian bytes as a number (sign-extended when `signed`).
+#[cfg_attr(not(feature = "sim"), allow(dead_code))] // used by the bus links
 pub(crate) fn decode_le(bytes: &[u8], signed: bool) -> i64 {
     let n = bytes.len().min(8);
     let mut b = [0u8; 8];

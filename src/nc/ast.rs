@@ -74,14 +74,14 @@ pub enum Item {
         /// Position of the letter.
         span: Span,
     },
-    /// `D<expr>`: select tool offset number (probe ball radius, seed 004 §5 meas_example).
+    /// `D<expr>`: select tool offset number (probe ball radius, FCT-C4 §5 meas_example).
     D {
         /// Tool offset number.
         value: Expr,
         /// Position of the `D`.
         span: Span,
     },
-    /// An independent-axis motion: `X[INDP_SYN G100 G90 POS100 FEED500]` (seed 004 §2).
+    /// An independent-axis motion: `X[INDP_SYN G100 G90 POS100 FEED500]` (FCT-C4 §2).
     Independent {
         /// Axis name.
         axis: String,
@@ -156,7 +156,7 @@ pub enum Command {
         /// The keyword list as written.
         args: Vec<KeyArg>,
     },
-    /// `#MEAS PREPARE [AXNR=.. {AXNR=..}]` (seed 004 §7.2).
+    /// `#MEAS PREPARE [AXNR=.. {AXNR=..}]` (FCT-C4 §7.2).
     MeasPrepare {
         /// The keyword list as written.
         args: Vec<KeyArg>,
@@ -180,7 +180,7 @@ pub enum Command {
         /// The keyword list as written.
         args: Vec<KeyArg>,
     },
-    /// `#IDENT WR|RD [SYN] [AXNR .. ID .. VAL=|P= TYP .. DEC .. SERC]` (seed 004 §7.3.1). Keywords
+    /// `#IDENT WR|RD [SYN] [AXNR .. ID .. VAL=|P= TYP .. DEC .. SERC]` (FCT-C4 §7.3.1). Keywords
     /// may be written with or without `=` (`AXNR 1`, `AXNR=1`).
     Ident {
         /// WR (true) or RD.
@@ -190,14 +190,14 @@ pub enum Command {
         /// The keyword list as written.
         args: Vec<KeyArg>,
     },
-    /// `#SET AX LINK [group, [slave=master, G, p1, p2] …]` (gantry coupling, seed 004 §7.3.1).
+    /// `#SET AX LINK [group, [slave=master, G, p1, p2] …]` (gantry coupling, FCT-C4 §7.3.1).
     SetAxLink {
         /// Link group number.
         group: Expr,
         /// Couplings.
         links: Vec<AxLink>,
     },
-    /// `#CONTROL AREA BEGIN|START [..]`, `END`, `ON`, `OFF`, `CLEAR` (seed 000 §3).
+    /// `#CONTROL AREA BEGIN|START [..]`, `END`, `ON`, `OFF`, `CLEAR` (FCT-C14 §3).
     ControlArea {
         /// The parsed area command.
         command: crate::core::monitor::areas::AreaCommand,

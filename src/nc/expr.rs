@@ -2,7 +2,7 @@
 //!
 //! Numbers are `f64` (mm, degrees, as programmed); strings exist only as `#MSG` arguments and
 //! literals. Arithmetic follows the usual rules; trigonometric functions take and return
-//! **degrees** (ISG convention, e.g. the `#CS ON[…]` angles of seed 004 §4). Every error carries a
+//! **degrees** (ISG convention, e.g. the `#CS ON[…]` angles of FCT-C4 §4). Every error carries a
 //! [`Span`] so the executor can say where the program went wrong.
 //!
 //! Spans: variables and function calls carry their own span in the AST. Operators and literals do

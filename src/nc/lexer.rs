@@ -10,19 +10,19 @@
 //!    with character-level primitives for address words and [`Cursor::next_token`] for
 //!    expressions and `#` command keywords.
 //!
-//! Comment rules (seed 001 §3.1 `( .... )` lines, seed 001 §3.3 `;neg. Software limit …`):
+//! Comment rules (FCT-A2 §3.1 `( .... )` lines, FCT-A2 §3.3 `;neg. Software limit …`):
 //! `;` comments to the end of the line; `( … )` is a comment outside `[ … ]` and must close on the
 //! same line; inside `[ … ]` parentheses group. Neither is recognised inside a string `"…"`.
 //!
-//! Continuation (seed 004 §2 `%Independent_measurement_path`): a `\` that is the last non-blank
+//! Continuation (FCT-C4 §2 `%Independent_measurement_path`): a `\` that is the last non-blank
 //! character before a comment or the end of the line joins the next line to the block. A line that
-//! ends inside an open `[` is continued as well, because the seed 004 §5 examples (meas1–meas4)
+//! ends inside an open `[` is continued as well, because the FCT-C4 §5 examples (meas1–meas4)
 //! print long `#MSG SYN[…]` blocks over two lines without a `\`.
 //! A `\` followed by more text on its line is not a continuation and stays in the text where it
-//! is; the parser rejects it, except directly in front of `#` (seed 004 §4 `N50 \#CS ON[…]`).
+//! is; the parser rejects it, except directly in front of `#` (FCT-C4 §4 `N50 \#CS ON[…]`).
 //!
 //! Documentation placeholders: a line that consists only of `.`, `…` or `:` characters (the
-//! seeds write `...` and `:` for "more blocks here", e.g. seed 001 §3.3, seed 000 §4) is skipped
+//! seeds write `...` and `:` for "more blocks here", e.g. FCT-A2 §3.3, FCT-C14 §4) is skipped
 //! like a blank line.
 
 use super::ast::{Span, VarRef};
@@ -445,7 +445,7 @@ impl<'a> Cursor<'a> {
     }
 
     /// Scan a variable `V.seg.seg…` where a segment is `[+-]?[A-Za-z_][A-Za-z0-9_]*`
-    /// (`V.A.-SWE.X`, seed 001 §3.1; `V.A.MEAS.ACS.VALUE.Z`, seed 004 §5). The sign is only
+    /// (`V.A.-SWE.X`, FCT-A2 §3.1; `V.A.MEAS.ACS.VALUE.Z`, FCT-C4 §5). The sign is only
     /// allowed right after a dot, so `V.A.ABS.X-5` stops before `-`. Segments are upper-cased.
     pub fn scan_var(&mut self) -> Option<VarRef> {
         if !self.at_var() {

@@ -1,17 +1,17 @@
 //! NC parser: DIN 66025 blocks plus the seeds' `#` control commands → [`Program`].
 //!
-//! Syntax (the programming examples of seed 001 §3, seed 004 §2–§7 and seed 000 §3):
+//! Syntax (the programming examples of FCT-A2 §3, FCT-C4 §2–§7 and FCT-C14 §3):
 //!
 //! ```text
 //! %name                              optional program name (first line)
 //! N10 G01 G90 X199 F500              N number first, then words in any order
 //! N100 G98 X-500 Y-500 ;comment      ';' comment, '( … )' comment
 //! N20 G01X10Y20                      blanks between words are optional
-//! N60 X2 = 100 Y2=100                indexed axis names (seed 000 §4)
+//! N60 X2 = 100 Y2=100                indexed axis names (FCT-C14 §4)
 //! N30 X[V.A.ABS.X - 5] F=V.G.FEED    bracketed expressions, variables, '='
 //! N30 #MSG SYN["V.A.MESS.Z=%f", V.A.MESS.Z]
-//! D1                                 tool offset number (probe ball radius, seed 004 §5)
-//! N20 X[INDP_SYN G100 G90 POS100 FEED500]   independent axis (seed 004 §2)
+//! D1                                 tool offset number (probe ball radius, FCT-C4 §5)
+//! N20 X[INDP_SYN G100 G90 POS100 FEED500]   independent axis (FCT-C4 §2)
 //! N10 P1 = V.A.ABS.X + 2             arithmetic parameter assignment
 //! ```
 //!
@@ -48,18 +48,18 @@
 //! The seeds are PDF extractions; these artefacts are accepted on purpose, each as narrowly as
 //! possible (any other use is still an error):
 //!
-//! * `\#` is read as `#` at the start of a command (seed 004 §4: `N50 \#CS ON[0,0,0,0,0,90]`).
+//! * `\#` is read as `#` at the start of a command (FCT-C4 §4: `N50 \#CS ON[0,0,0,0,0,90]`).
 //! * `NO<digits>` (letter O instead of zero) is read as the block number `N<digits>` only when it
-//!   is the first word and is followed by blanks and a `#` command (seed 004 §7.3:
+//!   is the first word and is followed by blanks and a `#` command (FCT-C4 §7.3:
 //!   `NO80 #IDENT WR SYN […]`, `NO30 #DRIVE WR SYN […]`).
 //! * A `#` command whose line ends right after its keywords (`N060 #IDENT RD`) takes its bracket
-//!   from the next non-empty line if that line starts with `[` (seed 004 §7.3.1, where the
+//!   from the next non-empty line if that line starts with `[` (FCT-C4 §7.3.1, where the
 //!   bracket `[AXNR 4 ID …]` was moved to the following line). The bracket may itself continue
 //!   over further lines as long as it is open (see [`super::lexer`]). Since no block can start
 //!   with `[`, this never changes the meaning of an otherwise valid program.
 //! * `KEY=TORQUE LIMIT` in `#DRIVE` (underscore lost) — see the `commands` submodule.
 //!
-//! 2-path blocks (seed 000 §2.4): after the block number, `:` separates the words of the
+//! 2-path blocks (FCT-C14 §2.4): after the block number, `:` separates the words of the
 //! reference path from those of the secondary path (`N050 : G0 X200 Y0 : G0 U150 V0`). The
 //! separators carry no meaning of their own here: all words form the one block, so both paths are
 //! interpolated together (and an area definition takes the coordinates its `MONITOR_LVL` needs).
@@ -289,7 +289,7 @@ fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PRes
                 let command = p.command(span)?;
                 Item::Command { command, span }
             }
-            // Seed 004 §4 `N50 \#CS ON[…]`: a stray '\' in front of a command (PDF extraction).
+            // FCT-C4 §4 `N50 \#CS ON[…]`: a stray '\' in front of a command (PDF extraction).
             '\\' if p.cur.peek_at(1) == Some('#') => {
                 p.cur.bump();
                 let span = p.cur.span();
@@ -298,7 +298,7 @@ fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PRes
                 Item::Command { command, span }
             }
             '%' => return Err(ParseError::at(span, PERCENT_MISPLACED)),
-            // Seed 000 §2.4: `N050 : G0 X200 Y0 : G0 U150 V0` — the words of the reference path
+            // FCT-C14 §2.4: `N050 : G0 X200 Y0 : G0 U150 V0` — the words of the reference path
             // and of the secondary path of a 2-path block, each after a ':'. Both paths run in
             // the one block (they are interpolated together).
             ':' if !first || block.number.is_some() => {
@@ -403,7 +403,7 @@ impl<'a> BlockParser<'a> {
 
 impl BlockParser<'_> {
     /// The block number after `N`: `<digits>`, or `O<digits>` (letter O) when followed by blanks
-    /// and a `#` command (seed 004 §7.3 transcription artefact `NO80 #IDENT …`).
+    /// and a `#` command (FCT-C4 §7.3 transcription artefact `NO80 #IDENT …`).
     fn block_number(&mut self) -> PResult<u32> {
         if matches!(self.cur.peek(), Some('O' | 'o')) {
             let mut k = 1;

@@ -1,4 +1,4 @@
-//! printf-style formatting for `#MSG ["fmt", …]` (seed 004 §5: `#MSG SYN["V.A.MESS.Z=%f",
+//! printf-style formatting for `#MSG ["fmt", …]` (FCT-C4 §5: `#MSG SYN["V.A.MESS.Z=%f",
 //! V.A.MESS.Z]` prints `V.A.MESS.Z=100.000000`).
 //!
 //! Conversions follow C's `printf` for `double` arguments:

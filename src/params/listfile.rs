@@ -1,5 +1,5 @@
 //! ISG parameter-list text: one assignment per line, `key value` (the form of the seeds'
-//! parameterisation examples, e.g. seed 004 §3 `kenngr.measure.signal PLC`, seed 004 §8.2.1
+//! parameterisation examples, e.g. FCT-C4 §3 `kenngr.measure.signal PLC`, FCT-C4 §8.2.1
 //! `meas_error_no_signal 1`); `key = value` is tolerated.
 //!
 //! Keys are IDs or name paths. Comments: lines starting with `#`, `;` or `(`, and trailing

@@ -1,5 +1,5 @@
 //! Machine file (TOML): the channel list, the manual-mode list and one `[[axis]]` table per axis,
-//! plus the `--set KEY=VALUE` overrides of the command line (DESIGN.md, command-line contract).
+//! plus the `--set KEY=VALUE` overrides of the command line (the command-line contract of `fieldprobe run`).
 //!
 //! ```toml
 //! [channel]
@@ -7,9 +7,9 @@
 //! in_position_timeout_ms = 1000        # project key: how long an exact stop may wait, ms
 //! max_lost_cycles = 3                  # project key: lost exchanges ridden through before 900012
 //! "P-CHAN-00498" = 1                   # parameters by ID …
-//! range_check_prog_soft_limits = 1     # … or by name path (seed 001 §4.2)
+//! range_check_prog_soft_limits = 1     # … or by name path (FCT-A2 §4.2)
 //! [manual]
-//! move_limit_warning = true            # P-MANU-00014 (seed 001 §4.4)
+//! move_limit_warning = true            # P-MANU-00014 (FCT-A2 §4.4)
 //! [[axis]]
 //! name = "X"                           # project key, required: X Y Z A B C U V W (+ digits)
 //! drive = "cia402-generic"             # project key: drives/<name>.toml
@@ -72,7 +72,7 @@ pub struct AxisConfig {
     /// Name of the drive definition in `drives/` (without `.toml`).
     pub drive: String,
     /// Whether the axis is referenced at start (software limit switches are active only on
-    /// referenced axes, seed 001 §1).
+    /// referenced axes, FCT-A2 §1).
     pub referenced: bool,
     /// CANopen node id (1 ..= 127) of the axis's drive on a CAN link; `None`: the axis number
     /// (1-based position in the file).
@@ -91,7 +91,7 @@ pub struct AxisConfig {
 /// tool list P-TOOL-00004 `wz[i].radius` does).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ToolData {
-    /// Tool radius — for a measuring probe the ball radius (seed 004 §5, P-CHAN-00311).
+    /// Tool radius — for a measuring probe the ball radius (FCT-C4 §5, P-CHAN-00311).
     pub radius: f64,
     /// Tool length along the tool axis (Z in G17).
     pub length: f64,
@@ -249,7 +249,7 @@ impl MachineConfig {
         Self::parse(&text, &file)
     }
 
-    /// The default machine (DESIGN.md): linear axes X, Y, Z, referenced, on `cia402-generic`
+    /// The default machine: linear axes X, Y, Z, referenced, on `cia402-generic`
     /// drives, parameters at the seeds' defaults plus, per axis, `kenngr.messachse 1`,
     /// `kenngr.measure.signal DRIVE`, `kenngr.measure.input 1`, `kenngr.measure.edge POS`.
     pub fn default_machine() -> Self {
@@ -288,7 +288,7 @@ impl MachineConfig {
             manual: ParamSet::new(Scope::Manual),
             axes,
             terminals: Vec::new(),
-            // D1: the measuring probe of seed 004 §5 "%meas_example" (ball radius 2 mm).
+            // D1: the measuring probe of FCT-C4 §5 "%meas_example" (ball radius 2 mm).
             tools: [(
                 1,
                 ToolData {

@@ -2,14 +2,14 @@
 //! the machine file.
 //!
 //! * The registry ([`registry()`], [`find`]): every parameter the seeds name, with the ISG name
-//!   path, type, default, data range and dimension, from seed 001 §4 (software limit switches), seed 004 §8.2
-//!   (measurement) and seed 000 §6.2 (workspace monitoring); parameters the seeds only mention
-//!   (e.g. P-AXIS-00003 `getriebe[i].dynamik.a_emergency`, used by seed 001 §4.3 for the
+//!   path, type, default, data range and dimension, from FCT-A2 §4 (software limit switches), FCT-C4 §8.2
+//!   (measurement) and FCT-C14 §6.2 (workspace monitoring); parameters the seeds only mention
+//!   (e.g. P-AXIS-00003 `getriebe[i].dynamik.a_emergency`, used by FCT-A2 §4.3 for the
 //!   stop-distance check) come from the ISG online parameter documentation. [`ParamSet`] holds
 //!   the values of one list; ranges that name another parameter are checked by
 //!   [`ParamSet::check_cross`]. Constants for every ID are in [`id`].
 //! * [`apply_list`] / [`parse_list`]: ISG list text, `kenngr.measure.signal PLC` (the
-//!   parameterisation examples of seed 004 §3 and §6).
+//!   parameterisation examples of FCT-C4 §3 and §6).
 //! * [`MachineConfig`]: the machine TOML file and the `--set KEY=VALUE` overrides.
 //!
 //! Values stay in the seeds' units (0.1 µm, 0.0001°, µm/s, mm/s²); conversions live in

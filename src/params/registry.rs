@@ -2,7 +2,7 @@
 //! with the ISG name path, data type, default and data range, plus [`ParamSet`], a set of values
 //! for one parameter list (one axis, the channel, or manual mode).
 //!
-//! Sources: seed 001 §4 (software limit switches), seed 004 §8.2 (measurement), seed 000 §6.2
+//! Sources: FCT-A2 §4 (software limit switches), FCT-C4 §8.2 (measurement), FCT-C14 §6.2
 //! (workspace monitoring). Parameters the seeds only mention are taken from the ISG online
 //! parameter documentation and marked so in [`ParamDef::source`].
 
@@ -1119,9 +1119,9 @@ impl ParamSet {
         self.values.values().map(|e| (e.def, &e.value))
     }
 
-    /// Check the ranges that refer to other parameters: P-AXIS-00177 < P-AXIS-00178 (seed 001
+    /// Check the ranges that refer to other parameters: P-AXIS-00177 < P-AXIS-00178 (FCT-A2
     /// §4.3), P-AXIS-00177 ≤ P-AXIS-00492/00493 ≤ P-AXIS-00178 when set (≠ 0), accelerations
-    /// ≤ P-AXIS-00008 (a_emergency ≤ 2 × P-AXIS-00008), vb_messen ≤ P-AXIS-00212 (seed 004
+    /// ≤ P-AXIS-00008 (a_emergency ≤ 2 × P-AXIS-00008), vb_messen ≤ P-AXIS-00212 (FCT-C4
     /// §8.2.2). The error's origin is the last assignment (in `origin.file`) of a parameter
     /// involved, else `origin`.
     pub fn check_cross(&self, origin: &Origin) -> Result<(), ParamError> {

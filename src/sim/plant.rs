@@ -20,7 +20,7 @@
 //! active level (high for `active_high`, else low) and `pulse` later (default 5 ms,
 //! [`DEFAULT_PULSE`]) back to its rest level. A crossing while the pulse is still on extends it
 //! (no new edge). Why not a persistent contact (active on one side of the surface)? In the seed's
-//! `meas1` example (seed 004 §2) the axis first passes the trigger position upwards in a
+//! `meas1` example (FCT-C4 §2) the axis first passes the trigger position upwards in a
 //! non-measuring block and then crosses it again in the measuring block; with a persistent
 //! contact the second, measuring crossing would be a *release* (the opposite edge) and a probe
 //! armed for the positive edge would never latch. With one pulse per crossing every crossing

@@ -1,4 +1,4 @@
-//! A scripted, deterministic PLC for the simulator: the machine builder's PLC glue of seed 004
+//! A scripted, deterministic PLC for the simulator: the machine builder's PLC glue of FCT-C4
 //! §7 played on virtual time.
 //!
 //! One [`ScriptedPlc`] serves one axis' PLC interface ([`AxisPlc`]). It runs its own cycle
@@ -74,13 +74,13 @@ pub enum SimPlcMode {
         /// The probe's physical edge.
         edge: ProbeEdge,
     },
-    /// External measuring hardware (`PLC_EXT_LATCH_CONTROL`, seed 004 §7.4): after ENABLE is
+    /// External measuring hardware (`PLC_EXT_LATCH_CONTROL`, FCT-C4 §7.4): after ENABLE is
     /// acknowledged, the first edge of the task's edge writes `probing_position` and raises
     /// `probing_signal`, held until DISABLE.
     ExtLatchControl,
 }
 
-/// EL1252-style timestamp output (seed 004 §7.5).
+/// EL1252-style timestamp output (FCT-C4 §7.5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct TimestampOutput {
     /// Virtual time ↔ DC time (ns since 2000-01-01).

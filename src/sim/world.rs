@@ -2,7 +2,7 @@
 //! [`Plant`] around them.
 //!
 //! Every link that hosts drive models — the in-memory [`SimLink`](crate::link::sim::SimLink) and
-//! the emulated EtherCAT segment ([`Segment`](crate::sim::esc::segment::Segment), where the
+//! the emulated EtherCAT segment (`sim::esc::segment::Segment`, where the
 //! models sit behind ESCs and the step runs at SYNC0) — advances them with [`World::step`], so
 //! a probe surface or a fixed stop behaves the same whichever bus carries the images.
 //!

@@ -1,5 +1,5 @@
 //! [`SocketCanBus`]: a Linux SocketCAN raw socket (`socketcan` 4 crate with its tokio
-//! `AsyncCanSocket`, driven by a current-thread runtime owned by the bus; notes `canopen.md` §1).
+//! `AsyncCanSocket`, driven by a current-thread runtime owned by the bus).
 //!
 //! Classic frames only. The socket receives every error class (`CAN_RAW_ERR_FILTER` = all) so
 //! error frames come out as [`CanFrame`]s with [`CanFrame::error`] set, like on
@@ -9,17 +9,19 @@
 //!
 //! Opening fails with [`CanError::Unavailable`] where the kernel has no SocketCAN
 //! (`EAFNOSUPPORT`) or the interface does not exist (`ENODEV`, e.g. vcan0 not set up: run
-//! `scripts/vcan.sh`), and on every OS other than Linux.
+//! `scripts/vcan.sh`), on every OS other than Linux, and in a build without the `socketcan` Cargo
+//! feature.
 
-#[cfg(target_os = "linux")]
+#[cfg(all(target_os = "linux", feature = "socketcan"))]
 pub use linux::SocketCanBus;
-#[cfg(not(target_os = "linux"))]
+#[cfg(not(all(target_os = "linux", feature = "socketcan")))]
 pub use other::SocketCanBus;
 
 #[allow(unused_imports)]
 use super::{err_class, CanBus, CanError, CanFilter, CanFrame};
 
 /// Message for a missing SocketCAN / interface.
+#[cfg(all(target_os = "linux", feature = "socketcan"))]
 fn unavailable(ifname: &str, detail: &str) -> CanError {
     CanError::Unavailable(format!(
         "SocketCAN interface `{ifname}` unavailable ({detail}): this system has no SocketCAN or \
@@ -28,7 +30,7 @@ fn unavailable(ifname: &str, detail: &str) -> CanError {
     ))
 }
 
-#[cfg(target_os = "linux")]
+#[cfg(all(target_os = "linux", feature = "socketcan"))]
 mod linux {
     use std::time::Duration;
 
@@ -266,22 +268,34 @@ mod linux {
     }
 }
 
-#[cfg(not(target_os = "linux"))]
+#[cfg(not(all(target_os = "linux", feature = "socketcan")))]
 mod other {
     use std::time::Duration;
 
-    use super::{unavailable, CanBus, CanError, CanFilter, CanFrame};
+    use super::{CanBus, CanError, CanFilter, CanFrame};
 
-    /// SocketCAN exists only on Linux: every operation returns [`CanError::Unavailable`].
+    /// Why there is no SocketCAN here.
+    #[cfg(not(target_os = "linux"))]
+    const WHY: &str = "SocketCAN exists only on Linux";
+    /// Why there is no SocketCAN here.
+    #[cfg(target_os = "linux")]
+    const WHY: &str = "this build of fieldprobe has no SocketCAN (Cargo feature `socketcan`)";
+
+    fn unavailable(ifname: &str) -> CanError {
+        CanError::Unavailable(format!("SocketCAN interface `{ifname}` unavailable: {WHY}"))
+    }
+
+    /// SocketCAN exists only on Linux, with the `socketcan` feature: every operation returns
+    /// [`CanError::Unavailable`].
     #[derive(Debug)]
     pub struct SocketCanBus {
         ifname: String,
     }
 
     impl SocketCanBus {
-        /// Always [`CanError::Unavailable`] on this OS.
+        /// Always [`CanError::Unavailable`] here.
         pub fn open(ifname: &str) -> Result<SocketCanBus, CanError> {
-            Err(unavailable(ifname, "SocketCAN exists only on Linux"))
+            Err(unavailable(ifname))
         }
 
         /// Interface name.
@@ -294,29 +308,29 @@ mod other {
             false
         }
 
-        /// Unavailable on this OS.
+        /// Unavailable here.
         pub fn set_filters(&mut self, _filters: &[CanFilter]) -> Result<(), CanError> {
-            Err(unavailable(&self.ifname, "SocketCAN exists only on Linux"))
+            Err(unavailable(&self.ifname))
         }
 
-        /// Unavailable on this OS.
+        /// Unavailable here.
         pub fn set_error_mask(&mut self, _mask: u32) -> Result<(), CanError> {
-            Err(unavailable(&self.ifname, "SocketCAN exists only on Linux"))
+            Err(unavailable(&self.ifname))
         }
 
-        /// Unavailable on this OS.
+        /// Unavailable here.
         pub fn set_recv_own_msgs(&mut self, _on: bool) -> Result<(), CanError> {
-            Err(unavailable(&self.ifname, "SocketCAN exists only on Linux"))
+            Err(unavailable(&self.ifname))
         }
     }
 
     impl CanBus for SocketCanBus {
         fn send(&mut self, _frame: &CanFrame) -> Result<(), CanError> {
-            Err(unavailable(&self.ifname, "SocketCAN exists only on Linux"))
+            Err(unavailable(&self.ifname))
         }
 
         fn recv(&mut self, _timeout: Duration) -> Result<Option<CanFrame>, CanError> {
-            Err(unavailable(&self.ifname, "SocketCAN exists only on Linux"))
+            Err(unavailable(&self.ifname))
         }
 
         fn describe(&self) -> String {

@@ -1,5 +1,5 @@
 //! python-can `udp_multicast` datagram codec (python-can 4.6.1
-//! `can/interfaces/udp_multicast/utils.py`; notes `canopen.md` §3.1).
+//! `can/interfaces/udp_multicast/utils.py`).
 //!
 //! One CAN frame is one UDP datagram holding one msgpack map, written by
 //! `msgpack.packb(message_as_dict, use_bin_type=True)` with the keys in this order:

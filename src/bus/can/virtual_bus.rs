@@ -1,5 +1,5 @@
 //! In-process CAN bus with SocketCAN's delivery semantics (the Lely approach of testing master
-//! and slave on one loop-back network, notes `canopen.md` §5, §8).
+//! and slave on one loop-back network).
 //!
 //! A [`VirtualCan`] hub hands out [`VirtualEndpoint`]s. A frame sent on one endpoint is queued,
 //! in one global send order, on every *other* endpoint whose filters pass it (and on the sender

@@ -43,7 +43,7 @@ pub fn describe(f: &CanFrame) -> String {
             let code = u32::from_le_bytes([d[4], d[5], d[6], d[7]]);
             return format!(
                 "SDO {dir} node {node}: abort{mux} {code:#010x} ({})",
-                crate::bus::ethercat::mailbox::abort_text(code)
+                crate::bus::abort::abort_text(code)
             );
         }
         format!("SDO {dir} node {node}: {what}{mux}")

@@ -6,7 +6,7 @@
 //! touches a bus; [`SdoClient::next_deadline`] / [`SdoServer::next_deadline`] say when `poll`
 //! has work to do.
 //!
-//! Protocols (byte 0 = command specifier; `notes/canopen.md` §6.4):
+//! Protocols (byte 0 = command specifier, CiA 301 SDO protocols):
 //!
 //! | transfer | client → server (0x600 + node) | server → client (0x580 + node) |
 //! |---|---|---|
@@ -47,8 +47,8 @@ use std::mem;
 
 use tracing::{debug, trace};
 
+use crate::bus::abort::abort_text;
 use crate::bus::can::CanFrame;
-use crate::bus::ethercat::mailbox::abort_text;
 use crate::units::Nanos;
 
 /// Server → client COB-ID base (SDO "tx" of the server): 0x580 + node.
@@ -66,7 +66,7 @@ pub const DEFAULT_MAX_SIZE: usize = 1 << 20;
 /// Largest block size of block transfers (CiA 301: 1 … 127 segments per block).
 pub const MAX_BLOCK_SIZE: u8 = 127;
 
-/// SDO abort codes used by this module (CiA 301 SDO abort transfer; `notes/canopen.md` §6.5).
+/// SDO abort codes used by this module (CiA 301 SDO abort transfer).
 /// Texts: [`abort_text`].
 pub mod abort {
     /// Toggle bit not alternated.

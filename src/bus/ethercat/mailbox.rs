@@ -1,10 +1,10 @@
 //! CoE mailbox client on ethercrab's public raw command API (`Command::fprd` / `fpwr`).
 //!
-//! Works around the ethercrab 0.7.1 CoE defects (notes `ethercat.md` §0 point 4, §3.2):
+//! Works around the ethercrab 0.7.1 CoE defects (reproduced against the emulated servo):
 //! spec-conformant segmented upload with toggle check, normal and segmented download
 //! (> 4 bytes), and CoE emergency messages arriving instead of the SDO response are collected
 //! ([`CoeClient::take_emergencies`]) while the client keeps waiting for the real response.
-//! Mailbox handling follows notes §2.4: SM1 status (0x080D bit 3 = mailbox full) is read
+//! Mailbox handling (ETG.1000.4 mailbox, ETG.1000.6 CoE): SM1 status (0x080D bit 3 = mailbox full) is read
 //! before the read mailbox, requests are padded to the full SM0 length, the mailbox counter
 //! runs 1..7. Every wait is bounded by [`CoeClient::timeout`]. That mailbox handling is the
 //! protocol-neutral [`MailboxTransport`], shared with the SoE client ([`super::soe`]).
@@ -17,6 +17,8 @@ use super::wire::{
     CoeHeader, CoeService, MailboxHeader, MailboxType, SdoCommand, SdoDirection, SdoFrame,
 };
 
+/// First sync manager register (SM0 start address; ETG.1000.4 register 0x0800).
+const SM_REGISTERS: u16 = 0x0800;
 /// SM0 (write mailbox) status register.
 const SM0_STATUS: u16 = 0x0805;
 /// SM1 (read mailbox) status register.
@@ -63,7 +65,7 @@ pub enum MailboxError {
         /// The cap (bytes).
         limit: usize,
     },
-    /// SoE error reply (SoE header error bit; notes `ethercat.md` §7.3) with its SERCOS error
+    /// SoE error reply (SoE header error bit, ETG.1000.6) with its SERCOS error
     /// code.
     #[error(
         "SoE {name} (drive {drive_no}): error {code:#06x} ({text})",
@@ -106,45 +108,10 @@ pub struct Emergency {
     pub data: [u8; 5],
 }
 
-/// CiA 301 SDO abort code in words.
-pub fn abort_text(code: u32) -> &'static str {
-    match code {
-        0x0503_0000 => "toggle bit not alternated",
-        0x0504_0000 => "SDO protocol timed out",
-        0x0504_0001 => "client/server command specifier not valid or unknown",
-        0x0504_0002 => "invalid block size (block mode only)",
-        0x0504_0003 => "invalid sequence number (block mode only)",
-        0x0504_0004 => "CRC error (block mode only)",
-        0x0504_0005 => "out of memory",
-        0x0601_0000 => "unsupported access to an object",
-        0x0601_0001 => "attempt to read a write-only object",
-        0x0601_0002 => "attempt to write a read-only object",
-        0x0602_0000 => "object does not exist in the object dictionary",
-        0x0604_0041 => "object cannot be mapped to the PDO",
-        0x0604_0042 => "number and length of mapped objects exceed PDO length",
-        0x0604_0043 => "general parameter incompatibility",
-        0x0604_0047 => "general internal incompatibility in the device",
-        0x0606_0000 => "access failed due to a hardware error",
-        0x0607_0010 => "data type does not match, length of service parameter does not match",
-        0x0607_0012 => "data type does not match, length of service parameter too high",
-        0x0607_0013 => "data type does not match, length of service parameter too low",
-        0x0609_0011 => "subindex does not exist",
-        0x0609_0030 => "value range of parameter exceeded",
-        0x0609_0031 => "value of parameter written too high",
-        0x0609_0032 => "value of parameter written too low",
-        0x0609_0036 => "maximum value is less than minimum value",
-        0x060A_0023 => "resource not available: SDO connection",
-        0x0800_0000 => "general error",
-        0x0800_0020 => "data cannot be transferred or stored to the application",
-        0x0800_0021 => "data cannot be transferred because of local control",
-        0x0800_0022 => "data cannot be transferred because of the present device state",
-        0x0800_0023 => "object dictionary not present or dynamic generation failed",
-        0x0800_0024 => "no data available",
-        _ => "unknown abort code",
-    }
-}
+/// CiA 301 SDO abort code in words (CoE uses the CiA 301 codes; defined in [`crate::bus::abort`]).
+pub use crate::bus::abort::abort_text;
 
-/// Standard mailbox transport to one SubDevice over ethercrab's raw commands (notes §2.4): the
+/// Standard mailbox transport to one SubDevice over ethercrab's raw commands (ETG.1000.4 mailbox): the
 /// write mailbox (SM0) and read mailbox (SM1) areas, the mailbox counter (1..7), a stale read
 /// mailbox flushed before each request, requests padded to the full SM0 length, replies
 /// awaited by polling the SM1 status (bit 3 = mailbox full) and read with the full SM1 length.
@@ -180,6 +147,36 @@ impl MailboxTransport {
             emergencies: Vec::new(),
             timeout: Duration::from_secs(2),
         }
+    }
+
+    /// Transport to the SubDevice at configured `station_address`, its mailbox areas read from
+    /// the device: the sync manager registers at 0x0800 (ETG.1000.4, 8 bytes per SM: start
+    /// address, length, control) must show SM0 and SM1 in mailbox mode (control bits 1..0 =
+    /// 10b), as they are from PRE-OP on. This is how a user who owns the ethercrab
+    /// `MainDevice` gets a transport for a `SubDevice` (`SubDeviceRef::configured_address`).
+    ///
+    /// # Errors
+    /// The register read failed ([`MailboxError::Datagram`]), or the device has no mailbox
+    /// ([`MailboxError::Protocol`]).
+    pub async fn discover(md: &MainDevice<'_>, station_address: u16) -> Result<Self, MailboxError> {
+        let regs = Command::fprd(station_address, SM_REGISTERS)
+            .receive::<[u8; 16]>(md)
+            .await
+            .map_err(dg)?;
+        let sm = |o: usize| {
+            (
+                u16::from_le_bytes([regs[o], regs[o + 1]]),
+                u16::from_le_bytes([regs[o + 2], regs[o + 3]]),
+            )
+        };
+        let mailbox_mode = |o: usize| regs[o + 4] & 0x03 == 0x02;
+        let (out, inp) = (sm(0), sm(8));
+        if !mailbox_mode(0) || !mailbox_mode(8) || out.1 == 0 || inp.1 == 0 {
+            return Err(MailboxError::Protocol(format!(
+                "SubDevice {station_address:#06x} has no mailbox (SM0 / SM1 not in mailbox mode)"
+            )));
+        }
+        Ok(Self::new(station_address, out, inp))
     }
 
     /// Configured station address of the SubDevice.
@@ -363,6 +360,17 @@ impl CoeClient {
     /// (SM0) and read mailbox (SM1) as (start address, length).
     pub fn new(station_address: u16, mbx_out: (u16, u16), mbx_in: (u16, u16)) -> Self {
         Self::from_transport(MailboxTransport::new(station_address, mbx_out, mbx_in))
+    }
+
+    /// Client for the SubDevice at configured `station_address`, its mailbox areas read from
+    /// the device ([`MailboxTransport::discover`]).
+    ///
+    /// # Errors
+    /// As [`MailboxTransport::discover`].
+    pub async fn discover(md: &MainDevice<'_>, station_address: u16) -> Result<Self, MailboxError> {
+        Ok(Self::from_transport(
+            MailboxTransport::discover(md, station_address).await?,
+        ))
     }
 
     /// Client on an existing transport (e.g. shared with an SoE client); the timeout is the

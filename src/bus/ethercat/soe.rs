@@ -2,7 +2,7 @@
 //! commands, through the shared [`MailboxTransport`] (ethercrab 0.7.1 has no SoE; notes
 //! `ethercat.md` §7.3).
 //!
-//! Wire layout (notes §7.3, SOEM `ec_soe.c`): mailbox header, SoE header
+//! Wire layout (ETG.1000.6 SoE, as SOEM's `ec_soe.c` lays it out): mailbox header, SoE header
 //! ([`SoeHeader`]: opcode 3 bits, incomplete, error, drive number 3 bits; element flags; IDN or
 //! fragments left), data. [`SoeClient`] groups:
 //!
@@ -40,7 +40,7 @@ pub fn format_idn(idn: u16) -> String {
 }
 
 /// SERCOS error code of an SoE error reply in words (IEC 61800-7-204 error codes as listed by
-/// SOEM / IgH; the codes [`crate::sim::esc::soe::error`] answers with are among them).
+/// SOEM / IgH; the codes the emulator (`sim::esc::soe::error`) answers with are among them).
 pub fn error_text(code: u16) -> &'static str {
     match code {
         0x0000 => "no error",
@@ -97,7 +97,7 @@ pub fn error_text(code: u16) -> &'static str {
     }
 }
 
-/// Element of an IDN, with its SoE element flag (notes §7.3).
+/// Element of an IDN, with its SoE element flag (ETG.1000.6 SoE header).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Element {
     /// 0x01 data state.
@@ -134,7 +134,7 @@ impl Element {
     }
 }
 
-/// Data type of an IDN (attribute bits 20–22; notes §7.3).
+/// Data type of an IDN (attribute bits 20–22; IEC 61800-7-204).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum IdnDataType {
     /// 0 binary.
@@ -155,7 +155,7 @@ pub enum IdnDataType {
     Parameter,
 }
 
-/// Decoded attribute element of an IDN (IEC 61800-7-204 attribute as laid out in notes §7.3,
+/// Decoded attribute element of an IDN (IEC 61800-7-204 attribute, as in
 /// SOEM `ec_SoEattributet`):
 ///
 /// | bits | field |
@@ -591,7 +591,7 @@ impl SoeClient {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "sim"))]
 mod tests {
     use super::*;
     use crate::sim::esc::soe::{error, sercos_idns};

@@ -16,7 +16,7 @@
 //!
 //! The mailbox layer (ETG.1000.4 §5.6 mailbox header, ETG.1000.6 CoE / SoE headers) sits on top:
 //! [`MailboxHeader`], [`CoeHeader`], [`SdoCommand`] / [`SdoFrame`], [`SdoInfoHeader`],
-//! [`SoeHeader`]. Mailbox type codes follow notes `ethercat.md` §2.4 (3 = CoE, 5 = SoE).
+//! [`SoeHeader`]. Mailbox type codes follow ETG.1000.4 (3 = CoE, 5 = SoE).
 //!
 //! Unknown codes are kept (`Unknown(u8)` variants) instead of failing; errors carry the byte
 //! offset of the offending field. No function here panics on any input.
@@ -278,7 +278,7 @@ enum_with_unknown! {
 pub struct EthernetHeader {
     /// Destination MAC.
     pub dst: [u8; 6],
-    /// Source MAC. A slave that processed the frame sets bit 1 of byte 0 (notes §2.1).
+    /// Source MAC. A slave that processed the frame sets bit 1 of byte 0 (ETG.1000.4: the first device marks the frame).
     pub src: [u8; 6],
     /// VLAN tag control information when an 802.1Q tag precedes the EtherType.
     pub vlan_tci: Option<u16>,
@@ -724,8 +724,8 @@ where
     Ok(count)
 }
 
-/// Mark a frame as processed by a slave: set bit 1 of the first source-MAC byte (notes
-/// `ethercat.md` §2.1). Returns `false` if the buffer is shorter than an Ethernet header.
+/// Mark a frame as processed by a slave: set bit 1 of the first source-MAC byte (as the first
+/// device of a segment does). Returns `false` if the buffer is shorter than an Ethernet header.
 pub fn mark_processed(frame: &mut [u8]) -> bool {
     if frame.len() < ETHERNET_HEADER_LEN {
         return false;
@@ -843,7 +843,7 @@ impl FrameBuilder {
 // Mailbox (ETG.1000.4 §5.6, ETG.1000.6 §5.6)
 
 enum_with_unknown! {
-    /// Mailbox type, low nibble of mailbox header byte 5 (notes `ethercat.md` §2.4).
+    /// Mailbox type, low nibble of mailbox header byte 5 (ETG.1000.4 mailbox header).
     pub enum MailboxType: u8 {
         /// Mailbox error reply.
         Error = 0,
@@ -855,7 +855,7 @@ enum_with_unknown! {
         Coe = 3,
         /// File access over EtherCAT.
         Foe = 4,
-        /// Servo drive profile over EtherCAT (SERCOS, notes §7.3).
+        /// Servo drive profile over EtherCAT (SERCOS, ETG.1000.6 SoE).
         Soe = 5,
         /// Vendor specific.
         Voe = 15,
@@ -1267,7 +1267,7 @@ impl SdoInfoHeader {
 }
 
 enum_with_unknown! {
-    /// SoE opcode (bits 0..2 of SoE header byte 0; notes `ethercat.md` §7.3).
+    /// SoE opcode (bits 0..2 of SoE header byte 0; ETG.1000.6).
     pub enum SoeOpcode: u8 {
         /// Read request.
         ReadRequest = 1,
@@ -1284,7 +1284,7 @@ enum_with_unknown! {
     }
 }
 
-/// SoE header (4 bytes after the mailbox header, mailbox type 5; notes `ethercat.md` §7.3).
+/// SoE header (4 bytes after the mailbox header, mailbox type 5; ETG.1000.6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SoeHeader {
     /// Opcode (bits 0..2).
@@ -1349,7 +1349,7 @@ mod tests {
 
     #[test]
     fn sdo_command_bytes() {
-        // ethercrab's upload init 0x40, complete access 0x50, expedited download 0x2F (notes §2.4)
+        // ethercrab's upload init 0x40, complete access 0x50, expedited download 0x2F
         assert_eq!(
             SdoCommand::decode(0x40, SdoDirection::Request),
             SdoCommand::InitiateUploadRequest {

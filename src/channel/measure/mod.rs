@@ -1,4 +1,4 @@
-//! Measurement runs in the channel (seed 004): a G100 / G210 / G310 block is a linear motion
+//! Measurement runs in the channel (FCT-C4): a G100 / G210 / G310 block is a linear motion
 //! that arms the probing-signal sources of its axes, collects their latches every cycle, brakes
 //! when the probing signal is complete and publishes a [`MeasurementOutcome`].
 //!
@@ -11,7 +11,7 @@
 //! braking ──(standstill)──► done
 //! ```
 //!
-//! Which axes take part (seed 004 §1): the measurement axes programmed in the block, with `#CS`
+//! Which axes take part (FCT-C4 §1): the measurement axes programmed in the block, with `#CS`
 //! the three main axes; no other axis's probe is armed. Which of them must latch (§4): in 2.5D
 //! every measurement axis the block moves; with `#CS` all three main axes. Braking uses the deceleration of the §2.1 table ("measurement
 //! signal active" column) for the non-linear slope parameter set our interpolator uses.
@@ -21,6 +21,9 @@ use crate::core::measure::fixed_stop::{FixedStopAxis, FixedStopDetector, FixedSt
 use crate::core::measure::plc::{
     BlockGate, EvaluatorConfig, ExtLatchClient, ExtLatchConfig, SignalEvaluator, SourceEvaluator,
     TimestampConfig,
+};
+use crate::core::measure::run::{
+    contact_path_position, latched_before_target, missing_signal_error,
 };
 use crate::core::measure::timestamp::{DcClock, DeadTimes};
 use crate::core::measure::{MeasType, MeasurementOutcome, SignalSource};
@@ -36,10 +39,6 @@ mod step;
 /// ends (P-CHAN-00266 = 1).
 const SETTLE_LAG: f64 = 1e-4;
 
-/// A contact closer to the programmed target than this (mm) counts as at the target (MERF 0):
-/// far below the 0.1 µm resolution of the drives' positions.
-const CONTACT_AT_TARGET: f64 = 1e-6;
-
 /// Cycles a measuring block may wait for its sources to confirm the arming (1 s at 1 ms).
 pub const ARMING_TIMEOUT_CYCLES: u32 = 1000;
 
@@ -50,11 +49,11 @@ pub struct MeasureRequest {
     pub mtype: MeasType,
     /// The G code of the block: 100, 210 or 310.
     pub gcode: u32,
-    /// `#CS` is active: the three main axes must all latch (seed 004 §4).
+    /// `#CS` is active: the three main axes must all latch (FCT-C4 §4).
     pub cs_active: bool,
     /// Per channel axis: the axis is programmed in the measuring block. Only these (and with
     /// `#CS` the three main axes) take part: "The measuring function is initialised and
-    /// activated for the axes programmed in the measurement block" (seed 004 §1). A shorter
+    /// activated for the axes programmed in the measurement block" (FCT-C4 §1). A shorter
     /// list reads the missing axes as not programmed.
     pub programmed: Vec<bool>,
     /// Per-axis signal overrides from `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`.
@@ -168,36 +167,26 @@ impl MeasRun {
     }
 
     /// Path position (distance from the start along the measuring line) of the contact the
-    /// latched positions describe: the least-squares projection of the latched axes that move
-    /// along the line; `None` when no moving axis latched.
+    /// latched positions describe ([`contact_path_position`]).
     fn contact_s(&self) -> Option<f64> {
-        let (mut num, mut den) = (0.0, 0.0);
-        for a in &self.axes {
-            let (Some((p, _)), Some(&d), Some(&o)) =
-                (a.latched, self.dir.get(a.axis), self.origin.get(a.axis))
-            else {
-                continue;
-            };
-            if d.abs() > 1e-12 {
-                num += (p - o) * d;
-                den += d * d;
-            }
-        }
-        (den > 0.0).then(|| num / den)
+        contact_path_position(
+            self.axes
+                .iter()
+                .filter_map(|a| a.latched.map(|(p, _)| (a.axis, p))),
+            &self.origin,
+            &self.dir,
+        )
     }
 
-    /// V.A.MERF per axis: the contact lies on the path before the programmed target (seed 004
-    /// §8: "received before the target position is reached"), judged from where the latched
-    /// positions are, not from where the command was when the latch arrived (the command runs
-    /// the link's dead time ahead of the axis).
+    /// V.A.MERF per axis ([`latched_before_target`]): the contact lies on the path before the
+    /// programmed target (FCT-C4 §8), judged from where the latched positions are, not from
+    /// where the command was when the latch arrived (the command runs the link's dead time
+    /// ahead of the axis).
     fn decide_merf(&mut self) {
         let s = self.contact_s();
         let target = self.target_len;
         for a in &mut self.axes {
-            a.before_target = match (a.latched, s) {
-                (Some(_), Some(s)) => s < target - CONTACT_AT_TARGET,
-                _ => false,
-            };
+            a.before_target = a.latched.is_some() && latched_before_target(s, target);
         }
     }
 
@@ -333,7 +322,7 @@ pub(super) enum MeasStep {
 }
 
 impl Channel {
-    /// `#MEAS PREPARE [AXNR=..]` (seed 004 §7.2): ask the PLC to prepare the switchable probe of
+    /// `#MEAS PREPARE [AXNR=..]` (FCT-C4 §7.2): ask the PLC to prepare the switchable probe of
     /// axis `axis` ahead of the measuring block.
     pub fn prepare_probe(&mut self, axis: usize) -> Result<(), CncMessage> {
         if axis >= self.axes.len() {
@@ -374,7 +363,7 @@ impl Channel {
         self.cfg.meas.plc_cycle = cycle;
     }
 
-    /// Program end (seed 004 §7.2 Notice): the preparation of all prepared axes is reset.
+    /// Program end (FCT-C4 §7.2 Notice): the preparation of all prepared axes is reset.
     pub fn program_end(&mut self) {
         for c in self.ext_latch.iter_mut().flatten() {
             c.clear_preparation();
@@ -383,7 +372,7 @@ impl Channel {
     }
 
     /// Homing of axis `i` (G74): resets the preparation of every prepared axis when `i` was
-    /// prepared (seed 004 §7.2 Notice).
+    /// prepared (FCT-C4 §7.2 Notice).
     pub fn homing(&mut self, i: usize) {
         if self.prepared.get(i).copied().unwrap_or(false) {
             self.program_end();

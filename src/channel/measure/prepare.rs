@@ -1,5 +1,5 @@
 //! Preparing a measuring block: which axes take part and must latch, the braking deceleration
-//! of the seed 004 §2.1 table, arming the sources (drive latch, CNC_DEFINED 0x60D0, PLC).
+//! of the FCT-C4 §2.1 table, arming the sources (drive latch, CNC_DEFINED 0x60D0, PLC).
 
 use super::*;
 
@@ -18,7 +18,7 @@ impl Channel {
         let end = segment.end();
         let moved: Vec<bool> = (0..n).map(|i| (end[i] - start[i]).abs() > 1e-9).collect();
         let mtype = req.mtype;
-        // G code and type must belong together (seed 004 §3 table).
+        // G code and type must belong together (FCT-C4 §3 table).
         let ok_gcode = match mtype {
             MeasType::Type5 => req.gcode == 210,
             MeasType::Type6 => req.gcode == 310,
@@ -62,14 +62,14 @@ impl Channel {
             }
             _ => {}
         }
-        // Which axes take part (seed 004 §1: "initialised and activated for the axes programmed
+        // Which axes take part (FCT-C4 §1: "initialised and activated for the axes programmed
         // in the measurement block") and which must latch (§4).
         let mut axes = Vec::new();
         for i in 0..n {
             let c = &self.cfg.axes[i].meas;
             let in_cs = req.cs_active && main.contains(&Some(i));
             let programmed = req.programmed.get(i).copied().unwrap_or(false);
-            // Gantry slaves move along but the master measures (seed 004 §7.3).
+            // Gantry slaves move along but the master measures (FCT-C4 §7.3).
             let slave = self.is_coupled_slave(i);
             let required = (moved[i] || in_cs) && !slave;
             if required && !c.enabled {
@@ -92,7 +92,7 @@ impl Channel {
             let ov = req.overrides.iter().rev().find(|o| o.axis == i);
             let mut signal = ov.and_then(|o| o.signal).unwrap_or(c.signal);
             if mtype == MeasType::Type7 {
-                // Seed 004 §7.3 "The following entries must be assigned in the axis parameter
+                // FCT-C4 §7.3 "The following entries must be assigned in the axis parameter
                 // lists: P-AXIS-00516 … FIXED_STOP" (P-AXIS-00330: "All other measurement signal
                 // sources … must be deselected"): an axis watched for the stop that is set up
                 // for another source is refused before anything moves. The other axes of the
@@ -243,7 +243,7 @@ impl Channel {
         Ok(run)
     }
 
-    /// Braking deceleration of axis `i` after the probing signal, seed 004 §2.1 table
+    /// Braking deceleration of axis `i` after the probing signal, FCT-C4 §2.1 table
     /// ("non-linear slope", column "measurement signal active").
     fn measurement_brake_decel(&self, i: usize) -> f64 {
         let m = &self.cfg.meas;

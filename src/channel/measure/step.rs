@@ -156,7 +156,7 @@ impl Channel {
                             .as_mut()
                             .and_then(|d| d.update(now, k, travelled, a.lag(), a.actual()));
                         if detected.is_some() {
-                            // The measuring point is latched for each axis involved (seed 004
+                            // The measuring point is latched for each axis involved (FCT-C4
                             // §7.3): every axis of the run takes its actual position; the motion
                             // brakes, and at its end all axes move there ("reduce interpolation
                             // to measured value", `finish_measurement`).
@@ -215,36 +215,14 @@ impl Channel {
                 .map(|a| self.axes[a.axis].name())
                 .collect();
             let list = missing.join(", ");
-            let m = &self.cfg.meas;
-            let error = if run.limited_at_sls {
-                Some(CncMessage::error(
-                    ids::MEAS_PATH_LIMITED,
-                    format!("measurement run stopped at the software limit switch or control-area boundary (P-CHAN-00268) without probing signal (axes {list})"),
-                ))
-            } else {
-                match run.mtype {
-                    MeasType::Type2 => Some(CncMessage::error(
-                        ids::MEAS_NO_SIGNAL,
-                        format!("measurement type 2: probing signal missing (axes {list})"),
-                    )),
-                    MeasType::Type1 if m.error_no_signal_type1 => Some(CncMessage::error(
-                        ids::MEAS_NO_SIGNAL,
-                        format!("probing signal missing (axes {list}; P-CHAN-00176 = 1)"),
-                    )),
-                    MeasType::Type7 if !m.fixed_stop_no_error => Some(CncMessage::error(
-                        ids::MEAS_NO_FIXED_STOP,
-                        format!("measurement type 7: fixed stop not detected (axes {list}; P-CHAN-00266 = 0)"),
-                    )),
-                    _ => None,
-                }
-            };
+            let error = missing_signal_error(run.mtype, &self.cfg.meas, run.limited_at_sls, &list);
             if let Some(e) = error {
                 return Err(e);
             }
         }
         run.decide_merf();
         let settle: Vec<(usize, f64)> = match run.mtype {
-            // Detected: every axis of the run goes to its latched position (seed 004 §7.3).
+            // Detected: every axis of the run goes to its latched position (FCT-C4 §7.3).
             MeasType::Type7 if complete => run
                 .axes
                 .iter()

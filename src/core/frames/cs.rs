@@ -1,4 +1,4 @@
-//! `#CS ON[x, y, z, a, b, c]`: the Cartesian machining coordinate system (seed 004 §4, §5 meas3,
+//! `#CS ON[x, y, z, a, b, c]`: the Cartesian machining coordinate system (FCT-C4 §4, §5 meas3,
 //! meas4), as an [`Isometry3`].
 //!
 //! # Convention
@@ -8,7 +8,7 @@
 //! the standard right-handed rotation about the ACS axis (`R_y(b)`: `x' = x·cos b + z·sin b`,
 //! `z' = −x·sin b + z·cos b`).
 //!
-//! Seed 004 §5 meas4 fixes the single-rotation case: with `#CS ON[0,0,75,0,15,0]` the CS point
+//! FCT-C4 §5 meas4 fixes the single-rotation case: with `#CS ON[0,0,75,0,15,0]` the CS point
 //! `w = (150, 0, 20)` is at ACS `z = 75 − 150·sin 15° + 20·cos 15° ≈ 55.5`, the probing position
 //! of the example. The order of several rotations (`R_z · R_y · R_x`: first about X, then Y,
 //! then Z, all about the fixed ACS axes) is an interpretation: the seed shows only single
@@ -48,7 +48,7 @@ impl CsTransform {
     }
 
     /// From the values of `#CS ON[x, y, z, a, b, c]`: offsets in mm, angles in degrees; missing
-    /// trailing values are 0 (seed 004 §4).
+    /// trailing values are 0 (FCT-C4 §4).
     ///
     /// Errors: more than six values, a value that is not finite or beyond
     /// ±[`MAX_COORDINATE`](crate::core::path::MAX_COORDINATE).

@@ -1,4 +1,4 @@
-//! Fixed-stop detection for measurement type 7 (seed 004 §7.3 "Measurement run to fixed stop",
+//! Fixed-stop detection for measurement type 7 (FCT-C4 §7.3 "Measurement run to fixed stop",
 //! parameters §8.2.2 P-AXIS-00774 … 00778 with the fallbacks P-AXIS-00769 … 00773 and the old
 //! P-AXIS-00331 / 00332).
 //!
@@ -38,9 +38,9 @@ use crate::messages::CncMessage;
 use crate::params::{id, ParamSet};
 use crate::units::{param_pos_to_mm, Nanos};
 
-/// Seed 004 §8.2.2 P-AXIS-00777: per mille > 1000 at controller start (warning, value kept).
+/// FCT-C4 §8.2.2 P-AXIS-00777: per mille > 1000 at controller start (warning, value kept).
 pub const PER_MILLE_WARNING_ID: u32 = 110757;
-/// Seed 004 §8.2.2 P-AXIS-00777: per mille > 1000 at the start of a measuring travel (error,
+/// FCT-C4 §8.2.2 P-AXIS-00777: per mille > 1000 at the start of a measuring travel (error,
 /// program aborted).
 pub const PER_MILLE_ERROR_ID: u32 = 51026;
 /// Largest permitted per mille (P-AXIS-00777 / 00772 data range).
@@ -128,7 +128,7 @@ impl FixedStopError {
         }
     }
 
-    /// Every variant as a CNC error in words: 51026 (seed 004 §8.2.2) for a per mille above
+    /// Every variant as a CNC error in words: 51026 (FCT-C4 §8.2.2) for a per mille above
     /// 1000, `config_id` (the caller's ID for a measuring block that may not run) for the others.
     /// `axis_names` are the names of the detector's axes in list order; the message names the
     /// axis concerned (or, without one, every axis of the measurement) and the parameters.
@@ -171,7 +171,7 @@ impl FixedStopError {
     }
 }
 
-/// Warning 110757: per mille > 1000 at controller start (seed 004 §8.2.2 P-AXIS-00777; the value
+/// Warning 110757: per mille > 1000 at controller start (FCT-C4 §8.2.2 P-AXIS-00777; the value
 /// is not corrected).
 pub fn per_mille_warning(axis_name: &str, value: i64) -> CncMessage {
     CncMessage::warning(
@@ -185,7 +185,7 @@ pub fn per_mille_warning(axis_name: &str, value: i64) -> CncMessage {
 }
 
 /// Error 51026: per mille > 1000 at the start of a measuring travel; the program is aborted
-/// (seed 004 §8.2.2 P-AXIS-00777).
+/// (FCT-C4 §8.2.2 P-AXIS-00777).
 pub fn per_mille_error(axis_name: &str, value: i64) -> CncMessage {
     CncMessage::error(
         PER_MILLE_ERROR_ID,
@@ -214,7 +214,7 @@ impl FixedStopParams {
         }
     }
 
-    /// The effective parameters of one axis, with the fallback chains of seed 004 §8.2.2:
+    /// The effective parameters of one axis, with the fallback chains of FCT-C4 §8.2.2:
     /// * lag limit P-AXIS-00774: 0 = off; < 0 → P-AXIS-00769 if > 0, else P-AXIS-00331
     ///   (0 = off);
     /// * min time P-AXIS-00775 µs: 0 → P-AXIS-00770 µs if > 0, else P-AXIS-00332 × `cycle`;
@@ -349,7 +349,7 @@ fn micros(us: i64) -> Nanos {
 pub struct FixedStopAxis {
     /// Its effective parameters.
     pub params: FixedStopParams,
-    /// Monitored: `false` for gantry slave axes (seed 004 §7.3: "the master axis is always used
+    /// Monitored: `false` for gantry slave axes (FCT-C4 §7.3: "the master axis is always used
     /// for measuring").
     pub monitored: bool,
 }
@@ -372,7 +372,7 @@ struct AxisState {
     since: Option<(Nanos, f64)>,
 }
 
-/// Per-cycle fixed-stop detection over the axes of one measuring block (seed 004 §7.3).
+/// Per-cycle fixed-stop detection over the axes of one measuring block (FCT-C4 §7.3).
 /// Allocates in [`new`](Self::new) only.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FixedStopDetector {

@@ -1,4 +1,4 @@
-//! Measurement (seed 004, FCT-C4): measurement types, signal sources, latch handling, results.
+//! Measurement (FCT-C4, FCT-C4): measurement types, signal sources, latch handling, results.
 //!
 //! | part | module |
 //! |---|---|
@@ -6,6 +6,8 @@
 //! | PLC interface (control units, external-latch handshake) | [`plc`] |
 //! | DC timestamp back-calculation | [`timestamp`] |
 //! | fixed-stop detection (type 7) | [`fixed_stop`] |
+//! | a measuring motion without the NC channel (types 1–4): signal, braking, MERF, errors | [`run`] |
+//! | `V.A.MESS`, `MOFFS`, `MEAS.ACS/PCS.VALUE`, G101 / G102 | [`results`] |
 //!
 //! Everything here is sans-IO: time comes in as [`Nanos`](crate::units::Nanos), positions in
 //! mm / ° (ACS).
@@ -13,11 +15,12 @@
 pub mod fixed_stop;
 pub mod plc;
 pub mod results;
+pub mod run;
 pub mod timestamp;
 
 use crate::drive::{ProbeEdge, TriggerSourceMode};
 
-/// Measurement type (P-CHAN-00057 `messtyp`, `#MEAS MODE[n]`; seed 004 §3 table).
+/// Measurement type (P-CHAN-00057 `messtyp`, `#MEAS MODE[n]`; FCT-C4 §3 table).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum MeasType {
     /// 1: G100, ≥ 1 axis, feed from F.
@@ -150,7 +153,7 @@ pub fn trigger_mode_from_text(text: &str) -> Option<TriggerSourceMode> {
     }
 }
 
-/// Measurement configuration of one axis, from its parameter list (seed 004 §3, §8.2.2), in
+/// Measurement configuration of one axis, from its parameter list (FCT-C4 §3, §8.2.2), in
 /// mm, mm/s, mm/s².
 #[derive(Debug, Clone, PartialEq)]
 pub struct AxisMeasConfig {
@@ -172,7 +175,7 @@ pub struct AxisMeasConfig {
     pub overtravel: f64,
     /// The permitted travel past the target in measurement type 2: P-AXIS-00467 when it is set,
     /// else the old P-AXIS-00114 `kenngr.mess_offset`, which "only has an influence on
-    /// measurement travels with measurement type 2" (seed 004 §8.2.2, P-AXIS-00467 remarks).
+    /// measurement travels with measurement type 2" (FCT-C4 §8.2.2, P-AXIS-00467 remarks).
     pub overtravel_type2: f64,
     /// P-AXIS-00053 `a_feedh` (0 → P-AXIS-00004): feedhold deceleration.
     pub a_feedhold: f64,
@@ -205,7 +208,7 @@ impl Default for AxisMeasConfig {
     }
 }
 
-/// Channel-wide measurement settings (seed 004 §8.2.1, seed 000 §6.2).
+/// Channel-wide measurement settings (FCT-C4 §8.2.1, FCT-C14 §6.2).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChannelMeasConfig {
     /// P-CHAN-00057 `messtyp`: default measurement type.

@@ -1,7 +1,7 @@
-//! PLC interface of the measurement (seed 004 §7.1, §7.2, §7.4, §7.5, §8.2.3): the library API
+//! PLC interface of the measurement (FCT-C4 §7.1, §7.2, §7.4, §7.5, §8.2.3): the library API
 //! a machine builder's PLC glue and the CNC channel use.
 //!
-//! * [`ControlUnit`] — the HLI control unit of seed 004 §8.2.3 (`command_w`, `enable_w`,
+//! * [`ControlUnit`] — the HLI control unit of FCT-C4 §8.2.3 (`command_w`, `enable_w`,
 //!   `request_r`, `state_r`); [`AxisPlc`] bundles the units of one axis (`probing_signal`,
 //!   `timestamp`, `probing_position`) with the axis' external-latch interface.
 //! * [`ExtLatchInterface`] / [`ExtLatchClient`] — the external-latch handshake of §7.2 / §7.4
@@ -56,10 +56,10 @@ use crate::drive::ProbeEdge;
 use crate::units::Nanos;
 
 // ---------------------------------------------------------------------------------------------
-// Control units (seed 004 §8.2.3)
+// Control units (FCT-C4 §8.2.3)
 // ---------------------------------------------------------------------------------------------
 
-/// An HLI control unit (seed 004 §8.2.3, `MC_CONTROL_*_UNIT`): the PLC writes `command_w` and
+/// An HLI control unit (FCT-C4 §8.2.3, `MC_CONTROL_*_UNIT`): the PLC writes `command_w` and
 /// `enable_w` ("redirection"); the CNC uses the command when enabled, otherwise its own value,
 /// and reports its own value in `request_r` and the value in effect in `state_r`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -169,10 +169,10 @@ impl AxisPlc {
 }
 
 // ---------------------------------------------------------------------------------------------
-// External-latch handshake (seed 004 §7.2, §7.4)
+// External-latch handshake (FCT-C4 §7.2, §7.4)
 // ---------------------------------------------------------------------------------------------
 
-/// A task of the external-latch interface (seed 004 §7.2).
+/// A task of the external-latch interface (FCT-C4 §7.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ExtLatchTask {
     /// `HLI_EXT_LATCH_PREPARE_PROBE` (`#MEAS PREPARE`): switch the probe on early.
@@ -285,7 +285,7 @@ pub enum ExtLatchError {
         max: u8,
     },
     /// A task is still waiting for its acknowledgement (a new task is rejected, not
-    /// overwritten — ISG MC platform rule, notes cnc.md §1.3).
+    /// overwritten — ISG MC platform rule).
     #[error("external-latch task {0:?} still waiting for acknowledgement")]
     Busy(ExtLatchTask),
 }
@@ -305,7 +305,7 @@ pub struct ExtLatchConfig {
 }
 
 impl ExtLatchConfig {
-    /// Validate the source and the input range (seed 004 §8.2.2 P-AXIS-00517 table).
+    /// Validate the source and the input range (FCT-C4 §8.2.2 P-AXIS-00517 table).
     pub fn new(
         source: SignalSource,
         input: u8,
@@ -334,7 +334,7 @@ impl ExtLatchConfig {
     }
 }
 
-/// Events that reset the preparation of `#MEAS PREPARE` (seed 004 §7.2 notice).
+/// Events that reset the preparation of `#MEAS PREPARE` (FCT-C4 §7.2 notice).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum PreparationReset {
     /// Homing of the axis with this index (into the clients slice).
@@ -345,7 +345,7 @@ pub enum PreparationReset {
     ProgramEnd,
 }
 
-/// CNC side of one axis' external-latch handshake (seed 004 §7.2 / §7.4), sans-IO.
+/// CNC side of one axis' external-latch handshake (FCT-C4 §7.2 / §7.4), sans-IO.
 ///
 /// Low level: [`request`](Self::request) writes a task, [`poll`](Self::poll) watches for the
 /// acknowledgement. The seed's rules are in the high-level calls:
@@ -538,7 +538,7 @@ impl ExtLatchClient {
 
     /// CNC reset: withdraw a pending task (`please_rw = done_w = FALSE`), forget the
     /// preparation and any enable; the status returns to [`ExtLatchStatus::Idle`]. A following
-    /// measuring block enables the probe as normal (seed 004 §7.2 "Basics").
+    /// measuring block enables the probe as normal (FCT-C4 §7.2 "Basics").
     pub fn cnc_reset(&mut self, iface: &mut ExtLatchInterface) {
         iface.please_rw = false;
         iface.done_w = false;
@@ -566,7 +566,7 @@ impl ExtLatchClient {
     }
 }
 
-/// Apply a preparation reset of seed 004 §7.2 to all clients of a channel (indexed like the
+/// Apply a preparation reset of FCT-C4 §7.2 to all clients of a channel (indexed like the
 /// channel's axes): homing or exchange of a *prepared* axis (or one with PREPARE pending) resets
 /// the preparation of all axes; program end resets all. Returns whether anything was reset.
 pub fn reset_preparations(clients: &mut [ExtLatchClient], event: PreparationReset) -> bool {
@@ -585,7 +585,7 @@ pub fn reset_preparations(clients: &mut [ExtLatchClient], event: PreparationRese
 }
 
 // ---------------------------------------------------------------------------------------------
-// Signal evaluators (seed 004 §7.1, §7.4, §7.5)
+// Signal evaluators (FCT-C4 §7.1, §7.4, §7.5)
 // ---------------------------------------------------------------------------------------------
 
 /// A probing event found by an evaluator.
@@ -676,12 +676,12 @@ impl Speed {
     }
 }
 
-/// `PLC` (seed 004 §7.1): edge of P-AXIS-00518 on `probing_signal` sampled in the CNC cycle;
+/// `PLC` (FCT-C4 §7.1): edge of P-AXIS-00518 on `probing_signal` sampled in the CNC cycle;
 /// the measured value is the actual value of that cycle. Every qualifying edge while armed is an
 /// event.
 ///
 /// The value lags the physical crossing by the sampling delay, so it lies *behind* the true
-/// crossing in the direction of motion by 0 … |v|·latency (notes cnc.md §6: uniform in
+/// crossing in the direction of motion by 0 … |v|·latency ( uniform in
 /// [0, v·T]). `latency` is the worst-case delay from the physical edge to the CNC cycle that
 /// sees it: the CNC cycle when the PLC runs synchronously with it, PLC period + CNC cycle
 /// otherwise.
@@ -818,7 +818,7 @@ impl SignalEvaluator for PlcFirstEventEvaluator {
     }
 }
 
-/// `PLC_EXT_LATCH_CONTROL` (seed 004 §7.4): positive edge of `probing_signal` (independent of
+/// `PLC_EXT_LATCH_CONTROL` (FCT-C4 §7.4): positive edge of `probing_signal` (independent of
 /// P-AXIS-00518); position = effective `probing_position` (the external hardware's value when
 /// enabled, else the actual value of the cycle). Every positive edge while armed is an event.
 /// Arm it once ENABLE is acknowledged ([`ExtLatchClient`]).
@@ -888,7 +888,7 @@ impl SignalEvaluator for ExtLatchEvaluator {
 /// Configuration of a [`TimestampEvaluator`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct TimestampConfig {
-    /// Edge of `probing_signal` (P-AXIS-00518, seed 004 §8.2.3 "Edge evaluation").
+    /// Edge of `probing_signal` (P-AXIS-00518, FCT-C4 §8.2.3 "Edge evaluation").
     pub edge: ProbeEdge,
     /// NC cycle.
     pub cycle: Nanos,
@@ -909,9 +909,9 @@ pub struct TimestampConfig {
 /// Cycles an edge may wait for a fresh timestamp (beyond the wait for the bracketing sample).
 const STALE_WAIT_CYCLES: u32 = 2;
 
-/// `PLC_TIMESTAMP` (seed 004 §7.5): edge of P-AXIS-00518 on `probing_signal`; the event time is
+/// `PLC_TIMESTAMP` (FCT-C4 §7.5): edge of P-AXIS-00518 on `probing_signal`; the event time is
 /// the `timestamp` control unit (DC ns); the position is calculated back from the buffered
-/// actual values ([`TimestampBuffer`], notes cnc.md §4.4).
+/// actual values ([`TimestampBuffer`]).
 ///
 /// Every [`update`](SignalEvaluator::update) pushes the cycle's actual value at the cycle's DC
 /// time ([`DcClock::dc_time`] of `now`; [`TimestampEvaluator::update_dc`] takes an explicit DC

@@ -1,10 +1,10 @@
 //! Measurement results: `V.A.MESS`, `V.A.MERF`, `V.A.MOFFS`, `V.A.MEAS.ACS.VALUE`,
-//! `V.A.MEAS.PCS.VALUE` and the measurement offset `V.A.MEIN` with G101 / G102 (seed 004 §4, §5).
+//! `V.A.MEAS.PCS.VALUE` and the measurement offset `V.A.MEIN` with G101 / G102 (FCT-C4 §4, §5).
 //!
 //! Pure functions over [`Frames`]: [`compute`] turns the latched ACS positions of a measuring
 //! block into per-axis results, [`g101`] and [`g102`] set MEIN.
 //!
-//! # The relationships (seed 004 §5 table; 2.5D and `#CS`, #TRAFO is out of scope)
+//! # The relationships (FCT-C4 §5 table; 2.5D and `#CS`, #TRAFO is out of scope)
 //!
 //! With `w` the CS frame of [`crate::core::frames`] (`w = ACS` in 2.5D, `w = Rᵀ·(ACS − offset)`
 //! on X, Y, Z under `#CS`):
@@ -105,14 +105,14 @@ pub enum ResultsError {
         /// The radius given.
         radius: f64,
     },
-    /// Under `#CS` some but not all main axes latched (seed 004 §4: the probing signal must be
+    /// Under `#CS` some but not all main axes latched (FCT-C4 §4: the probing signal must be
     /// looped to all measurement axes).
     #[error("#CS active: main axis {axis} has no probing latch while others have")]
     IncompleteCsLatch {
         /// Channel index of a main axis without a latch.
         axis: usize,
     },
-    /// G101 for an axis without a measured value (seed 004 §5: "An error message is output if
+    /// G101 for an axis without a measured value (FCT-C4 §5: "An error message is output if
     /// no measured values were detected beforehand").
     #[error("G101: axis {axis} has no measured value")]
     NoMeasuredValue {
@@ -158,7 +158,7 @@ fn unit(d: [f64; 3]) -> Option<[f64; 3]> {
     (n.is_finite() && n > 0.0 && d.iter().all(|x| x.is_finite())).then(|| d.map(|x| x / n))
 }
 
-/// The results of a measuring block (seed 004 §5 table; module docs).
+/// The results of a measuring block (FCT-C4 §5 table; module docs).
 ///
 /// `latched_acs` has the latched ACS position per channel axis (`None`: no latch), `previous`
 /// the results before the block; both, like the block's slices, one entry per channel axis.
@@ -254,7 +254,7 @@ pub fn compute(
     Ok(results)
 }
 
-/// `G101 <axis><factor> …`: `MEIN = factor × MOFFS` for each listed axis (seed 004 §5, "Include
+/// `G101 <axis><factor> …`: `MEIN = factor × MOFFS` for each listed axis (FCT-C4 §5, "Include
 /// the measurement offset in calculations with G101, G102"; meas1: `G101 Z1` after MOFFS 80 →
 /// MEIN 80). Everything is checked before any MEIN changes.
 ///
@@ -293,7 +293,7 @@ pub fn g101(
     Ok(())
 }
 
-/// `G102 <axis> …`: MEIN = 0 for each listed axis (seed 004 §5). All axes are checked first.
+/// `G102 <axis> …`: MEIN = 0 for each listed axis (FCT-C4 §5). All axes are checked first.
 ///
 /// Errors: an unknown axis.
 pub fn g102(frames: &mut Frames, axes: &[usize]) -> Result<(), ResultsError> {

@@ -1,6 +1,5 @@
-//! DC timestamp back-calculation (seed 004 §7.5 "Measuring with Distributed Clocks Timestamp";
-//! maths in notes cnc.md §4.4, buffer contract of CODESYS `SMC_ETC_InterpolateAxisPosition` in
-//! notes cnc.md §1.7).
+//! DC timestamp back-calculation (FCT-C4 §7.5 "Measuring with Distributed Clocks Timestamp";
+//! buffer contract as CODESYS `SMC_ETC_InterpolateAxisPosition`).
 //!
 //! A digital input terminal (EL1252) timestamps the probe edge on the EtherCAT distributed-clock
 //! time base; the PLC hands the timestamp to the CNC through the `timestamp` control unit (seed
@@ -17,7 +16,7 @@
 //! the TwinCAT `T_DCTIME32` rule — the difference modulo 2³² is taken as a signed value, so it is
 //! valid within ±2.147 s ([`dc32_diff`]).
 //!
-//! # Dead times ([`DeadTimes`], notes cnc.md §4.4 steps 1–2)
+//! # Dead times ([`DeadTimes`])
 //!
 //! * The time passed to [`TimestampBuffer::push`] is the DC time of the cycle in which the CNC
 //!   received the actual value (Sync0 of that cycle). The value was *acquired* earlier, at
@@ -31,7 +30,7 @@
 //! A dead time that is wrong by Δ moves the result by v·Δ; the buffer cannot see that unless the
 //! corrected time leaves the buffer ([`TimestampError::TooOld`] / [`TimestampError::TooNew`]).
 //!
-//! # Accuracy (notes cnc.md §4.4 step 5)
+//! # Accuracy
 //!
 //! Linear interpolation between two samples a cycle `T` apart, with an acceleration `a` that is
 //! constant over the interval, errs by `a/2·(t − t_k)(t_{k+1} − t)`, at most **a·T²/8**
@@ -47,7 +46,7 @@ use thiserror::Error;
 
 use crate::units::Nanos;
 
-/// Smallest buffer (notes cnc.md §4.4 step 6: 32–64 entries cover a 10 ms PLC at 1 ms NC).
+/// Smallest buffer (32–64 entries cover a 10 ms PLC at 1 ms NC).
 pub const MIN_CAPACITY: usize = 32;
 /// Largest buffer accepted by [`TimestampBuffer::new`] (requests above are clamped).
 pub const MAX_CAPACITY: usize = 1 << 16;
@@ -102,7 +101,7 @@ impl Default for DcClock {
     }
 }
 
-/// Dead times in ns (notes cnc.md §4.4 steps 1–2). All zero by default.
+/// Dead times in ns (ETG.1000.4 distributed clocks; Beckhoff EL1252 documentation). All zero by default.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct DeadTimes {
     /// DcInputShift: time between acquisition and evaluation of the actual value.
@@ -218,7 +217,7 @@ const EMPTY: Sample = Sample {
 };
 
 /// Ring buffer of (DC cycle time, actual position, optional actual velocity) with
-/// back-calculation of the position at an event time (notes cnc.md §4.4, §1.7).
+/// back-calculation of the position at an event time (the contract of CODESYS SoftMotion's DC back-calculation).
 ///
 /// Allocates once in [`TimestampBuffer::new`]; [`push`](Self::push) and
 /// [`estimate_at`](Self::estimate_at) never allocate.

@@ -1,5 +1,5 @@
 //! Exact path-versus-area geometry for workspace and protection area monitoring
-//! (seed 000, FCT-C14 §2.3 "Path check", issue 7 item 4).
+//! (FCT-C14 §2.3 "Path check", issue 7 item 4).
 //!
 //! Pure functions on `f64`, no I/O, no panics on any input: non-finite inputs give the
 //! conservative verdict (a violation).

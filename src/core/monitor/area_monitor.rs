@@ -1,4 +1,4 @@
-//! The active control areas applied to channel paths and positions (seed 000 §2.3 "Path check",
+//! The active control areas applied to channel paths and positions (FCT-C14 §2.3 "Path check",
 //! §2.4 2-path / IMCS, §4 additional axes, §5 manual mode).
 //!
 //! [`AreaTable`] keeps the areas in their own plane coordinates; this module ties them to channel
@@ -26,7 +26,7 @@
 //! orientation of G17 / G18 / G19, are checked exactly. Anything else (an arc tilted by a
 //! rotating `#CS`, an arc whose end point is off the start circle within the radius tolerance,
 //! an arc with only one plane axis monitored) is replaced by chords with chordal deviation
-//! `e ≤ tol / 2` (at most [`MAX_CHORDS`](super::area_geom::MAX_CHORDS) chords); the chords are
+//! `e ≤ tol / 2` (at most [`MAX_CHORDS`] chords); the chords are
 //! checked against protection areas enlarged by `tol + e` and against workspaces with `tol − e`,
 //! so segmentation never accepts a violating path.
 

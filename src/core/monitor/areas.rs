@@ -1,5 +1,5 @@
-//! Workspace and protection areas: definition, definition rules and states (seed 000, FCT-C14;
-//! syntax also seed 002).
+//! Workspace and protection areas: definition, definition rules and states (FCT-C14;
+//! syntax also FCT-C14).
 //!
 //! This module is sans-IO. The NC layer drives it:
 //!
@@ -17,10 +17,10 @@
 //!
 //! # Coordinates
 //!
-//! Areas are defined in the MCS (seed 000 §2.3 notice, §3.1 attention): the caller passes the
+//! Areas are defined in the MCS (FCT-C14 §2.3 notice, §3.1 attention): the caller passes the
 //! definition points *after* G54 / G92 and the other Cartesian offsets, and *without* an active
 //! `#(A)CS` (which areas ignore). `MONITOR_LVL=IMCS` areas take IMCS coordinates of the secondary
-//! path (U/V, seed 000 §2.4); areas programmed with `X2=` / `Y2=` (seed 000 §4) are polygons in the
+//! path (U/V, FCT-C14 §2.4); areas programmed with `X2=` / `Y2=` (FCT-C14 §4) are polygons in the
 //! plane of those additional axes. The caller resolves arc centres (I/J/K with G161/G162) to
 //! absolute coordinates before building a [`DefBlock`].
 //!
@@ -56,10 +56,10 @@ use std::fmt;
 
 use crate::messages::{ids, BlockRef, CncMessage};
 
-/// Seed 000 §2.3 / §3.1: at most 20 workspace and protection areas.
+/// FCT-C14 §2.3 / §3.1: at most 20 workspace and protection areas.
 pub const MAX_AREAS: usize = 20;
 
-/// Seed 000 §2.3: at most 20 motion blocks define a polygon (starting point included).
+/// FCT-C14 §2.3: at most 20 motion blocks define a polygon (starting point included).
 pub const MAX_POLY_BLOCKS: usize = 20;
 
 /// Length tolerance in mm (or inch) for "same point", "on the boundary" and "touching": 1 nm.
@@ -70,7 +70,7 @@ pub const POINT_EPSILON: f64 = 1e-6;
 // Commands
 // ------------------------------------------------------------------------------------------
 
-/// `WORK` or `PROT` (seed 000 §3.1).
+/// `WORK` or `PROT` (FCT-C14 §3.1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum AreaKind {
     /// `WORK`: the TCP must not leave the area.
@@ -79,7 +79,7 @@ pub enum AreaKind {
     Prot,
 }
 
-/// `POLY` or `CIRC` (seed 000 §3.1.1 / §3.1.2).
+/// `POLY` or `CIRC` (FCT-C14 §3.1.1 / §3.1.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum AreaShape {
     /// `POLY`: closed chain of G01 blocks.
@@ -88,7 +88,7 @@ pub enum AreaShape {
     Circ,
 }
 
-/// `MONITOR_LVL=` (seed 000 §3.1, §2.4).
+/// `MONITOR_LVL=` (FCT-C14 §3.1, §2.4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum MonitorLevel {
     /// `MCS`: machine coordinate system (default).
@@ -98,7 +98,7 @@ pub enum MonitorLevel {
     Imcs,
 }
 
-/// `EXCUR_AX=` / `EXCUR_AXNR=` (seed 000 §3.1): the axis of the third dimension.
+/// `EXCUR_AX=` / `EXCUR_AXNR=` (FCT-C14 §3.1): the axis of the third dimension.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub enum ExcurAxis {
     /// `EXCUR_AX=<name>`: axis identifier (upper case).
@@ -107,7 +107,7 @@ pub enum ExcurAxis {
     Number(u32),
 }
 
-/// The bracket of `#CONTROL AREA BEGIN [..]` (seed 000 §3.1).
+/// The bracket of `#CONTROL AREA BEGIN [..]` (FCT-C14 §3.1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct AreaHeader {
     /// `ID=..`.
@@ -126,7 +126,7 @@ pub struct AreaHeader {
     pub monitor_level: MonitorLevel,
 }
 
-/// Which areas `ON` / `OFF` / `CLEAR` address (seed 000 §3.2–§3.4).
+/// Which areas `ON` / `OFF` / `CLEAR` address (FCT-C14 §3.2–§3.4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Selector {
     /// `ALL`.
@@ -137,7 +137,7 @@ pub enum Selector {
     Last,
 }
 
-/// One `#CONTROL AREA` command, parsed (seed 000 §3).
+/// One `#CONTROL AREA` command, parsed (FCT-C14 §3).
 #[derive(Debug, Clone, PartialEq)]
 pub enum AreaCommand {
     /// `BEGIN` / `START [..]`.
@@ -547,7 +547,7 @@ fn parse_selector(
 /// Parse the text after `#CONTROL AREA` (a leading `#CONTROL AREA` is accepted and skipped).
 ///
 /// Accepts the seed's spellings: `START` for `BEGIN`, `ID3` for `ID=3`, spaces around `=`,
-/// quoted values (`MONITOR_LVL = "IMCS"`, seed 000 §2.4), line breaks inside the bracket, and
+/// quoted values (`MONITOR_LVL = "IMCS"`, FCT-C14 §2.4), line breaks inside the bracket, and
 /// `ON ALL` / `ON [ALL]`. Keywords are case-insensitive. Numbers must be literal; the NC layer
 /// substitutes parameters before calling.
 pub fn parse_area_command(text: &str) -> Result<AreaCommand, AreaSyntaxError> {
@@ -630,7 +630,7 @@ impl fmt::Display for DefMotion {
 }
 
 /// One NC motion block between `#CONTROL AREA BEGIN` and `END`, as the NC layer resolved it
-/// (seed 000 §3.1). Coordinates are MCS (offsets applied, `#(A)CS` ignored) and absolute.
+/// (FCT-C14 §3.1). Coordinates are MCS (offsets applied, `#(A)CS` ignored) and absolute.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DefBlock {
     /// The block (N number, line).
@@ -644,7 +644,7 @@ pub struct DefBlock {
     /// End point in the plane of the 1st / 2nd main axis (X/Y for G17; U/V for IMCS areas);
     /// `None` = not programmed in this block.
     pub main: [Option<f64>; 2],
-    /// End point of the additional axes `X2=` / `Y2=` (seed 000 §4).
+    /// End point of the additional axes `X2=` / `Y2=` (FCT-C14 §4).
     pub additional: [Option<f64>; 2],
     /// Absolute arc centre in the same plane as the end point (G02 / G03).
     pub centre: Option<[f64; 2]>,
@@ -718,7 +718,7 @@ impl DefBlock {
 pub enum AreaAxes {
     /// The 1st / 2nd main axis (or U/V on the IMCS level).
     Main,
-    /// The additional axes `X2` / `Y2` (seed 000 §4; polygons only).
+    /// The additional axes `X2` / `Y2` (FCT-C14 §4; polygons only).
     Additional,
 }
 
@@ -883,7 +883,7 @@ fn segments_touch(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
         && ((d3 > 0.0 && d4 < 0.0) || (d3 < 0.0 && d4 > 0.0))
 }
 
-/// Which rule of seed 000 §3 a definition or a command violated.
+/// Which rule of FCT-C14 §3 a definition or a command violated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum AreaErrorKind {
     /// The command text does not parse.
@@ -1043,7 +1043,7 @@ pub enum AreaErrorKind {
 }
 
 impl AreaErrorKind {
-    /// The message ID (project IDs, seed 000 gives none for these errors).
+    /// The message ID (project IDs, FCT-C14 gives none for these errors).
     pub fn message_id(&self) -> u32 {
         use AreaErrorKind::*;
         match self {
@@ -1116,7 +1116,7 @@ struct DefPoint {
 }
 
 /// Collects the geometry of one area between `BEGIN` and `END` and enforces the definition
-/// rules of seed 000 §3.1 (lifecycle: [`AreaDefinition::begin`] → [`AreaDefinition::block`]* →
+/// rules of FCT-C14 §3.1 (lifecycle: [`AreaDefinition::begin`] → [`AreaDefinition::block`]* →
 /// [`AreaDefinition::end`]).
 #[derive(Debug, Clone)]
 pub struct AreaDefinition {
@@ -1205,7 +1205,7 @@ impl AreaDefinition {
         if !(end[0].is_finite() && end[1].is_finite()) {
             return err(AreaErrorKind::StartIncomplete { id });
         }
-        // Seed 000 §2.4: the 2-path (IMCS) example programs its polygon with G0 blocks.
+        // FCT-C14 §2.4: the 2-path (IMCS) example programs its polygon with G0 blocks.
         let imcs_rapid = self.header.monitor_level == MonitorLevel::Imcs;
         match self.header.shape {
             AreaShape::Poly => {
@@ -1352,7 +1352,7 @@ impl AreaDefinition {
 // The table and its state machine
 // ------------------------------------------------------------------------------------------
 
-/// State of one area ID (seed 000 Fig. 11).
+/// State of one area ID (FCT-C14 Fig. 11).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum AreaState {
     /// Not defined (never defined, or cleared).
@@ -1389,7 +1389,7 @@ struct Slot {
     active: bool,
 }
 
-/// The control areas of one channel and their states (seed 000 §3, Fig. 11).
+/// The control areas of one channel and their states (FCT-C14 §3, Fig. 11).
 ///
 /// - Start-up: [`AreaTable::new`] is empty — no area is predefined (§3.1 "Time of definition").
 /// - Commands: [`AreaTable::apply`] for BEGIN / END / ON / OFF / CLEAR, and

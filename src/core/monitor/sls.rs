@@ -1,8 +1,8 @@
-//! Software limit switches (seed 001, FCT-A2).
+//! Software limit switches (FCT-A2, FCT-A2).
 //!
 //! [`SoftLimits`] holds, per axis, the configured limits (P-AXIS-00177 / P-AXIS-00178), the
 //! active (programmed, G98 / G99) limits and the monitoring state. It answers four questions,
-//! each at the point of the interpolation cycle where DESIGN.md places it:
+//! each at its point of the interpolation cycle ([`crate::channel`]):
 //!
 //! | question | method | seed |
 //! |---|---|---|
@@ -26,7 +26,7 @@ use crate::core::path::Segment;
 use crate::messages::{ids, CncMessage, Severity};
 
 /// Comparison slack for command positions in mm (or °): 1 nm. Command positions are checked
-/// "exactly" (seed 001 §2); the slack only absorbs the rounding of arc extents computed in f64,
+/// "exactly" (FCT-A2 §2); the slack only absorbs the rounding of arc extents computed in f64,
 /// so that an arc whose apex lies exactly on the limit is accepted, as the seed permits moving
 /// to the limit itself.
 pub const COMMAND_EPSILON: f64 = 1e-6;
@@ -231,7 +231,7 @@ impl SoftLimits {
         }
     }
 
-    /// Whether SLS monitoring is effective for axis `i` (seed 001 §1, §2 "Activation",
+    /// Whether SLS monitoring is effective for axis `i` (FCT-A2 §1, §2 "Activation",
     /// P-AXIS-00705): referenced or absolute encoder, and not a modulo axis unless forced on.
     pub fn is_active(&self, i: usize) -> bool {
         self.axes.get(i).is_some_and(axis_active)
@@ -243,7 +243,7 @@ impl SoftLimits {
         self.axes.get(i).map(|a| (a.neg, a.pos))
     }
 
-    /// Restore the configured limits (reset, mode change, program start; seed 001 §3.3) and clear
+    /// Restore the configured limits (reset, mode change, program start; FCT-A2 §3.3) and clear
     /// latched violations.
     pub fn reset(&mut self) {
         for a in &mut self.axes {
@@ -253,7 +253,7 @@ impl SoftLimits {
         }
     }
 
-    /// Block preparation: check a block's command path against the active limits (seed 001 §2,
+    /// Block preparation: check a block's command path against the active limits (FCT-A2 §2,
     /// "Command positions are checked for exact compliance with the SLS").
     ///
     /// Every point of the path counts, including the extremes of arcs between in-range end points
@@ -338,7 +338,7 @@ impl SoftLimits {
     }
 
     /// Position controller, every cycle: the actual position against limit ± P-AXIS-00179
-    /// (seed 001 §2, P-ERR-70021 / 70022).
+    /// (FCT-A2 §2, P-ERR-70021 / 70022).
     ///
     /// Returns the message when a violation begins. For ERROR and ERROR_LR the message is an
     /// error (the caller stops interpolation and decelerates); for WARNING a warning, given once
@@ -376,7 +376,7 @@ impl SoftLimits {
         }
     }
 
-    /// Command-side stop-distance check (P-AXIS-00520 / 00521, seed 001 §4.3): can axis `i`,
+    /// Command-side stop-distance check (P-AXIS-00520 / 00521, FCT-A2 §4.3): can axis `i`,
     /// at command position `position` moving with `velocity`, still stop before the active limit
     /// (without tolerance) when decelerating with P-AXIS-00003? Returns the side that can no
     /// longer be kept, if that side's check is enabled and monitoring is active.
@@ -416,7 +416,7 @@ impl SoftLimits {
         .on_axis(name)
     }
 
-    /// G98 (`side` = Negative) or G99 (Positive) for axis `i` (seed 001 §3.1–3.3).
+    /// G98 (`side` = Negative) or G99 (Positive) for axis `i` (FCT-A2 §3.1–3.3).
     ///
     /// `value` is the programmed value; with `relative` (G91) it is added to the configured
     /// limit P-AXIS-00177 / 00178, as the seed says. `actual` is the axis's current actual
@@ -522,7 +522,7 @@ impl SoftLimits {
         }
     }
 
-    /// Manual-mode range of axis `i` (seed 001 §2 "Manual mode", §3.3): referenced axes are
+    /// Manual-mode range of axis `i` (FCT-A2 §2 "Manual mode", §3.3): referenced axes are
     /// limited by the active SLS; in addition the relative offset limits P-AXIS-00137 / 00138
     /// around `start` (the position when manual mode was selected; inactive when both are 0)
     /// and the absolute offset limits P-AXIS-00492 / 00493 (each only when ≠ 0) apply. A
@@ -555,7 +555,7 @@ impl SoftLimits {
     /// `(s_min, s_max)` of all `s` with `neg ≤ acs + s·dir ≤ pos` on every axis whose monitoring
     /// is active and whose share of `dir` is not zero (|share| > 1e-12: the 6e-17 of cos 90° is
     /// none). `None` when no active limit lies on the line. For P-CHAN-00489 with `#CS`, where a
-    /// PCS axis may run along another ACS axis or obliquely (seed 001 §2.1). `s_min > s_max`
+    /// PCS axis may run along another ACS axis or obliquely (FCT-A2 §2.1). `s_min > s_max`
     /// when the point lies outside the range on an axis the line crosses.
     pub fn range_along(&self, acs: &[f64], dir: &[f64]) -> Option<(f64, f64)> {
         let mut range: Option<(f64, f64)> = None;
@@ -593,7 +593,7 @@ impl SoftLimits {
     }
 }
 
-/// The four CNC objects of seed 001 §4.5 (positive / negative PCS limit, distance to each),
+/// The four CNC objects of FCT-A2 §4.5 (positive / negative PCS limit, distance to each),
 /// in mm / °. The CNC objects themselves are in 0.1 µm / 0.0001° (multiply by 10⁴).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PcsLimits {

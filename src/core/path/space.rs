@@ -1,6 +1,6 @@
 //! Arcs in a general plane of the n-space and the rigid maps that make them.
 //!
-//! Under a rotating `#CS` (seed 004 §4, §5 meas4) a G02/G03 arc programmed in a plane of two
+//! Under a rotating `#CS` (FCT-C4 §4, §5 meas4) a G02/G03 arc programmed in a plane of two
 //! axes becomes a circle in a tilted plane of the ACS. [`Segment::transformed`] maps a segment
 //! through an [`AffineMap`] (for example [`Frames::pcs_to_acs_map`]): lines to lines, arcs to
 //! arcs with a [`SpaceArc`] geometry, exactly (no sampling).
@@ -224,7 +224,7 @@ fn rigid(ok: bool, what: &'static str) -> Result<(), PathError> {
 impl Segment {
     /// This segment mapped through the rigid map `map` (a rotation plus a translation, such as
     /// [`Frames::pcs_to_acs_map`](crate::core::frames::Frames::pcs_to_acs_map) under `#CS`,
-    /// seed 004 §4): a line becomes the line between the mapped end points, an arc becomes an
+    /// FCT-C4 §4): a line becomes the line between the mapped end points, an arc becomes an
     /// arc whose [`Arc::space`] holds the mapped circle (see the [`space`](self) docs). The path
     /// coordinate is kept: `transformed.point_at(s)` is `map(self.point_at(s))`, up to rounding.
     /// Radius, start angle and sweep are kept; `a1`, `a2` and `centre` keep describing the

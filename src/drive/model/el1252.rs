@@ -1,6 +1,6 @@
 //! EL1252-style timestamp terminal, device side: observes input edges with their times, stamps
 //! them with the DC clock and writes the process image of
-//! [`crate::drive::el1252`] (notes cnc.md §4.3; seed 004 §7.5).
+//! [`crate::drive::el1252`] (Beckhoff EL1252 documentation; FCT-C4 §7.5).
 
 use crate::core::measure::timestamp::DcClock;
 use crate::drive::el1252::{encode_image, Channel, LatchMode, ST_FALLING, ST_LEVEL, ST_RISING};

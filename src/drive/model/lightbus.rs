@@ -1,5 +1,5 @@
 //! Lightbus AX2000 drive model: the drive side of [`crate::drive::lightbus::LightbusAdapter`]
-//! (telegram: [`crate::drive::lightbus::telegram`]; seed 004 §6.2, notes cnc.md §4.2).
+//! (telegram: [`crate::drive::lightbus::telegram`]; FCT-C4 §6.2; Beckhoff AX2000 documentation).
 //!
 //! - **Axis physics**: the shared servo of every family ([`AxisPlant::servo`], `[model]`:
 //!   cascade with feed-forward or first-order loop, set-point ramped over the cycle,

@@ -1,9 +1,9 @@
 //! PROFIdrive drive model: the drive side of [`crate::drive::profidrive::ProfidriveAdapter`]
 //! (telegrams 3 / 5 / 102 / 105, same [`Telegram`] definition as the adapter).
 //!
-//! Sources: seed 004 §6.5 (P0660 = 80 makes I0.0 the measuring input), §7.3 (fixed stop, torque
-//! limitation, drive lag monitoring off); notes `cnc.md` §3 (STW1 / ZSW1, G1_STW / G1_ZSW,
-//! telegrams, MOMRED). Sans-IO like every model: time comes in as arguments.
+//! Sources: FCT-C4 §6.5 (P0660 = 80 makes I0.0 the measuring input), §7.3 (fixed stop, torque
+//! limitation, drive lag monitoring off); the PROFIdrive profile (PI order no. 3.172: STW1 / ZSW1, G1_STW /
+//! G1_ZSW, telegrams, MOMRED). Sans-IO like every model: time comes in as arguments.
 //!
 //! # Behaviour
 //!
@@ -224,7 +224,7 @@ impl ProfidriveModel {
         self.torque
     }
 
-    /// Effective torque limit in ‰: P1520 × (1 − MOMRED / 0x4000) (assumption, notes §3.5).
+    /// Effective torque limit in ‰: P1520 × (1 − MOMRED / 0x4000) (assumption).
     pub fn torque_limit(&self) -> f64 {
         let red = f64::from(self.momred.min(0x4000)) / f64::from(0x4000u16);
         f64::from(self.torque_limit) * (1.0 - red)

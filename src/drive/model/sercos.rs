@@ -6,7 +6,7 @@
 //!
 //! # Behaviour
 //!
-//! - **Power** (status word S-0-0135 bits 15/14, notes ethercat.md §7.1): 00 at start, 01 (ready
+//! - **Power** (status word S-0-0135 bits 15/14, IEC 61800-7-204): 00 at start, 01 (ready
 //!   for power-up) after the first step, 10 (main power on) after the second (mains are always
 //!   on); control word bits 15 + 14 (drive on + enable) → 11 after `[model]
 //!   enable_delay_cycles`; clearing either → 10. Bit 13 of the control word = 1 runs (the
@@ -22,7 +22,7 @@
 //! - **S-0-0159** monitoring window (increments): 0 = off; values above the IDN's maximum
 //!   0x7FFFFFFF also mean off (assumption, so that `MON_WINDOW VAL=4294967295` behaves as on a
 //!   CiA 402 drive); |S-0-0189| beyond it → error at once (no time-out, AX2000 IDN 159 text).
-//! - **Probe unit** (seed 004 §6.1, notes §7.2): real-time control bit n (MDT control word bit
+//! - **Probe unit** (FCT-C4 §6.1; probe IDNs S-0-0169 … S-0-0409, IEC 61800-7-204): real-time control bit n (MDT control word bit
 //!   5 + n) drives the signal S-0-0301 / 0303 allocates: 405 = probe 1 enable, 406 = probe 2
 //!   enable. Enable 0 → 1 and 1 → 0 clear the probe's latched bits (values stay). While enabled,
 //!   the first edge selected by S-0-0169 (bit 0 probe 1 pos, 1 probe 1 neg, 2 probe 2 pos, 3
@@ -47,7 +47,7 @@ use crate::units::Nanos;
 pub const C1D_POSITION_DEVIATION: u16 = 1 << 11;
 /// Digital inputs of the model.
 const NUM_INPUTS: usize = 4;
-/// Largest S-0-0159 value that monitors (the IDN's maximum, notes §7.2).
+/// Largest S-0-0159 value that monitors (the IDN's maximum).
 const WINDOW_MAX: u32 = 0x7FFF_FFFF;
 
 /// Drive side of a SERCOS servo (see the module documentation).
@@ -89,7 +89,7 @@ pub struct SercosModel {
 
 impl SercosModel {
     /// A drive at increment 0 with the telegram and IDN start values of `def`'s `[sercos]`
-    /// (defaults: seed 004 §6.1 example S-0-0301 = 405, 0305 = 409, 0307 = 401, 0169 = 1) and the
+    /// (defaults: FCT-C4 §6.1 example S-0-0301 = 405, 0305 = 409, 0307 = 401, 0169 = 1) and the
     /// loop of `[model]`.
     pub fn new(def: &DriveDefinition) -> Result<Self, DriveError> {
         let cfg = sercos::config(def)?;
@@ -249,7 +249,7 @@ impl SercosModel {
                     && self.rtc_alloc[usize::from(n - 1)] == idn::PROBE_1_ENABLE + p as u16
             });
             if want != self.enabled[p] {
-                // Either transition resets the probe's latch status (notes §7.2, S-0-0405).
+                // Either transition resets the probe's latch status (S-0-0405).
                 self.latched &= !(0b11 << (2 * p));
                 self.enabled[p] = want;
             }

@@ -1,6 +1,6 @@
 //! Terminal drive model: an analog velocity amplifier plus a KL5101 / EL5101 encoder terminal,
 //! the drive side of [`crate::drive::terminal::TerminalAdapter`] (image:
-//! [`crate::drive::terminal::image`]; seed 004 §6.3, notes cnc.md §4.1).
+//! [`crate::drive::terminal::image`]; FCT-C4 §6.3; Beckhoff KL5101 / EL5101 documentation).
 //!
 //! - **Amplifier** (assumption): enabled while drive output bit 0 is set and no fault; it moves
 //!   the axis at the commanded velocity (`velocity / 32767 × [terminal] full_scale_velocity`)

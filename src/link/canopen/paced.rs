@@ -24,7 +24,7 @@
 //!
 //! Every cycle is recorded in [`CycleStats`] (sent = SYNC, done = last TPDO, missed deadlines,
 //! lost). While the master waits for an SDO answer between exchanges, the SYNC keeps running on
-//! the grid ([`Pacing::keep_alive`]): SYNC-only cycles, so a drive watching its SYNC does not
+//! the grid (`Pacing::keep_alive`): SYNC-only cycles, so a drive watching its SYNC does not
 //! stop because the master was busy with a parameter.
 //!
 //! # Stall rule

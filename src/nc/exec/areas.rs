@@ -1,8 +1,8 @@
-//! `#CONTROL AREA` and the motion blocks of an area definition (seed 000 §3).
+//! `#CONTROL AREA` and the motion blocks of an area definition (FCT-C14 §3).
 //!
 //! Between BEGIN and END a motion block defines geometry and does not move the axes. Its
 //! programmed coordinates are turned into MCS coordinates with the frames of the moment (zero
-//! offsets G54…, G92, MEIN, tool length) but without `#CS` (seed 000 §2.3 notice, §3.1
+//! offsets G54…, G92, MEIN, tool length) but without `#CS` (FCT-C14 §2.3 notice, §3.1
 //! attention), and handed to the channel's area table as a [`DefBlock`]. Which coordinates
 //! form the area plane depends on the BEGIN bracket: X / Y for MCS areas, U / V for
 //! `MONITOR_LVL=IMCS` (seed §2.4), and `X2=` / `Y2=` words always go to the additional-axes

@@ -1,5 +1,5 @@
 //! `#` commands other than `#MSG`: `#MEAS`, `#CS`, `#TRAFO`, `#DRIVE`, `#IDENT`, `#SET AX LINK`,
-//! `#ENABLE AX LINK` (seed 004).
+//! `#ENABLE AX LINK` (FCT-C4).
 
 use super::{err, Decode, Executor, Fail, PendingRead};
 use crate::channel::acyclic::AcyclicOp;

@@ -9,7 +9,7 @@
 //!
 //! Coordinates: programmed positions are PCS; `w = PCS + zero shifts + MEIN (+ tool length)` is
 //! the CS frame (`V.A.ABS`); `#CS` maps `w` to the ACS ([`crate::core::frames`]). G98 / G99 values
-//! are ACS (seed 001 §2: "The positions of the SLS are always referred to the axis coordinate
+//! are ACS (FCT-A2 §2: "The positions of the SLS are always referred to the axis coordinate
 //! system").
 
 mod areas;
@@ -321,7 +321,7 @@ impl Executor {
         }
         let Some(block) = self.program.blocks.get(self.pc).cloned() else {
             self.ended = true;
-            // An area definition still open at program end is an error (seed 000 §3.1: "Each
+            // An area definition still open at program end is an error (FCT-C14 §3.1: "Each
             // control area must be closed by the command #CONTROL AREA END").
             if ch.area_program_end() {
                 return Step::Abort;
@@ -545,7 +545,7 @@ impl Executor {
         }
         if g92 {
             // ISG G92 is a reference-point offset: the programmed values shift the PCS
-            // additively (seed 004 §5 meas2: `G92 Z33` → ACS = PCS + 33). The axis does not move.
+            // additively (FCT-C4 §5 meas2: `G92 Z33` → ACS = PCS + 33). The axis does not move.
             for (i, v) in axes {
                 self.frames
                     .set_g92(i, v)

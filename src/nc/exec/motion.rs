@@ -40,7 +40,7 @@ impl Executor {
         }
         let feed = match (self.modal.motion, meas_g) {
             (MotionMode::G0, None) => 0.0,
-            // Measurement type 2 travels with P-AXIS-00215 of its axis, not with F (seed 004 §3
+            // Measurement type 2 travels with P-AXIS-00215 of its axis, not with F (FCT-C4 §3
             // "Measurement feed is specified in the axis data list", §8.2.2 P-AXIS-00215): an F
             // is neither needed nor used.
             (_, Some(_)) if self.modal.meas_type == MeasType::Type2 => {
@@ -154,7 +154,7 @@ impl Executor {
         Ok(MotionKind::Path(mapped))
     }
 
-    /// `X[INDP_SYN G100 G90 POS100 FEED500]` (seed 004 §2).
+    /// `X[INDP_SYN G100 G90 POS100 FEED500]` (FCT-C4 §2).
     pub(super) fn independent(
         &mut self,
         name: &str,
@@ -191,7 +191,7 @@ impl Executor {
         }
         let _ = block_meas;
         let pos = self.num(&motion.pos, span, ch)?;
-        // Type 2 travels with P-AXIS-00215, not with FEED / F (seed 004 §3, §8.2.2).
+        // Type 2 travels with P-AXIS-00215, not with FEED / F (FCT-C4 §3, §8.2.2).
         let type2 = meas && self.modal.meas_type == MeasType::Type2;
         let feed = match (&motion.feed, self.modal.feed) {
             (Some(f), _) => {

@@ -2,9 +2,9 @@
 //!
 //! | variable | value |
 //! |---|---|
-//! | `V.A.ABS.<ax>` | command position in the CS frame `w` (= ACS without `#CS`), seed 004 §5 |
+//! | `V.A.ABS.<ax>` | command position in the CS frame `w` (= ACS without `#CS`), FCT-C4 §5 |
 //! | `V.A.PROG.<ax>` | programmed (PCS) position |
-//! | `V.A.-SWE.<ax>` / `V.A.+SWE.<ax>` | active programmed software limit switches, seed 001 §3 |
+//! | `V.A.-SWE.<ax>` / `V.A.+SWE.<ax>` | active programmed software limit switches, FCT-A2 §3 |
 //! | `V.A.MESS.<ax>` | measured value in the measuring frame, all offsets included |
 //! | `V.A.MEAS.ACS.VALUE.<ax>` / `V.A.MEAS.PCS.VALUE.<ax>` | ACS / PCS measured value |
 //! | `V.A.MOFFS.<ax>` | measured value − programmed target − offsets |

@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! #MSG [SYN] ["format", <expr>, …]
-//! #MEAS MODE [<expr>]            MeasMode { mode: Some }   (seed 004 §3; also `#MEAS MODE[2]`)
+//! #MEAS MODE [<expr>]            MeasMode { mode: Some }   (FCT-C4 §3; also `#MEAS MODE[2]`)
 //! #MEAS MODE                     MeasMode { mode: None }   (channel default P-CHAN-00057)
 //! #MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]               MeasConfig (AXNR required)
 //! #MEAS PREPARE [AXNR=.. {AXNR=..}]                        MeasPrepare (at least one AXNR)
@@ -37,7 +37,7 @@
 //! value after AXNR"). Values are not range-checked here (signal names, edge, axis numbers, the
 //! target of `P=`): that is the executor's business.
 //!
-//! Leniency (seed 004 §7.3.2 lost underscores in the PDF: `KEY=TORQUE LIMIT`, `KEY=MON WINDOW`):
+//! Leniency (FCT-C4 §7.3.2 lost underscores in the PDF: `KEY=TORQUE LIMIT`, `KEY=MON WINDOW`):
 //! a bare-word `KEY` value may be followed by a second bare word that is not a keyword of the
 //! list, not a parameter `P<n>` and not followed by `=` or `[`; the two are joined with `_`
 //! (`TORQUE_LIMIT`). Only two words are joined.
@@ -248,7 +248,7 @@ fn command_trafo(p: &mut BlockParser<'_>, _hash: Span) -> PResult<Command> {
     })
 }
 
-/// `#CONTROL AREA …` (seed 000 §3): the rest of the block is the area command text.
+/// `#CONTROL AREA …` (FCT-C14 §3): the rest of the block is the area command text.
 fn command_control(p: &mut BlockParser<'_>, hash: Span) -> PResult<Command> {
     let t = p.expect_token("AREA after #CONTROL")?;
     match &t.kind {
@@ -819,7 +819,7 @@ impl BlockParser<'_> {
         Ok(Some(name))
     }
 
-    /// `#MSG [SYN] ["format", expr, …]` (seed 004 §5).
+    /// `#MSG [SYN] ["format", expr, …]` (FCT-C4 §5).
     fn msg(&mut self) -> PResult<Command> {
         self.continue_at_next_line_bracket();
         let mut t = self.expect_token("'SYN' or '[' after #MSG")?;

@@ -45,7 +45,7 @@ pub trait EscApplication: Send {
 
     /// The device entered INIT: the mailbox sync managers are off and the mailbox session
     /// ends. Forget the master's last request counter (a master starts again at counter 1
-    /// after INIT, ETG.1000.4 §5.6 mailbox repeat rule, notes `ethercat.md` §2.4), transfers in
+    /// after INIT, ETG.1000.4 §5.6 mailbox repeat rule), transfers in
     /// progress and queued device-initiated messages.
     fn mailbox_reset(&mut self) {}
 

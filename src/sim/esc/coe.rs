@@ -3,8 +3,7 @@
 //! [`CoeServer`] answers SDO requests (CoE service 2) from an object dictionary given as a
 //! table of [`ObjectEntry`]s. Numeric entries are read and written through a [`DriveModel`]
 //! (`read_object(index, sub)` / `write_object`); byte-string entries (device name, large test
-//! objects) are stored in the entry itself. Spec sources: `../shared/notes/ethercat.md` §2.4
-//! (mailbox + CoE as ethercrab uses it), ETG.1000.6 §5.6 and CiA 301 §7.2.4 (SDO protocol).
+//! objects) are stored in the entry itself. Spec sources: ETG.1000.4 (mailbox), ETG.1000.6 §5.6 and CiA 301 §7.2.4 (SDO protocol).
 //!
 //! Implemented:
 //! * SDO upload expedited (≤ 4 bytes, always expedited — ethercrab requires it), normal (the
@@ -227,7 +226,7 @@ definition; the drive model runs one step per process-data exchange.";
 /// 0x1C00 (ETG.1000.6 §5.6.7.4.1, UINT8 array) describes the standard layout of a device with a
 /// mailbox: SM0 mailbox out (1), SM1 mailbox in (2), SM2 outputs (3), SM3 inputs (4). SOEM reads
 /// it before 0x1C12/0x1C13 (`ecx_readPDOmap`) and fails the mapping without it; ethercrab 0.7.1
-/// does not read it (notes `ethercat.md` §2.2).
+/// does not read it.
 pub fn ds402_objects(device_name: &str) -> Vec<ObjectEntry> {
     use Access::*;
     use DataType::*;

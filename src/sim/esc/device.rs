@@ -9,7 +9,7 @@
 //!   the ESI assigns to SM2/SM3 by default) and the mapping objects (0x1600.., 0x1A00..) with the
 //!   CiA 301 mapping values `index << 16 | sub << 8 | bits`. All are read-only constants, which
 //!   is enough for a MainDevice that discovers the mapping by reading them (ethercrab 0.7.1
-//!   reads 0x1C12/0x1C13:0.., then each PDO's :0.. with expedited uploads; notes §2.4). All of
+//!   reads 0x1C12/0x1C13:0.., then each PDO's :0.. with expedited uploads). All of
 //!   them are ≤ 4 bytes, so the server answers them expedited.
 //! * Process data: the SM2 output image is kept when the master writes it (OP only, see
 //!   [`Esc`]; several writes before the next step: the last one counts). In a segment with a

@@ -4,8 +4,8 @@
 //! The model is independent of any frame codec: [`Esc::process`] takes the fields of one
 //! datagram (command, address, data, working counter) as the datagram passes this device, and
 //! [`EscChain`] passes it through several devices in ring order. Spec source:
-//! `../shared/notes/ethercat.md` §2.1 (datagram semantics), §2.2 (init sequence), §2.5 (AL
-//! state machine), §8 (checklist).
+//! ETG.1000.4 (datagram semantics, registers, AL state machine) and what ethercrab 0.7.1 and
+//! SOEM send during their start-up.
 //!
 //! Working-counter rules implemented (per ESC the datagram passes):
 //! * physical read (APRD/FPRD/BRD) +1, physical write (APWR/FPWR/BWR) +1, read-write

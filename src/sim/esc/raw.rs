@@ -1,6 +1,6 @@
 //! Serve an emulated [`Segment`] on a real Linux network interface (e.g. one end of a veth
 //! pair), so a stock EtherCAT master (ethercrab's `std::tx_rx_task`, SOEM) can talk to it
-//! over a raw socket (notes `ethercat.md` §0 point 2, §1.3).
+//! over a raw socket.
 //!
 //! The socket is an AF_PACKET/SOCK_RAW socket bound to the interface (via the safe
 //! `pnet_datalink` crate, protocol ETH_P_ALL); frames whose EtherType is not 0x88A4 are

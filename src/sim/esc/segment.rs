@@ -5,7 +5,7 @@
 //! written in place, working counter incremented per the ESC rules of [`super::Esc::process`]),
 //! the datagram IRQ field is ORed with the devices' event requests, and the source MAC gets its
 //! U/L bit set (`frame[6] |= 0x02`) like the first device does, so a master recognises the frame
-//! as returned (notes `ethercat.md` §1.1, §2.1).
+//! as returned (ETG.1000.4).
 //!
 //! # Stepping the drive models ([`Stepping`])
 //!

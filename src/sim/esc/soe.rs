@@ -1,5 +1,5 @@
 //! SoE (Servo drive profile over EtherCAT, mailbox type 5) server for an emulated ESC
-//! application. Spec source: `../shared/notes/ethercat.md` §7.3 (SOEM `ec_soe.c` layout).
+//! application. Spec source: ETG.1000.6 SoE (the layout of SOEM's `ec_soe.c`).
 //!
 //! [`SoeServer`] answers IDN read requests (opcode 1 → 2) and write requests (opcode 3 → 4)
 //! for the IDNs of an [`IdnEntry`] table; values go through the [`DriveModel`]

@@ -1,4 +1,4 @@
-//! Unit tests of the SLS monitor. Expected values come from seed 001, worked by hand.
+//! Unit tests of the SLS monitor. Expected values come from FCT-A2, worked by hand.
 
 use super::*;
 use crate::core::path::Segment;

@@ -1,12 +1,12 @@
 //! Drive side of the CiA 402 touch probe function: 0x60B8 touch probe function, 0x60B9 touch
 //! probe status, 0x60BA–0x60BD edge positions, 0x60D0 touch probe source, 0x60D5–0x60D8 edge
-//! counters (notes ethercat.md §6, canopen.md §6.7).
+//! counters (CiA 402; ETG.6010 for the CoE drive profile).
 //!
 //! [`TouchProbes`] holds both probes of a drive. It knows nothing about time or motion: the model
 //! hands it each edge of a signal together with the position to store
 //! ([`TouchProbes::edge`]), already interpolated to the edge time.
 //!
-//! # Timing rules (notes ethercat.md §6.2, MOONS' timing diagram)
+//! # Timing rules (CiA 402 0x60B8 / 0x60B9, as MOONS' timing diagram shows them)
 //!
 //! - 0x60B8 enable bit 0 → 1 (bit 8 for probe 2): 0x60B9 bit 0 set, both stored bits cleared.
 //! - an edge-enable bit 4 / 5 going 1 → 0 clears its stored bit (1 / 2) and keeps the value;
