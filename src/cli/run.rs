@@ -34,16 +34,16 @@ pub struct RunArgs {
     trace: Option<PathBuf>,
 }
 
+/// `AXIS=POS` (POS in mm, [`super::number::position`]).
 fn parse_axis_pos(opt: &str, s: &str) -> anyhow::Result<(String, f64)> {
     let (ax, pos) = s
         .split_once('=')
         .with_context(|| format!("{opt} {s}: expected AXIS=POS, e.g. Z=100"))?;
-    let pos: f64 = pos
-        .trim()
-        .parse()
-        .ok()
-        .filter(|p: &f64| p.is_finite())
-        .with_context(|| format!("{opt} {s}: '{pos}' is not a position in mm"))?;
+    let pos = super::number::position(opt, pos.trim()).map_err(|e| super::number::NumberError {
+        text: s.to_string(),
+        expected: format!("AXIS=POS with {}", e.expected),
+        ..e
+    })?;
     Ok((ax.trim().to_string(), pos))
 }
 
