@@ -3,6 +3,7 @@
 //! ```text
 //! fieldprobe run PROGRAM.nc [--machine FILE.toml] [--link LINK] [--set KEY=VALUE]...
 //!                           [--probe-at AXIS=POS]... [--fixed-stop-at AXIS=POS]... [--json]
+//!                           [--quiet]
 //! ```
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
 //! 1 aborted by a CNC error, 2 bad input. Every `--set` is checked against its own data range
@@ -15,7 +16,7 @@
 //!
 //! Every number on the command line follows one grammar (decimal or `0x` hex, negative values
 //! without `--`; an object index without `0x` is decimal): [`number`], docs/cli.md "Numbers on
-//! the command line".
+//! the command line". `--quiet`: no progress line on a terminal ([`progress`]).
 
 /// `println!` for the tool's results on stdout that survives a reader going away
 /// (`fieldprobe run … | head`, `> /dev/full`): the first failed write is reported once on
@@ -40,6 +41,7 @@ mod jog;
 mod number;
 mod params;
 mod plot;
+mod progress;
 mod run;
 mod sdo;
 mod sim;
@@ -445,6 +447,11 @@ pub(crate) fn write_stdout(args: std::fmt::Arguments<'_>) {
             eprintln!("fieldprobe: writing to stdout failed ({e}); further output is dropped");
         }
     }
+}
+
+/// Erase the progress line of `run`, if one is shown (before the log writes to stderr).
+pub fn clear_progress() {
+    progress::clear();
 }
 
 #[cfg(test)]
