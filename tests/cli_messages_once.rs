@@ -57,6 +57,7 @@ fn a_refused_raw_socket_is_said_once() {
     let Some((code, _, err)) = wrapped(
         &["unshare", "-r"],
         "\"$FIELDPROBE\" sim ethercat --iface lo --device esi/fieldprobe-cia402-servo.xml --seconds 0; \
+         \"$FIELDPROBE\" run examples/nc/hello.nc --link ethercat:lo; \
          \"$FIELDPROBE\" scan --link ethercat:lo",
     ) else {
         eprintln!("SKIP a_refused_raw_socket_is_said_once: `unshare -r` not available");
@@ -64,16 +65,42 @@ fn a_refused_raw_socket_is_said_once() {
     };
     assert_eq!(code, Some(2), "{err}");
     let lines: Vec<&str> = err.lines().filter(|l| l.contains("CAP_NET_RAW")).collect();
-    assert_eq!(lines.len(), 2, "{err}");
+    assert_eq!(lines.len(), 3, "{err}");
     for l in &lines {
         occurs(l, "Operation not permitted", 1);
         occurs(l, "interface lo", 1);
     }
-    assert!(
-        lines[1].starts_with("fieldprobe: --link ethercat:lo: interface lo:"),
-        "{err}"
-    );
-    occurs(&err, "ethercat:lo", 1);
+    for l in &lines[1..] {
+        assert!(
+            l.starts_with("fieldprobe: --link ethercat:lo: interface lo:"),
+            "{err}"
+        );
+    }
+    occurs(&err, "ethercat:lo", 2);
+}
+
+#[test]
+fn a_missing_interface_is_said_once() {
+    // No namespace needed: an interface that does not exist, for `run` (the machine's link)
+    // and `scan` (a session).
+    for args in [
+        &[
+            "run",
+            "examples/nc/hello.nc",
+            "--link",
+            "ethercat:fp-no-such0",
+        ][..],
+        &["scan", "--link", "ethercat:fp-no-such0"],
+    ] {
+        let o = fieldprobe(args);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{e}");
+        assert!(
+            e.starts_with("fieldprobe: --link ethercat:fp-no-such0: interface fp-no-such0: no such network interface"),
+            "{args:?}: {e}"
+        );
+        occurs(&e, "ethercat:fp-no-such0", 1);
+    }
 }
 
 #[test]

@@ -151,29 +151,33 @@ pub fn error_text(e: &anyhow::Error) -> String {
     said_once(&text)
 }
 
-/// `text` with every `: `-separated part that equals the part before it removed: the layers of
-/// a message each naming the same thing (`node 9: SDO 0x1000:00: SDO 0x1000:00: no response`)
-/// say it once.
+/// `text` with every `: `-separated part that repeats the part before it removed: the layers
+/// of a message that each name the same thing say it once. A part repeats the one before when
+/// it is equal (`node 9: SDO 0x1000:00: SDO 0x1000:00: no response`) or when it is a single
+/// name (no blank, not only digits) the part before ends with (`--link ethercat:lo:
+/// ethercat:lo: interface lo: …`).
 pub fn said_once(text: &str) -> String {
     let mut parts: Vec<&str> = Vec::new();
     for part in text.split(": ") {
-        if parts.last() != Some(&part) {
+        let repeats = parts.last().is_some_and(|before| {
+            *before == part
+                || (!part.contains(char::is_whitespace)
+                    && !part.bytes().all(|b| b.is_ascii_digit())
+                    && before
+                        .strip_suffix(part)
+                        .is_some_and(|head| head.ends_with(char::is_whitespace)))
+        });
+        if !repeats {
             parts.push(part);
         }
     }
     parts.join(": ")
 }
 
-/// `prefix: text`, said once: when `text` starts with the last word of `prefix` and a `: `
-/// (`--link ethercat:lo` + `ethercat:lo: interface lo: …`), that part is not repeated.
+/// `prefix: text`, said once ([`said_once`]): `--link ethercat:lo` + `ethercat:lo: interface
+/// lo: …` is `--link ethercat:lo: interface lo: …`.
 pub fn prefixed(prefix: &str, text: impl std::fmt::Display) -> String {
-    let text = said_once(&text.to_string());
-    let last = prefix.rsplit(' ').next().unwrap_or(prefix);
-    let rest = text
-        .strip_prefix(last)
-        .and_then(|r| r.strip_prefix(": "))
-        .unwrap_or(&text);
-    format!("{prefix}: {rest}")
+    said_once(&format!("{prefix}: {text}"))
 }
 
 /// A command whose stdout or capture file could not be written did not deliver its result: it
@@ -466,6 +470,13 @@ mod tests {
         );
         assert_eq!(said_once("a: b: a: b"), "a: b: a: b");
         assert_eq!(said_once("x"), "x");
+        assert_eq!(
+            said_once("--link ethercat:lo: ethercat:lo: interface lo: gone"),
+            "--link ethercat:lo: interface lo: gone"
+        );
+        // Numbers and phrases are not names: kept.
+        assert_eq!(said_once("--node 5: 5: x"), "--node 5: 5: x");
+        assert_eq!(said_once("axis Z: moved Z: x"), "axis Z: moved Z: x");
     }
 
     #[test]
