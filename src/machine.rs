@@ -18,7 +18,7 @@ use crate::drive::catalogue;
 use crate::drive::DriveError;
 use crate::drive::ProbeEdge;
 use crate::link::{Link, ProcessImage};
-use crate::messages::{ids, CncMessage};
+use crate::messages::{ids, BlockRef, CncMessage};
 use crate::nc::ast::Program;
 use crate::nc::exec::{Event, Executor, Step};
 use crate::params::{AxisConfig, MachineConfig, ParamSet};
@@ -62,6 +62,17 @@ pub enum RunEvent {
     Output(String),
     /// A warning or error.
     Message(CncMessage),
+}
+
+/// Where a run stands, after one interpolation cycle ([`Machine::run_program_with_progress`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunProgress {
+    /// The block being executed (N number and source line).
+    pub block: Option<BlockRef>,
+    /// Interpolation cycles run since the program started.
+    pub cycles: u64,
+    /// Program time: the cycles times the interpolation cycle.
+    pub time: Nanos,
 }
 
 /// Summary of a run.
@@ -796,12 +807,24 @@ impl Machine {
         program: &Program,
         on_event: &mut dyn FnMut(&RunEvent),
     ) -> RunReport {
+        self.run_program_with_progress(program, on_event, &mut |_| {})
+    }
+
+    /// [`Machine::run_program`], with `on_cycle` called after every interpolation cycle with
+    /// where the run stands (for a progress display; it must be cheap).
+    pub fn run_program_with_progress(
+        &mut self,
+        program: &Program,
+        on_event: &mut dyn FnMut(&RunEvent),
+        on_cycle: &mut dyn FnMut(&RunProgress),
+    ) -> RunReport {
         let mut events = Vec::new();
         let mut emit = |e: RunEvent, events: &mut Vec<RunEvent>| {
             on_event(&e);
             events.push(e);
         };
         let start_cycles = self.channel.cycles();
+        let start_time = self.now;
         for m in std::mem::take(&mut self.startup) {
             emit(RunEvent::Message(m), &mut events);
         }
@@ -881,7 +904,14 @@ impl Machine {
                         }
                     }
                 }
-                _ => self.step(),
+                _ => {
+                    self.step();
+                    on_cycle(&RunProgress {
+                        block: self.channel.block(),
+                        cycles: self.channel.cycles() - start_cycles,
+                        time: Nanos(self.now.0.saturating_sub(start_time.0)),
+                    });
+                }
             }
         };
         let measurements = (0..self.channel.axis_count())

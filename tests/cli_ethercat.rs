@@ -86,7 +86,7 @@ fn sdo_read_write_and_abort_in_words() {
     let o = fieldprobe(&["sdo", "read", "--device", "1", "0x16000"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("index 0x0000 … 0xFFFF"),
+        stderr(&o).contains("index 0 … 65535 (0x0000 … 0xFFFF)"),
         "{}",
         stderr(&o)
     );

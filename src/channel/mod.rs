@@ -430,6 +430,11 @@ impl Channel {
         self.block = block;
     }
 
+    /// The block being executed (the one messages refer to), if any.
+    pub fn block(&self) -> Option<BlockRef> {
+        self.block
+    }
+
     /// Command position of every axis (ACS).
     pub fn command_positions(&self) -> Vec<f64> {
         self.axes.iter().map(Axis::command).collect()

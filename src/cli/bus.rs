@@ -1,90 +1,325 @@
-//! EtherCAT commissioning commands: `scan`, `sdo read|write`, `idn read|write`.
+//! Commissioning commands on a bus: `scan`, `idn read|write`, `can scan|dump` here, `sdo
+//! read|write` in [`super::sdo`].
 //!
 //! ```text
-//! fieldprobe scan [--link ethercat-emu|ethercat:IFACE] [--machine FILE.toml] [--set KEY=VALUE]...
-//! fieldprobe sdo read  [--link …] --device N INDEX:SUB [--type T]
-//! fieldprobe sdo write [--link …] --device N INDEX:SUB VALUE [--type T]
+//! fieldprobe scan [--link ethercat-emu|ethercat:IFACE] [--machine FILE.toml] [--set KEY=VALUE]... [--pcap FILE]
 //! fieldprobe idn read  [--link …] --device N S-0-0092
 //! fieldprobe idn write [--link …] --device N S-0-0092 VALUE
+//! fieldprobe can scan|dump [--link canopen-emu|canopen-udp[:GROUP:PORT]|socketcan:IF] [--candump FILE]
 //! ```
-//! The bus is brought to PRE-OP (no process data); `--device` is the ring position `scan`
-//! prints. `ethercat-emu` (default) is the emulated segment of the machine file (a coupler, then
-//! one drive per axis). Errors name the device and the object, with the SDO abort code / SoE
-//! error in words. Exit 0; 1 when the device refuses the access; 2 on bad input or a bus error.
+//! The EtherCAT bus is brought to PRE-OP (no process data); `--device` is the ring position
+//! `scan` prints. `ethercat-emu` (default) is the emulated segment of the machine file (a
+//! coupler, then one drive per axis). Errors name the device and the object, with the SDO abort
+//! code / SoE error in words. Exit 0; 1 when the device refuses the access; 2 on bad input or a
+//! bus error.
+//!
+//! Each command has its own option set (docs/cli.md "Options per command"): `scan` and `idn`
+//! offer the EtherCAT links and `--pcap`, `can` the CAN links and `--candump`, `sdo` both. The
+//! capture option of the other bus family is not shown in a command's help; given anyway, it
+//! is refused with a message that names the option, the link and where those frames go.
 
-use super::{load_machine, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
+use super::{load_machine, number, prefixed, said_once, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
-use fieldprobe::drive::pdo::DataType;
 use fieldprobe::link::canopen::CanSession;
 use fieldprobe::link::ethercat::{EthercatSpec, Session, Wire};
 use fieldprobe::link::LinkError;
 use std::path::PathBuf;
 
-/// Where the bus is.
-#[derive(Debug, Clone, clap::Args)]
-pub struct BusArgs {
-    /// `ethercat-emu` (emulated segment of the machine file), `ethercat:IFACE`, `canopen-emu`
-    /// (emulated CANopen nodes of the machine file, ids 1 …), `canopen-udp[:GROUP:PORT]` or
+/// A `--link` of the bus commands.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum BusLink {
+    /// `ethercat-emu`.
+    EthercatEmu,
+    /// `ethercat:IFACE`.
+    Ethercat(String),
+    /// `canopen-emu`.
+    CanopenEmu,
+    /// `canopen-udp[:GROUP:PORT]` (checked when opened).
+    CanopenUdp,
     /// `socketcan:IF`.
+    SocketCan,
+}
+
+/// The bus families a command works on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// EtherCAT only (`scan`, `idn`).
+    Ethercat,
+    /// CAN only (`can scan`, `can dump`).
+    Can,
+    /// Both (`sdo`).
+    Both,
+}
+
+/// The EtherCAT links, for help and messages.
+pub const ETHERCAT_LINKS: &str = "ethercat-emu (the emulated segment of the machine file) or \
+                                  ethercat:IFACE (a network interface)";
+/// The CAN links, for help and messages.
+pub const CAN_LINKS: &str = "canopen-emu (the emulated nodes of the machine file), \
+                             canopen-udp[:GROUP:PORT] or socketcan:IF";
+
+impl Family {
+    fn allowed(self) -> String {
+        match self {
+            Family::Ethercat => ETHERCAT_LINKS.to_string(),
+            Family::Can => CAN_LINKS.to_string(),
+            Family::Both => format!("{ETHERCAT_LINKS}; {CAN_LINKS}"),
+        }
+    }
+}
+
+impl BusLink {
+    /// Parse `text`; the error says why (without the option).
+    fn parse(text: &str) -> Result<BusLink, &'static str> {
+        if text == "ethercat-emu" {
+            return Ok(BusLink::EthercatEmu);
+        }
+        if text == "canopen-emu" {
+            return Ok(BusLink::CanopenEmu);
+        }
+        if text == "canopen-udp" || text.starts_with("canopen-udp:") {
+            return Ok(BusLink::CanopenUdp);
+        }
+        if let Some(i) = text.strip_prefix("ethercat:") {
+            return match i {
+                "" => Err("no interface name after `ethercat:`"),
+                i => Ok(BusLink::Ethercat(i.to_string())),
+            };
+        }
+        if let Some(i) = text.strip_prefix("socketcan:") {
+            return match i {
+                "" => Err("no interface name after `socketcan:`"),
+                _ => Ok(BusLink::SocketCan),
+            };
+        }
+        Err("unknown link")
+    }
+
+    /// A CAN link.
+    pub fn is_can(&self) -> bool {
+        matches!(
+            self,
+            BusLink::CanopenEmu | BusLink::CanopenUdp | BusLink::SocketCan
+        )
+    }
+
+    /// A link to emulated devices (the machine file describes them).
+    fn is_emulated(&self) -> bool {
+        matches!(self, BusLink::EthercatEmu | BusLink::CanopenEmu)
+    }
+}
+
+/// `--link TEXT` of `command`, checked against the families it works on. The messages name
+/// the link and list what the command takes; a link of the other family says which command
+/// serves it.
+fn parse_link(command: &str, text: &str, family: Family) -> anyhow::Result<BusLink> {
+    let link = BusLink::parse(text).map_err(|why| {
+        anyhow::anyhow!(
+            "--link {}: {why}; `{command}` takes {}",
+            super::cap_echo(text),
+            family.allowed()
+        )
+    })?;
+    match (family, link.is_can()) {
+        (Family::Ethercat, true) if command == "scan" => anyhow::bail!(
+            "--link {text}: `scan` lists EtherCAT SubDevices ({ETHERCAT_LINKS}); CANopen nodes: `can scan`"
+        ),
+        (Family::Ethercat, true) => anyhow::bail!(
+            "--link {text}: `{command}` reaches SERCOS IDNs of EtherCAT SubDevices (SoE); expected {ETHERCAT_LINKS}"
+        ),
+        (Family::Can, false) => anyhow::bail!(
+            "--link {text}: `{command}` needs a CAN link ({CAN_LINKS}); EtherCAT SubDevices: `scan`"
+        ),
+        _ => Ok(link),
+    }
+}
+
+/// `--link`, `--machine`, `--set`, `--pcap`, `--candump` of `scan` and `idn`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct EthercatBusArgs {
+    /// EtherCAT link: `ethercat-emu` (the emulated segment of the machine file: a coupler,
+    /// then one drive per axis) or `ethercat:IFACE` (a network interface). CANopen nodes: see
+    /// `can scan` and `sdo --node`.
     #[arg(long, value_name = "LINK", default_value = "ethercat-emu")]
     link: String,
-    /// Log every CAN frame in candump -L format (CAN links; refused on EtherCAT links).
+    /// Machine file whose axes the emulated devices are (ethercat-emu only).
+    #[arg(long, value_name = "FILE.toml")]
+    machine: Option<PathBuf>,
+    /// Parameter assignment for the machine file (e.g. `Z.drive=sercos-ax5000`; ethercat-emu
+    /// only, as `--machine`).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+    /// Write every EtherCAT frame (both directions) into this pcap file.
+    #[arg(long, value_name = "FILE.pcap")]
+    pcap: Option<PathBuf>,
+    /// Not offered (CAN links only); refused with a message when given.
+    #[arg(long, value_name = "FILE.log", hide = true)]
+    candump: Option<PathBuf>,
+}
+
+impl EthercatBusArgs {
+    /// The bus of `command`, its options checked.
+    pub fn bus(&self, command: &str) -> anyhow::Result<Bus> {
+        let link = parse_link(command, &self.link, Family::Ethercat)?;
+        Bus::new(
+            command,
+            link,
+            &self.link,
+            &self.machine,
+            &self.sets,
+            &self.pcap,
+            &self.candump,
+        )
+    }
+}
+
+/// `--link`, `--machine`, `--set`, `--candump`, `--pcap` of `can scan` and `can dump`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CanBusArgs {
+    /// CAN link: `canopen-emu` (the emulated CiA 402 nodes of the machine file, ids 1 …),
+    /// `canopen-udp[:GROUP:PORT]` (python-can udp_multicast bus) or `socketcan:IF`.
+    #[arg(long, value_name = "LINK", default_value = "canopen-emu")]
+    link: String,
+    /// Machine file whose axes the emulated nodes are (canopen-emu only).
+    #[arg(long, value_name = "FILE.toml")]
+    machine: Option<PathBuf>,
+    /// Parameter assignment for the machine file (canopen-emu only, as `--machine`).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
+    /// Log every CAN frame (both directions) in candump -L format into this file.
     #[arg(long, value_name = "FILE.log")]
     candump: Option<PathBuf>,
-    /// Machine file whose axes the emulated devices are (ethercat-emu, canopen-emu; refused on
-    /// the links to a real bus).
-    #[arg(long)]
+    /// Not offered (EtherCAT links only); refused with a message when given.
+    #[arg(long, value_name = "FILE.pcap", hide = true)]
+    pcap: Option<PathBuf>,
+}
+
+impl CanBusArgs {
+    /// The bus of `command`, its options checked.
+    pub fn bus(&self, command: &str) -> anyhow::Result<Bus> {
+        let link = parse_link(command, &self.link, Family::Can)?;
+        Bus::new(
+            command,
+            link,
+            &self.link,
+            &self.machine,
+            &self.sets,
+            &self.pcap,
+            &self.candump,
+        )
+    }
+}
+
+/// `--link`, `--machine`, `--set`, `--pcap`, `--candump` of `sdo`, which works on both bus
+/// families.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SdoBusArgs {
+    /// Link: `ethercat-emu` (default with --device; the emulated segment of the machine file),
+    /// `ethercat:IFACE`, `canopen-emu` (default with --node; the emulated nodes of the machine
+    /// file, ids 1 …), `canopen-udp[:GROUP:PORT]` or `socketcan:IF`.
+    #[arg(long, value_name = "LINK")]
+    link: Option<String>,
+    /// Machine file whose axes the emulated devices are (ethercat-emu, canopen-emu).
+    #[arg(long, value_name = "FILE.toml")]
     machine: Option<PathBuf>,
-    /// Parameter assignment for the machine file (e.g. `Z.drive=sercos-ax5000`; emulated links
-    /// only, as `--machine`).
+    /// Parameter assignment for the machine file (emulated links only, as `--machine`).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     sets: Vec<String>,
     /// Write every EtherCAT frame into this pcap file (EtherCAT links; refused on CAN links).
     #[arg(long, value_name = "FILE.pcap")]
     pcap: Option<PathBuf>,
+    /// Log every CAN frame in candump -L format into this file (CAN links; refused on
+    /// EtherCAT links).
+    #[arg(long, value_name = "FILE.log")]
+    candump: Option<PathBuf>,
 }
 
-impl BusArgs {
-    fn is_can(&self) -> bool {
-        self.link.starts_with("canopen") || self.link.starts_with("socketcan:")
+impl SdoBusArgs {
+    /// The bus of `command`; without `--link`, `canopen-emu` when the target is a node
+    /// (`node` true), else `ethercat-emu`.
+    pub fn bus(&self, command: &str, node: bool) -> anyhow::Result<Bus> {
+        let text = match &self.link {
+            Some(l) => l.as_str(),
+            None if node => "canopen-emu",
+            None => "ethercat-emu",
+        };
+        let link = parse_link(command, text, Family::Both)?;
+        Bus::new(
+            command,
+            link,
+            text,
+            &self.machine,
+            &self.sets,
+            &self.pcap,
+            &self.candump,
+        )
     }
+}
 
+/// A checked bus: the link and the options that apply to it.
+#[derive(Debug, Clone)]
+pub struct Bus {
+    /// The link.
+    pub link: BusLink,
+    /// `--link` as given.
+    pub text: String,
+    machine: Option<PathBuf>,
+    sets: Vec<String>,
+    pcap: Option<PathBuf>,
+    candump: Option<PathBuf>,
+}
+
+impl Bus {
     /// Refuse the options `command` does not use on this link, naming option and link (exit
     /// 2), instead of ignoring them: `--pcap` on a CAN link, `--candump` on an EtherCAT link,
     /// `--machine` / `--set` on a link that reaches a real bus (they describe the emulated
     /// devices of `ethercat-emu` and `canopen-emu` only).
-    fn check_options(&self, command: &str) -> anyhow::Result<()> {
-        let link = &self.link;
-        if self.is_can() {
-            if let Some(p) = &self.pcap {
+    fn new(
+        command: &str,
+        link: BusLink,
+        text: &str,
+        machine: &Option<PathBuf>,
+        sets: &[String],
+        pcap: &Option<PathBuf>,
+        candump: &Option<PathBuf>,
+    ) -> anyhow::Result<Bus> {
+        if link.is_can() {
+            if let Some(p) = pcap {
                 anyhow::bail!(
-                    "--pcap {}: `{command}` on --link {link} (a CAN link) writes no pcap capture; the CAN frames go to --candump FILE.log",
+                    "--pcap {}: `{command}` on --link {text} (a CAN link) writes no pcap capture; the CAN frames go to --candump FILE.log",
                     p.display()
                 );
             }
-        } else if let Some(p) = &self.candump {
+        } else if let Some(p) = candump {
             anyhow::bail!(
-                "--candump {}: `{command}` on --link {link} writes no candump log (CAN links only: canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF); EtherCAT frames go to --pcap FILE.pcap",
+                "--candump {}: `{command}` on --link {text} writes no candump log (CAN links only: {CAN_LINKS}); EtherCAT frames go to --pcap FILE.pcap",
                 p.display()
             );
         }
-        if link != "canopen-emu" && link != "ethercat-emu" {
+        if !link.is_emulated() {
             let mut given = Vec::new();
-            if let Some(m) = &self.machine {
+            if let Some(m) = machine {
                 given.push(format!("--machine {}", m.display()));
             }
-            given.extend(self.sets.iter().map(|s| format!("--set {s}")));
+            given.extend(sets.iter().map(|s| format!("--set {s}")));
             if !given.is_empty() {
                 anyhow::bail!(
-                    "{}: `{command}` on --link {link} talks to the devices on the bus; the machine file describes the emulated devices of --link ethercat-emu / canopen-emu only",
+                    "{}: `{command}` on --link {text} talks to the devices on the bus; the machine file describes the emulated devices of --link ethercat-emu / canopen-emu only",
                     given.join(", ")
                 );
             }
         }
-        Ok(())
+        Ok(Bus {
+            link,
+            text: text.to_string(),
+            machine: machine.clone(),
+            sets: sets.to_vec(),
+            pcap: pcap.clone(),
+            candump: candump.clone(),
+        })
     }
 
-    /// The machine's drives and CANopen node ids.
+    /// The machine's drives and CANopen node ids (the emulated devices).
     #[allow(clippy::type_complexity)]
     fn drives(
         &self,
@@ -98,23 +333,34 @@ impl BusArgs {
         Ok((drives, ids))
     }
 
-    fn open_can(&self) -> anyhow::Result<CanSession> {
-        let (drives, ids) = if self.link == "canopen-emu" {
+    /// The node ids of the emulated nodes (`canopen-emu`), `None` on a real bus.
+    pub fn emulated_nodes(&self) -> anyhow::Result<Option<Vec<u8>>> {
+        Ok(match self.link {
+            BusLink::CanopenEmu => Some(self.drives()?.1),
+            _ => None,
+        })
+    }
+
+    /// `--link TEXT: …` said once (a link error that starts with the link's name again).
+    fn link_error(&self, e: impl std::fmt::Display) -> anyhow::Error {
+        anyhow::anyhow!(prefixed(&format!("--link {}", self.text), e))
+    }
+
+    /// Open the CAN link.
+    pub fn open_can(&self) -> anyhow::Result<CanSession> {
+        let (drives, ids) = if self.link == BusLink::CanopenEmu {
             self.drives()?
         } else {
             (Vec::new(), Vec::new())
         };
-        CanSession::open(&self.link, &drives, &ids, self.candump.as_deref())
-            .map_err(|e| anyhow::anyhow!("--link {}: {e}", self.link))
+        CanSession::open(&self.text, &drives, &ids, self.candump.as_deref())
+            .map_err(|e| self.link_error(e))
     }
 
-    fn open(&self) -> anyhow::Result<Session> {
-        let wire = Wire::from_link(&self.link).with_context(|| {
-            format!(
-                "--link {}: expected ethercat-emu or ethercat:IFACE",
-                self.link
-            )
-        })?;
+    /// Open the EtherCAT link (PRE-OP).
+    pub fn open(&self) -> anyhow::Result<Session> {
+        let wire = Wire::from_link(&self.text)
+            .with_context(|| format!("--link {}: expected {ETHERCAT_LINKS}", self.text))?;
         let (drives, terminals) = if wire == Wire::Emulated {
             // The emulated segment of the machine: its axes' drives and its terminals.
             let cfg = load_machine(self.machine.as_deref(), &self.sets)?;
@@ -142,7 +388,18 @@ impl BusArgs {
             terminals,
             emulated_extra: Vec::new(),
         };
-        Session::open(&wire, &spec).map_err(|e| anyhow::anyhow!("--link {}: {e}", self.link))
+        Session::open(&wire, &spec).map_err(|e| match &self.link {
+            // The first frame of the bus initialisation (a broadcast read every SubDevice
+            // answers) did not come back: nothing on that wire answered.
+            BusLink::Ethercat(iface) if e.to_string().starts_with("EtherCAT init: timeout") => {
+                anyhow::anyhow!(
+                    "--link {}: no EtherCAT device answered on {iface} ({e}); check that a \
+                     device is connected to {iface} and powered",
+                    self.text
+                )
+            }
+            _ => self.link_error(e),
+        })
     }
 }
 
@@ -164,18 +421,13 @@ fn load_drives(
 #[derive(Debug, clap::Args)]
 pub struct ScanArgs {
     #[command(flatten)]
-    bus: BusArgs,
+    bus: EthercatBusArgs,
 }
 
 /// `fieldprobe scan`.
 pub fn scan(a: ScanArgs) -> anyhow::Result<i32> {
-    anyhow::ensure!(
-        !a.bus.is_can(),
-        "--link {}: `scan` lists EtherCAT SubDevices (ethercat-emu, ethercat:IFACE); CANopen nodes: `can scan`",
-        a.bus.link
-    );
-    a.bus.check_options("scan")?;
-    let mut s = a.bus.open()?;
+    let bus = a.bus.bus("scan")?;
+    let mut s = bus.open()?;
     super::finish_capture(s.finish_capture());
     outln!("pos  address  vendor      product     revision    state    DC              name");
     for d in s.devices() {
@@ -194,262 +446,14 @@ pub fn scan(a: ScanArgs) -> anyhow::Result<i32> {
     Ok(EXIT_OK)
 }
 
-/// Arguments of `fieldprobe sdo`.
-#[derive(Debug, clap::Args)]
-pub struct SdoArgs {
-    #[command(subcommand)]
-    op: SdoOp,
-}
-
-#[derive(Debug, clap::Subcommand)]
-enum SdoOp {
-    /// Upload (read) an object.
-    Read(SdoRead),
-    /// Download (write) an object.
-    Write(SdoWrite),
-}
-
-/// The bus and the device (EtherCAT) or node (CANopen) an SDO goes to.
-#[derive(Debug, clap::Args)]
-struct SdoTo {
-    #[command(flatten)]
-    bus: BusArgs,
-    /// Ring position of the SubDevice (as `scan` prints it; EtherCAT links).
-    #[arg(long, required_unless_present = "node", conflicts_with = "node")]
-    device: Option<usize>,
-    /// CANopen node id 1 … 127 (CAN links).
-    #[arg(long)]
-    node: Option<u8>,
-}
-
-#[derive(Debug, clap::Args)]
-struct SdoRead {
-    #[command(flatten)]
-    to: SdoTo,
-    /// Object, e.g. `0x6041:00` or `0x1008` (sub-index 0).
-    object: String,
-    /// Data type (`u8` `i8` `u16` `i16` `u32` `i32`, or `string`, `bytes`); default: the CiA 402
-    /// type of the object, else by length.
-    #[arg(long = "type")]
-    ty: Option<String>,
-}
-
-#[derive(Debug, clap::Args)]
-struct SdoWrite {
-    #[command(flatten)]
-    to: SdoTo,
-    /// Object, e.g. `0x6065:00`.
-    object: String,
-    /// Value (decimal or 0x hex; a string for `--type string`).
-    value: String,
-    /// Data type; default: the CiA 402 type of the object (required for other objects).
-    #[arg(long = "type")]
-    ty: Option<String>,
-}
-
-/// `INDEX[:SUB]` → (index, sub).
-fn parse_object(s: &str) -> anyhow::Result<(u16, u8)> {
-    let num = |t: &str, max: u32| -> Option<u32> {
-        let t = t.trim();
-        let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-            Some(h) => u32::from_str_radix(h, 16).ok()?,
-            None => u32::from_str_radix(t, 16).ok()?,
-        };
-        (v <= max).then_some(v)
-    };
-    let (i, sub) = s.split_once(':').unwrap_or((s, "0"));
-    match (num(i, 0xFFFF), num(sub, 0xFF)) {
-        (Some(i), Some(sub)) => Ok((i as u16, sub as u8)),
-        _ => anyhow::bail!(
-            "object '{s}': expected INDEX:SUB in hex, e.g. 0x6041:00 (index 0x0000 … 0xFFFF, sub-index 0x00 … 0xFF)"
-        ),
-    }
-}
-
-fn parse_int(s: &str) -> Option<i64> {
-    let t = s.trim();
-    let (neg, t) = match t.strip_prefix('-') {
-        Some(r) => (true, r),
-        None => (false, t),
-    };
-    let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
-        Some(h) => i64::from_str_radix(h, 16).ok()?,
-        None => t.parse().ok()?,
-    };
-    Some(if neg { -v } else { v })
-}
-
-/// Whom an SDO goes to.
-enum Target {
-    Device(usize),
-    Node(u8),
-}
-
-fn target(to: &SdoTo) -> anyhow::Result<Target> {
-    let bus = &to.bus;
-    bus.check_options("sdo")?;
-    match (bus.is_can(), to.device, to.node) {
-        (false, Some(d), None) => Ok(Target::Device(d)),
-        (true, None, Some(n)) if (1..=127).contains(&n) => Ok(Target::Node(n)),
-        (true, None, Some(n)) => anyhow::bail!("--node {n}: allowed 1 … 127"),
-        (true, _, _) => anyhow::bail!(
-            "--link {}: a CAN link addresses nodes: give --node N (1 … 127), not --device",
-            bus.link
-        ),
-        (false, _, _) => anyhow::bail!(
-            "--link {}: an EtherCAT link addresses SubDevices: give --device N (ring position)",
-            bus.link
-        ),
-    }
-}
-
-/// Exit code and message for a refused access.
-fn refused(e: LinkError) -> anyhow::Result<i32> {
-    eprintln!("fieldprobe: {e}");
+/// Exit code and message for an access that failed: 1 when the device refused it, else 2.
+pub fn refused(e: LinkError) -> anyhow::Result<i32> {
+    eprintln!("fieldprobe: {}", said_once(&e.to_string()));
     Ok(if e.is_refusal() {
         EXIT_CNC_ERROR
     } else {
         EXIT_BAD_INPUT
     })
-}
-
-/// `fieldprobe sdo`.
-pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
-    match a.op {
-        SdoOp::Read(r) => {
-            let (index, sub) = parse_object(&r.object)?;
-            let ty = r.ty.as_deref().map(str::to_ascii_lowercase);
-            let result = match target(&r.to)? {
-                Target::Device(d) => {
-                    let mut s = r.to.bus.open()?;
-                    let res = s.sdo_read(d, index, sub);
-                    super::finish_capture(s.finish_capture());
-                    res
-                }
-                Target::Node(n) => {
-                    let mut s = r.to.bus.open_can()?;
-                    let res = s.sdo_upload(n, index, sub);
-                    super::finish_capture(s.finish_capture());
-                    res
-                }
-            };
-            let bytes = match result {
-                Ok(b) => b,
-                Err(e) => return refused(e),
-            };
-            let known = fieldprobe::drive::pdo::lookup(index, sub).map(|o| o.ty);
-            let numeric = match ty.as_deref() {
-                Some("string") | Some("bytes") => None,
-                Some(t) => Some(DataType::from_name(t).with_context(|| {
-                    format!("--type {t}: expected u8, i8, u16, i16, u32, i32, string or bytes")
-                })?),
-                None => known.or(match bytes.len() {
-                    1 => Some(DataType::U8),
-                    2 => Some(DataType::U16),
-                    4 => Some(DataType::U32),
-                    _ => None,
-                }),
-            };
-            match numeric {
-                Some(t) if bytes.len() == t.size() => {
-                    let mut b = [0u8; 8];
-                    b[..bytes.len()].copy_from_slice(&bytes);
-                    let raw = u64::from_le_bytes(b);
-                    let v = if t.is_signed() {
-                        let shift = 64 - 8 * t.size() as u32;
-                        ((raw << shift) as i64) >> shift
-                    } else {
-                        raw as i64
-                    };
-                    outln!("{index:#06x}:{sub:02x} = {v} ({raw:#x})");
-                }
-                Some(t) => {
-                    eprintln!(
-                        "fieldprobe: {} {index:#06x}:{sub:02x}: {} bytes do not fit type {}",
-                        r.to.node.map_or_else(
-                            || format!("device {}", r.to.device.unwrap_or(0)),
-                            |n| format!("node {n}")
-                        ),
-                        bytes.len(),
-                        t.name()
-                    );
-                    return Ok(EXIT_BAD_INPUT);
-                }
-                None if ty.as_deref() != Some("bytes")
-                    && !bytes.is_empty()
-                    && bytes.iter().all(|b| b.is_ascii_graphic() || *b == b' ') =>
-                {
-                    outln!(
-                        "{index:#06x}:{sub:02x} = \"{}\" ({} bytes)",
-                        String::from_utf8_lossy(&bytes),
-                        bytes.len()
-                    );
-                }
-                None => {
-                    let hex: Vec<String> = bytes.iter().map(|b| format!("{b:02x}")).collect();
-                    outln!(
-                        "{index:#06x}:{sub:02x} = [{}] ({} bytes)",
-                        hex.join(" "),
-                        bytes.len()
-                    );
-                }
-            }
-            Ok(EXIT_OK)
-        }
-        SdoOp::Write(w) => {
-            let (index, sub) = parse_object(&w.object)?;
-            let data = match w.ty.as_deref().map(str::to_ascii_lowercase).as_deref() {
-                Some("string") => w.value.as_bytes().to_vec(),
-                t => {
-                    let ty = match t {
-                        Some(t) => DataType::from_name(t).with_context(|| {
-                            format!("--type {t}: expected u8, i8, u16, i16, u32, i32 or string")
-                        })?,
-                        None => fieldprobe::drive::pdo::lookup(index, sub)
-                            .map(|o| o.ty)
-                            .with_context(|| {
-                                format!("{index:#06x}:{sub:02x}: type unknown; give --type (u8, i8, u16, i16, u32, i32, string)")
-                            })?,
-                    };
-                    let v = parse_int(&w.value)
-                        .with_context(|| format!("value '{}': not an integer", w.value))?;
-                    let bits = 8 * ty.size() as u32;
-                    let (lo, hi) = if ty.is_signed() {
-                        (-(1i64 << (bits - 1)), (1i64 << (bits - 1)) - 1)
-                    } else {
-                        (0, (1i64 << bits) - 1)
-                    };
-                    anyhow::ensure!(
-                        (lo..=hi).contains(&v),
-                        "value {v} is out of range for {} ({lo} … {hi})",
-                        ty.name()
-                    );
-                    v.to_le_bytes()[..ty.size()].to_vec()
-                }
-            };
-            let result = match target(&w.to)? {
-                Target::Device(d) => {
-                    let mut s = w.to.bus.open()?;
-                    let res = s.sdo_write(d, index, sub, &data);
-                    super::finish_capture(s.finish_capture());
-                    res
-                }
-                Target::Node(n) => {
-                    let mut s = w.to.bus.open_can()?;
-                    let res = s.sdo_download(n, index, sub, &data);
-                    super::finish_capture(s.finish_capture());
-                    res
-                }
-            };
-            match result {
-                Ok(()) => {
-                    outln!("{index:#06x}:{sub:02x} written ({} bytes)", data.len());
-                    Ok(EXIT_OK)
-                }
-                Err(e) => refused(e),
-            }
-        }
-    }
 }
 
 /// Arguments of `fieldprobe idn`.
@@ -470,9 +474,9 @@ enum IdnOp {
 #[derive(Debug, clap::Args)]
 struct IdnRead {
     #[command(flatten)]
-    bus: BusArgs,
-    /// Ring position of the SubDevice.
-    #[arg(long)]
+    bus: EthercatBusArgs,
+    /// Ring position of the SubDevice (decimal or 0x hex).
+    #[arg(long, value_name = "N", value_parser = number::value_ring_position, allow_hyphen_values = true)]
     device: usize,
     /// IDN, e.g. `S-0-0092` or `P-0-0010`.
     idn: String,
@@ -481,13 +485,14 @@ struct IdnRead {
 #[derive(Debug, clap::Args)]
 struct IdnWrite {
     #[command(flatten)]
-    bus: BusArgs,
-    /// Ring position of the SubDevice.
-    #[arg(long)]
+    bus: EthercatBusArgs,
+    /// Ring position of the SubDevice (decimal or 0x hex).
+    #[arg(long, value_name = "N", value_parser = number::value_ring_position, allow_hyphen_values = true)]
     device: usize,
     /// IDN, e.g. `S-0-0092`.
     idn: String,
-    /// Value (decimal or 0x hex).
+    /// Value: an integer, decimal or 0x hex, negative without `--` (e.g. -100).
+    #[arg(allow_hyphen_values = true)]
     value: String,
 }
 
@@ -502,13 +507,8 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
     match a.op {
         IdnOp::Read(r) => {
             let idn = parse_idn(&r.idn)?;
-            anyhow::ensure!(
-                !r.bus.is_can(),
-                "--link {}: `idn` reaches SERCOS IDNs of EtherCAT SubDevices (SoE); expected ethercat-emu or ethercat:IFACE",
-                r.bus.link
-            );
-            r.bus.check_options("idn")?;
-            let mut s = r.bus.open()?;
+            let bus = r.bus.bus("idn")?;
+            let mut s = bus.open()?;
             let res = s.idn_read(r.device, idn);
             super::finish_capture(s.finish_capture());
             match res {
@@ -526,15 +526,15 @@ pub fn idn(a: IdnArgs) -> anyhow::Result<i32> {
         }
         IdnOp::Write(w) => {
             let idn = parse_idn(&w.idn)?;
-            anyhow::ensure!(
-                !w.bus.is_can(),
-                "--link {}: `idn` reaches SERCOS IDNs of EtherCAT SubDevices (SoE); expected ethercat-emu or ethercat:IFACE",
-                w.bus.link
-            );
-            w.bus.check_options("idn")?;
-            let v = parse_int(&w.value)
-                .with_context(|| format!("value '{}': not an integer", w.value))?;
-            let mut s = w.bus.open()?;
+            let bus = w.bus.bus("idn")?;
+            let v = number::int_option(
+                "value",
+                &w.value,
+                i64::MIN.into(),
+                i64::MAX.into(),
+                "an integer",
+            )? as i64;
+            let mut s = bus.open()?;
             let res = s.idn_write(w.device, idn, v);
             super::finish_capture(s.finish_capture());
             match res {
@@ -567,16 +567,21 @@ enum CanOp {
 #[derive(Debug, clap::Args)]
 struct CanScan {
     #[command(flatten)]
-    bus: BusArgs,
+    bus: CanBusArgs,
 }
 
 #[derive(Debug, clap::Args)]
 struct CanDump {
     #[command(flatten)]
-    bus: BusArgs,
-    /// How long to listen, s.
-    #[arg(long, default_value = "1")]
-    seconds: f64,
+    bus: CanBusArgs,
+    /// How long to listen, s (0 … 86400).
+    #[arg(
+        long,
+        value_name = "N",
+        default_value = "1",
+        allow_hyphen_values = true
+    )]
+    seconds: String,
     /// Plain `candump -L` lines without the `  ; meaning` comment, for tools that read candump
     /// logs (canplayer, log2asc, python-can's `CanutilsLogReader`).
     #[arg(long)]
@@ -587,12 +592,17 @@ struct CanDump {
 pub fn can(a: CanArgs) -> anyhow::Result<i32> {
     match a.op {
         CanOp::Scan(s) => {
-            anyhow::ensure!(s.bus.is_can(), "--link {}: `can scan` needs a CAN link (canopen-emu, canopen-udp[:GROUP:PORT], socketcan:IF)", s.bus.link);
-            s.bus.check_options("can scan")?;
-            let mut session = s.bus.open_can()?;
-            let nodes = session.scan().map_err(|e| anyhow::anyhow!("{e}"));
+            let bus = s.bus.bus("can scan")?;
+            let mut session = bus.open_can()?;
+            let nodes = session.scan().map_err(|e| bus.link_error(e));
             super::finish_capture(session.finish_capture());
             let nodes = nodes?;
+            if nodes.is_empty() {
+                eprintln!(
+                    "fieldprobe: no CANopen node answered on --link {} (SDO upload of 0x1000 to node ids 1 … 127)",
+                    bus.text
+                );
+            }
             outln!("node  state            device type  vendor      product     revision    name");
             let hex = |v: Option<u32>| v.map_or_else(|| "-".to_string(), |v| format!("{v:#010x}"));
             for n in nodes {
@@ -610,21 +620,18 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
             Ok(EXIT_OK)
         }
         CanOp::Dump(d) => {
-            anyhow::ensure!(
-                d.bus.is_can(),
-                "--link {}: `can dump` needs a CAN link",
-                d.bus.link
-            );
-            d.bus.check_options("can dump")?;
-            anyhow::ensure!(
-                d.seconds.is_finite() && (0.0..=86_400.0).contains(&d.seconds),
-                "--seconds {}: allowed 0 … 86400",
-                super::show_number(d.seconds)
-            );
-            let mut session = d.bus.open_can()?;
+            let bus = d.bus.bus("can dump")?;
+            let seconds = number::real_option(
+                "--seconds",
+                &d.seconds,
+                0.0,
+                86_400.0,
+                "a number of seconds",
+            )?;
+            let mut session = bus.open_can()?;
             let iface = session.log_interface();
             let plain = d.plain;
-            let heard = session.listen(std::time::Duration::from_secs_f64(d.seconds), &mut |f| {
+            let heard = session.listen(std::time::Duration::from_secs_f64(seconds), &mut |f| {
                 let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
                 let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
                 let meaning = fieldprobe::bus::canopen::describe(f);
@@ -635,7 +642,7 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
                 }
             });
             super::finish_capture(session.finish_capture());
-            heard.map_err(|e| anyhow::anyhow!("{e}"))?;
+            heard.map_err(|e| bus.link_error(e))?;
             Ok(EXIT_OK)
         }
     }

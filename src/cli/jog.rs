@@ -29,11 +29,16 @@ pub struct JogArgs {
     #[arg(long, value_parser = ["+", "-"], conflicts_with = "step")]
     continuous: Option<String>,
     /// Incremental jog by DIST (mm, signed).
-    #[arg(long, allow_hyphen_values = true)]
-    step: Option<f64>,
+    #[arg(long, value_name = "DIST", allow_hyphen_values = true)]
+    step: Option<String>,
     /// Jog feed in mm/min.
-    #[arg(long, default_value_t = 1000.0)]
-    feed: f64,
+    #[arg(
+        long,
+        value_name = "MM_PER_MIN",
+        default_value = "1000",
+        allow_hyphen_values = true
+    )]
+    feed: String,
     /// NC program to run before manual mode is selected.
     #[arg(long)]
     program: Option<PathBuf>,
@@ -50,25 +55,27 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
     if a.continuous.is_none() && a.step.is_none() {
         anyhow::bail!("jog: give --continuous + | - or --step DIST");
     }
-    if !(a.feed > 0.0 && a.feed.is_finite()) {
+    let feed = super::number::real(&a.feed).filter(|f| *f > 0.0);
+    let Some(feed) = feed else {
         anyhow::bail!(
-            "jog: --feed {} must be a number > 0 (mm/min)",
-            super::show_number(a.feed)
+            "jog: --feed {}: expected a number > 0 (mm/min), {}",
+            super::cap_echo(&a.feed),
+            super::number::REAL_FORM
         );
-    }
+    };
     // A step no NC program could command (path coordinates are bounded the same way) is bad
     // input, refused before the machine starts; a step inside this bound but beyond the
     // permitted range is the CNC's warning 150008.
-    if let Some(d) = a.step {
-        if !(-MAX_STEP..=MAX_STEP).contains(&d) {
-            anyhow::bail!(
-                "jog: --step {}: expected a distance in mm in -{} … {}",
-                super::show_number(d),
-                super::show_number(MAX_STEP),
-                super::show_number(MAX_STEP)
-            );
-        }
-    }
+    let step = match &a.step {
+        Some(text) => Some(super::number::real_option(
+            "jog: --step",
+            text,
+            -MAX_STEP,
+            MAX_STEP,
+            "a distance in mm",
+        )?),
+        None => None,
+    };
     let cfg = load_machine(a.machine.as_deref(), &a.sets)?;
     let mut m = Machine::new(&cfg)?;
     let i = m
@@ -95,10 +102,10 @@ pub fn run(a: JogArgs) -> anyhow::Result<i32> {
     }
     let ch = m.channel_mut();
     ch.enter_manual();
-    let v = a.feed / 60.0;
+    let v = feed / 60.0;
     if let Some(dir) = &a.continuous {
         ch.jog_continuous(i, if dir == "-" { -v } else { v });
-    } else if let Some(d) = a.step {
+    } else if let Some(d) = step {
         ch.jog_increment(i, d, v);
     }
     // A continuous jog without any limit (non-referenced axis, offset limits 0) would run on:

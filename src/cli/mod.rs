@@ -3,6 +3,7 @@
 //! ```text
 //! fieldprobe run PROGRAM.nc [--machine FILE.toml] [--link LINK] [--set KEY=VALUE]...
 //!                           [--probe-at AXIS=POS]... [--fixed-stop-at AXIS=POS]... [--json]
+//!                           [--quiet]
 //! ```
 //! stdout: `#MSG` lines; stderr: `warning|error <ID>: <text> (N<block>)`; exit 0 program ended,
 //! 1 aborted by a CNC error, 2 bad input. Every `--set` is checked against its own data range
@@ -12,6 +13,10 @@
 //! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `idn`,
 //! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (FCT-C14 control areas,
 //! see `docs/areas.md`).
+//!
+//! Every number on the command line follows one grammar (decimal or `0x` hex, negative values
+//! without `--`; an object index without `0x` is decimal): [`number`], docs/cli.md "Numbers on
+//! the command line". `--quiet`: no progress line on a terminal ([`progress`]).
 
 /// `println!` for the tool's results on stdout that survives a reader going away
 /// (`fieldprobe run … | head`, `> /dev/full`): the first failed write is reported once on
@@ -33,11 +38,15 @@ mod bus;
 mod check;
 mod esi;
 mod jog;
+mod number;
 mod params;
 mod plot;
+mod progress;
 mod run;
+mod sdo;
 mod sim;
 mod trace;
+mod value;
 
 use clap::{Parser, Subcommand};
 
@@ -80,7 +89,7 @@ enum Command {
     Scan(bus::ScanArgs),
     /// Read or write an object by SDO: CoE on an EtherCAT SubDevice (`--device`) or a CANopen
     /// node (`--node`).
-    Sdo(bus::SdoArgs),
+    Sdo(sdo::SdoArgs),
     /// CANopen bus: find nodes, dump frames.
     Can(bus::CanArgs),
     /// Read or write a SERCOS IDN (SoE) of an EtherCAT SubDevice.
@@ -113,18 +122,62 @@ pub fn main() -> i32 {
         Command::Esi(a) => esi::run(a),
         Command::Sim(a) => sim::run(a),
         Command::Scan(a) => bus::scan(a),
-        Command::Sdo(a) => bus::sdo(a),
+        Command::Sdo(a) => sdo::sdo(a),
         Command::Can(a) => bus::can(a),
         Command::Idn(a) => bus::idn(a),
     };
     let code = match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("fieldprobe: {}", cap_echo(&format!("{e:#}")));
+            eprintln!("fieldprobe: {}", cap_echo(&error_text(&e)));
             EXIT_BAD_INPUT
         }
     };
     exit_code_after_output(code)
+}
+
+/// An error and its causes as one line, each thing said once: a cause whose text the line
+/// holds already (an error type that prints its source in its own text) is not repeated, and
+/// [`said_once`] removes a part that follows itself.
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut text = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !text.contains(&c) {
+            text.push_str(": ");
+            text.push_str(&c);
+        }
+    }
+    said_once(&text)
+}
+
+/// `text` with every `: `-separated part that repeats the part before it removed: the layers
+/// of a message that each name the same thing say it once. A part repeats the one before when
+/// it is equal (`node 9: SDO 0x1000:00: SDO 0x1000:00: no response`) or when it is a single
+/// name (no blank, not only digits) the part before ends with (`--link ethercat:lo:
+/// ethercat:lo: interface lo: …`).
+pub fn said_once(text: &str) -> String {
+    let mut parts: Vec<&str> = Vec::new();
+    for part in text.split(": ") {
+        let repeats = parts.last().is_some_and(|before| {
+            *before == part
+                || (!part.contains(char::is_whitespace)
+                    && !part.bytes().all(|b| b.is_ascii_digit())
+                    && before
+                        .strip_suffix(part)
+                        .is_some_and(|head| head.ends_with(char::is_whitespace)))
+        });
+        if !repeats {
+            parts.push(part);
+        }
+    }
+    parts.join(": ")
+}
+
+/// `prefix: text`, said once ([`said_once`]): `--link ethercat:lo` + `ethercat:lo: interface
+/// lo: …` is `--link ethercat:lo: interface lo: …`.
+pub fn prefixed(prefix: &str, text: impl std::fmt::Display) -> String {
+    said_once(&format!("{prefix}: {text}"))
 }
 
 /// A command whose stdout or capture file could not be written did not deliver its result: it
@@ -175,22 +228,14 @@ pub fn cap_echo(text: &str) -> std::borrow::Cow<'_, str> {
     std::borrow::Cow::Owned(out)
 }
 
-pub use fieldprobe::messages::show_number;
-
 /// Longest time a `--seconds` option takes: about 31.7 years, far beyond any test or
 /// commissioning session, and far inside what `Instant` and `Duration` hold.
 pub const MAX_SECONDS: f64 = 1e9;
 
-/// Check a `--seconds` value (`option` names it in the message): finite, 0 … [`MAX_SECONDS`].
-/// The caller exits 2 on the error.
-pub fn seconds_option(option: &str, s: f64) -> anyhow::Result<std::time::Duration> {
-    if !(0.0..=MAX_SECONDS).contains(&s) {
-        anyhow::bail!(
-            "{option} {}: expected a number of seconds in 0 … {}",
-            show_number(s),
-            show_number(MAX_SECONDS)
-        );
-    }
+/// Read a `--seconds` value (`option` names it in the message): a real number
+/// ([`number::real`]), 0 … [`MAX_SECONDS`]. The caller exits 2 on the error.
+pub fn seconds_option(option: &str, text: &str) -> anyhow::Result<std::time::Duration> {
+    let s = number::real_option(option, text, 0.0, MAX_SECONDS, "a number of seconds")?;
     Ok(std::time::Duration::from_secs_f64(s))
 }
 
@@ -270,10 +315,10 @@ pub struct LinkArgs {
 pub struct RtArgs {
     /// SCHED_FIFO at this priority (1 ..= 99; needs CAP_SYS_NICE or RLIMIT_RTPRIO). `run`:
     /// links that leave the process only.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = number::value_priority, allow_hyphen_values = true)]
     rt_priority: Option<u8>,
     /// Pin to this CPU. `run`: links that leave the process only.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = number::value_cpu, allow_hyphen_values = true)]
     cpu: Option<usize>,
     /// Lock all memory (mlockall) so no page fault delays a cycle. `run`: links that leave the
     /// process only.
@@ -405,5 +450,85 @@ pub(crate) fn write_stdout(args: std::fmt::Arguments<'_>) {
         if !STDOUT_FAILED.swap(true, Ordering::Relaxed) {
             eprintln!("fieldprobe: writing to stdout failed ({e}); further output is dropped");
         }
+    }
+}
+
+/// Erase the progress line of `run`, if one is shown (before the log writes to stderr).
+pub fn clear_progress() {
+    progress::clear();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn said_once_drops_a_part_that_repeats_the_one_before() {
+        assert_eq!(
+            said_once("node 9: SDO 0x1000:00: SDO 0x1000:00: no response"),
+            "node 9: SDO 0x1000:00: no response"
+        );
+        assert_eq!(said_once("a: b: a: b"), "a: b: a: b");
+        assert_eq!(said_once("x"), "x");
+        assert_eq!(
+            said_once("--link ethercat:lo: ethercat:lo: interface lo: gone"),
+            "--link ethercat:lo: interface lo: gone"
+        );
+        // Numbers and phrases are not names: kept.
+        assert_eq!(said_once("--node 5: 5: x"), "--node 5: 5: x");
+        assert_eq!(said_once("axis Z: moved Z: x"), "axis Z: moved Z: x");
+    }
+
+    #[test]
+    fn prefixed_does_not_repeat_the_prefix_word() {
+        assert_eq!(
+            prefixed("--link ethercat:lo", "ethercat:lo: interface lo: gone"),
+            "--link ethercat:lo: interface lo: gone"
+        );
+        assert_eq!(
+            prefixed("--link canopen-emu", "node id 0: allowed 1 … 127"),
+            "--link canopen-emu: node id 0: allowed 1 … 127"
+        );
+    }
+
+    #[derive(Debug)]
+    struct Inner;
+    impl std::fmt::Display for Inner {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("Operation not permitted (os error 1)")
+        }
+    }
+    impl std::error::Error for Inner {}
+
+    /// An error that prints its source in its own text and also returns it as `source()`.
+    #[derive(Debug)]
+    struct Outer(Inner);
+    impl std::fmt::Display for Outer {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(
+                f,
+                "interface lo: cannot open a raw packet socket: {}",
+                self.0
+            )
+        }
+    }
+    impl std::error::Error for Outer {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            Some(&self.0)
+        }
+    }
+
+    #[test]
+    fn error_text_says_a_cause_once() {
+        let e = anyhow::Error::new(Outer(Inner));
+        assert_eq!(
+            error_text(&e),
+            "interface lo: cannot open a raw packet socket: Operation not permitted (os error 1)"
+        );
+        let e = anyhow::Error::new(Inner).context("--trace t.svg");
+        assert_eq!(
+            error_text(&e),
+            "--trace t.svg: Operation not permitted (os error 1)"
+        );
     }
 }

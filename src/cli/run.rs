@@ -1,9 +1,11 @@
 //! `fieldprobe run`.
 
+use super::progress::Progress;
 use super::{load_machine, load_program, LinkArgs, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus};
 use fieldprobe::nc::exec::Executor;
+use std::io::IsTerminal;
 use std::path::PathBuf;
 
 /// Arguments of `fieldprobe run`.
@@ -32,18 +34,22 @@ pub struct RunArgs {
     /// over time, probe edges and the latched values of the axes that measured marked.
     #[arg(long, value_name = "FILE.svg|FILE.png")]
     trace: Option<PathBuf>,
+    /// No progress line on stderr (it is shown only when stderr is a terminal and the run
+    /// lasts longer than a second).
+    #[arg(long, short = 'q')]
+    quiet: bool,
 }
 
+/// `AXIS=POS` (POS in mm, [`super::number::position`]).
 fn parse_axis_pos(opt: &str, s: &str) -> anyhow::Result<(String, f64)> {
     let (ax, pos) = s
         .split_once('=')
         .with_context(|| format!("{opt} {s}: expected AXIS=POS, e.g. Z=100"))?;
-    let pos: f64 = pos
-        .trim()
-        .parse()
-        .ok()
-        .filter(|p: &f64| p.is_finite())
-        .with_context(|| format!("{opt} {s}: '{pos}' is not a position in mm"))?;
+    let pos = super::number::position(opt, pos.trim()).map_err(|e| super::number::NumberError {
+        text: s.to_string(),
+        expected: format!("AXIS=POS with {}", e.expected),
+        ..e
+    })?;
     Ok((ax.trim().to_string(), pos))
 }
 
@@ -112,11 +118,25 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         machine.enable_trace();
     }
     let json = a.json;
-    let report = machine.run_program(&program, &mut |e| match e {
-        RunEvent::Output(line) if !json => outln!("{line}"),
-        RunEvent::Message(m) => eprintln!("{m}"),
-        RunEvent::Output(_) => {}
-    });
+    // The progress line: on a terminal, unless --quiet; cycles per second on the links that
+    // run on the wall clock.
+    let mut progress = Progress::new(
+        !a.quiet && std::io::stderr().is_terminal(),
+        choice.leaves_process(),
+    );
+    let report = machine.run_program_with_progress(
+        &program,
+        &mut |e| {
+            super::progress::clear();
+            match e {
+                RunEvent::Output(line) if !json => outln!("{line}"),
+                RunEvent::Message(m) => eprintln!("{m}"),
+                RunEvent::Output(_) => {}
+            }
+        },
+        &mut |p| progress.tick(p),
+    );
+    progress.finish();
     // The JSON report is the state at the program's end (command and actual positions,
     // limits); the power-off below makes the command follow the actual position.
     let mut json_report = json.then(|| report_json(&program.name, &report, &machine));

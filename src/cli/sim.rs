@@ -58,7 +58,7 @@
 //!
 //! Exit 0; 2 on bad input (the message names the file, position or interface).
 
-use super::{EXIT_BAD_INPUT, EXIT_OK};
+use super::{number, EXIT_BAD_INPUT, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::bus::can::{CanBus, CanError};
 use fieldprobe::bus::canopen::eds;
@@ -125,8 +125,8 @@ struct EthercatArgs {
     #[arg(long)]
     lockstep: bool,
     /// Stop after this many seconds (default: run until killed).
-    #[arg(long, value_name = "N")]
-    seconds: Option<f64>,
+    #[arg(long, value_name = "N", allow_hyphen_values = true)]
+    seconds: Option<String>,
     /// Real-time options of the serve threads (a device answers in hardware: on a loaded
     /// machine an emulator without them answers late, and the master sees late frames).
     #[command(flatten)]
@@ -165,10 +165,18 @@ fn split_position<'a>(option: &str, spec: &'a str) -> anyhow::Result<(usize, &'a
     let (pos, value) = spec
         .split_once('=')
         .with_context(|| format!("{option} {spec}: expected POS=VALUE"))?;
-    let pos: usize = pos
-        .trim()
-        .parse()
-        .with_context(|| format!("{option} {spec}: ring position {pos:?} is not a number"))?;
+    let pos = number::int_in(
+        pos.trim(),
+        0,
+        i128::from(u16::MAX),
+        "POS=VALUE with a ring position",
+    )
+    .map_err(|expected| number::NumberError {
+        what: option.to_string(),
+        text: spec.to_string(),
+        expected,
+    })?
+    .value as usize;
     Ok((pos, value.trim()))
 }
 
@@ -279,17 +287,13 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
         None => None,
         Some(s) => Some(super::deadline_after(
             "--seconds",
-            super::seconds_option("--seconds", s)?,
+            super::seconds_option("--seconds", &s)?,
         )?),
     };
     let mut plant = Plant::new();
     for spec in &a.probes {
         let (pos, mm) = split_position("--probe-at", spec)?;
-        let mm: f64 = mm
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite())
-            .with_context(|| format!("--probe-at {spec}: {mm:?} is not a position in mm"))?;
+        let mm = position("--probe-at", spec, "POS=MM", mm)?;
         let (device, scaling) = hosted
             .iter()
             .enumerate()
@@ -433,8 +437,8 @@ pub struct CanopenArgs {
     #[arg(long = "heartbeat-ms", value_name = "MS")]
     heartbeat_ms: Option<String>,
     /// Stop after this many seconds (default: run until killed).
-    #[arg(long, value_name = "N")]
-    seconds: Option<f64>,
+    #[arg(long, value_name = "N", allow_hyphen_values = true)]
+    seconds: Option<String>,
     /// Real-time options of the serve loop (see `sim ethercat`).
     #[command(flatten)]
     rt: super::RtArgs,
@@ -532,13 +536,29 @@ fn open_can_bus(spec: &str, bus: CanBusSpec) -> anyhow::Result<Box<dyn CanBus>> 
     })
 }
 
-/// `--node ID` → node id 1 … 127.
+/// The node id `id` in the argument `spec` of `option` (`--node 0x05`, `--probe-at 5=10`):
+/// 1 … 127, decimal or 0x hex.
 fn parse_node_id(option: &str, spec: &str, id: &str) -> anyhow::Result<u8> {
-    id.trim()
-        .parse::<u8>()
-        .ok()
-        .filter(|n| (1..=127).contains(n))
-        .with_context(|| format!("{option} {spec}: node id {id:?} (allowed: 1 … 127)"))
+    let mut e = match number::node_id(option, id.trim()) {
+        Ok(n) => return Ok(n),
+        Err(e) => e,
+    };
+    if spec != id {
+        e.text = spec.to_string();
+        e.expected = format!("ID=MM with {}", e.expected);
+    }
+    Err(e.into())
+}
+
+/// The position MM (mm) in the argument `spec` (of the form `form`, e.g. `ID=MM`) of `option`.
+fn position(option: &str, spec: &str, form: &str, mm: &str) -> anyhow::Result<f64> {
+    number::position(option, mm).map_err(|e| {
+        anyhow::anyhow!(number::NumberError {
+            text: spec.to_string(),
+            expected: format!("{form} with {}", e.expected),
+            ..e
+        })
+    })
 }
 
 fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
@@ -547,16 +567,21 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         None => None,
         Some(s) => Some(super::deadline_after(
             "--seconds",
-            super::seconds_option("--seconds", s)?,
+            super::seconds_option("--seconds", &s)?,
         )?),
     };
     let heartbeat = a
         .heartbeat_ms
         .as_deref()
         .map(|ms| {
-            ms.trim().parse::<u16>().map_err(|_| {
-                anyhow::anyhow!("--heartbeat-ms {ms}: expected 0 … 65535 (ms, 0 = no heartbeat)")
-            })
+            number::int_option(
+                "--heartbeat-ms",
+                ms.trim(),
+                0,
+                i128::from(u16::MAX),
+                "a time in ms (0 = no heartbeat)",
+            )
+            .map(|v| v as u16)
         })
         .transpose()?;
     let mut ids = Vec::new();
@@ -605,12 +630,7 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
         let device = ids.iter().position(|&n| n == id).with_context(|| {
             format!("{option} {spec}: node {id} is not emulated (nodes: {ids:?})")
         })?;
-        let mm: f64 = mm
-            .trim()
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite())
-            .with_context(|| format!("{option} {spec}: {mm:?} is not a position in mm"))?;
+        let mm = position(option, spec, "ID=MM", mm.trim())?;
         let inc = def
             .scaling
             .to_increments(mm)
