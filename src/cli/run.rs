@@ -75,9 +75,16 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         return Ok(EXIT_BAD_INPUT);
     }
     let mut machine = Machine::with_link(&cfg, &choice)?;
-    // The bus as it came up: EtherCAT segment, SubDevices not named, wire time per cycle.
+    // The bus as it came up (EtherCAT segment, SubDevices not named, wire time per cycle): on
+    // stderr for a real bus and for a machine that names terminals; the emulator's default
+    // segment of axes only is logged (FIELDPROBE_LOG=info), not printed.
+    let print_report = choice.leaves_process() || !cfg.terminals.is_empty();
     for m in machine.startup_report() {
-        eprintln!("{m}");
+        if print_report {
+            eprintln!("{m}");
+        } else {
+            tracing::info!(target: "fieldprobe::link::ethercat", "{m}");
+        }
     }
     // The cyclic phase runs with the real-time options; the start-up (SII, mailbox, PDO
     // mapping) ran without them, as the masters' start-up threads do.

@@ -450,14 +450,14 @@ mod tests {
         log.record(&frame(&[(2, 6, 6, 0)]), false);
         // Part 2: the inputs of device 1 (+1), the outputs of both (+2 each).
         log.record(&frame(&[(2, 6, 6, 5)]), true);
-        assert_eq!(log.check(2, &want), Ok(()));
+        assert_eq!(log.check(2, want), Ok(()));
         // The second part one short.
         log.start();
         log.record(&frame(&[(3, 0, 6, 0)]), false);
         log.record(&frame(&[(3, 0, 6, 2)]), true);
         log.record(&frame(&[(4, 6, 6, 0)]), false);
         log.record(&frame(&[(4, 6, 6, 4)]), true);
-        let e = log.check(2, &want).unwrap_err();
+        let e = log.check(2, want).unwrap_err();
         assert_eq!((e.number, e.of), (2, 2));
         assert_eq!(
             e.kind,
@@ -469,7 +469,7 @@ mod tests {
         // The first part lost: the second was never sent.
         log.start();
         log.record(&frame(&[(5, 0, 6, 0)]), false);
-        let mut e = log.check(2, &want).unwrap_err();
+        let mut e = log.check(2, want).unwrap_err();
         assert_eq!((e.number, e.of, e.kind), (1, 2, FaultKind::Lost));
         e.devices = m.devices_in(e.datagram.start, e.datagram.len);
         assert_eq!(
@@ -480,9 +480,9 @@ mod tests {
         log.start();
         log.record(&frame(&[(7, 0, 6, 0)]), false);
         log.record(&frame(&[(5, 0, 6, 2)]), true);
-        assert_eq!(log.check(1, &want).unwrap_err().kind, FaultKind::Lost);
+        assert_eq!(log.check(1, want).unwrap_err().kind, FaultKind::Lost);
         // Nothing sent at all.
         log.start();
-        assert_eq!(log.check(2, &want).unwrap_err().kind, FaultKind::NotSent);
+        assert_eq!(log.check(2, want).unwrap_err().kind, FaultKind::NotSent);
     }
 }
