@@ -122,75 +122,63 @@ pub fn nominal_bits(data_len: usize, extended: bool) -> u32 {
     g + 8 * n + TAIL_BITS
 }
 
-/// The bits from start of frame to the end of the data field of `frame` (destuffed), MSB of
-/// every field first, then the CRC-15 over them — the part of the frame that is stuffed.
-/// Bits are `false` dominant (0), `true` recessive (1).
-fn stuffed_part(frame: &CanFrame, out: &mut Vec<bool>) {
-    fn push(out: &mut Vec<bool>, value: u32, bits: u32) {
-        for k in (0..bits).rev() {
-            out.push((value >> k) & 1 != 0);
+/// A frame's bits as the sender puts them on the wire, counted as they come: the CRC-15 over
+/// the bits before the CRC sequence, the stuff bits over everything up to its end.
+#[derive(Debug, Default)]
+struct Sender {
+    bits: u32,
+    crc: u16,
+    last: Option<bool>,
+    run: u32,
+    stuff: u32,
+}
+
+impl Sender {
+    /// One bit (`false` dominant, `true` recessive); `crc`: it is covered by the CRC.
+    fn bit(&mut self, b: bool, crc: bool) {
+        if crc {
+            let next = b ^ (self.crc & 0x4000 != 0);
+            self.crc = (self.crc << 1) & 0x7FFF;
+            if next {
+                self.crc ^= CRC15_POLY;
+            }
+        }
+        self.bits += 1;
+        if Some(b) == self.last {
+            self.run += 1;
+        } else {
+            self.last = Some(b);
+            self.run = 1;
+        }
+        if self.run == 5 {
+            // The stuff bit has the other level and starts a new run of one.
+            self.stuff += 1;
+            self.last = Some(!b);
+            self.run = 1;
         }
     }
-    out.clear();
-    push(out, 0, 1); // start of frame, dominant
-    let len = u32::from(frame.len.min(8));
-    if frame.extended {
-        let id = frame.id & super::CAN_EFF_MASK;
-        push(out, id >> 18, 11); // base identifier
-        push(out, 1, 1); // SRR, recessive
-        push(out, 1, 1); // IDE, recessive
-        push(out, id & 0x3_FFFF, 18); // identifier extension
-        push(out, u32::from(frame.rtr), 1);
-        push(out, 0, 2); // r1, r0
-    } else {
-        push(out, frame.id & super::CAN_SFF_MASK, 11);
-        push(out, u32::from(frame.rtr), 1);
-        push(out, 0, 2); // IDE (dominant: base format), r0
-    }
-    push(out, len, 4);
-    if !frame.rtr {
-        for &b in frame.payload() {
-            push(out, u32::from(b), 8);
+
+    /// `n` bits of `value`, most significant first.
+    fn field(&mut self, value: u32, n: u32, crc: bool) {
+        for k in (0..n).rev() {
+            self.bit((value >> k) & 1 != 0, crc);
         }
     }
-    let crc = crc15(out);
-    push(out, u32::from(crc), 15);
 }
 
 /// CRC-15 of CAN over `bits` (ISO 11898-1 §10.4.2.6: shift register, generator 0x4599).
 pub fn crc15(bits: &[bool]) -> u16 {
-    let mut reg: u16 = 0;
-    for &b in bits {
-        let next = b ^ (reg & 0x4000 != 0);
-        reg = (reg << 1) & 0x7FFF;
-        if next {
-            reg ^= CRC15_POLY;
-        }
-    }
-    reg
+    let mut s = Sender::default();
+    bits.iter().for_each(|&b| s.bit(b, true));
+    s.crc
 }
 
 /// Stuff bits the sender inserts into `bits` (five equal bits → one of the other level, which
 /// counts towards the next run).
 pub fn stuff_bits(bits: &[bool]) -> u32 {
-    let mut count = 0;
-    let mut run = 0;
-    let mut last = None;
-    for &b in bits {
-        if Some(b) == last {
-            run += 1;
-        } else {
-            last = Some(b);
-            run = 1;
-        }
-        if run == 5 {
-            count += 1;
-            // The stuff bit has the other level and starts a new run of one.
-            last = Some(!b);
-            run = 1;
-        }
-    }
-    count
+    let mut s = Sender::default();
+    bits.iter().for_each(|&b| s.bit(b, false));
+    s.stuff
 }
 
 /// Bit times `frame` takes on the bus: its fields with their real stuff bits plus the unstuffed
@@ -200,9 +188,29 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
     if frame.error {
         return 0;
     }
-    let mut bits = Vec::with_capacity(160);
-    stuffed_part(frame, &mut bits);
-    bits.len() as u32 + stuff_bits(&bits) + TAIL_BITS
+    let mut s = Sender::default();
+    s.field(0, 1, true); // start of frame, dominant
+    if frame.extended {
+        let id = frame.id & super::CAN_EFF_MASK;
+        s.field(id >> 18, 11, true); // base identifier
+        s.field(0b11, 2, true); // SRR, IDE: recessive
+        s.field(id & 0x3_FFFF, 18, true); // identifier extension
+        s.field(u32::from(frame.rtr), 1, true);
+        s.field(0, 2, true); // r1, r0
+    } else {
+        s.field(frame.id & super::CAN_SFF_MASK, 11, true);
+        s.field(u32::from(frame.rtr), 1, true);
+        s.field(0, 2, true); // IDE (dominant: base format), r0
+    }
+    s.field(u32::from(frame.len.min(8)), 4, true);
+    if !frame.rtr {
+        for &b in frame.payload() {
+            s.field(u32::from(b), 8, true);
+        }
+    }
+    let crc = s.crc;
+    s.field(u32::from(crc), 15, false);
+    s.bits + s.stuff + TAIL_BITS
 }
 
 /// The time `frame` takes on the bus at `bitrate` ([`frame_bits`]).

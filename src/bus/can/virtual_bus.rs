@@ -70,6 +70,8 @@ struct Queued {
     from: Option<u64>,
     frame: CanFrame,
     key: u32,
+    /// Its bit times on the wire ([`timing::frame_bits`]).
+    bits: u32,
 }
 
 /// The wire of a bus with a bit rate (module documentation, "The wire").
@@ -101,7 +103,7 @@ impl Wire {
             .enumerate()
             .filter(|(_, q)| q.ready <= start)
             .min_by_key(|(_, q)| (q.key, q.seq))?;
-        let end = start.saturating_add(timing::wire_time(&q.frame, self.bitrate));
+        let end = start.saturating_add(self.bitrate.time_of(u64::from(q.bits)));
         Some((start, end, i))
     }
 }
@@ -168,6 +170,7 @@ impl Hub {
                     from,
                     frame: *frame,
                     key: timing::arbitration_key(frame),
+                    bits: timing::frame_bits(frame),
                 });
             }
             _ => {
@@ -203,7 +206,7 @@ impl Hub {
         let (_, _, q) = w.on_wire.take()?;
         w.clock = end;
         w.idle_at = end;
-        w.bits += u64::from(timing::frame_bits(&q.frame));
+        w.bits += u64::from(q.bits);
         self.deliver(q.from, &q.frame, end);
         Some(Delivery {
             at: end,
@@ -416,6 +419,10 @@ impl CanBus for VirtualEndpoint {
     }
 
     fn recv(&mut self, timeout: Duration) -> Result<Option<CanFrame>, CanError> {
+        if timeout.is_zero() {
+            // A poll: no clock to read.
+            return Ok(self.recv_timed().map(|(f, _)| f));
+        }
         let deadline = Instant::now().checked_add(timeout);
         let mut hub = lock(&self.hub);
         loop {
