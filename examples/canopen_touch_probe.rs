@@ -107,7 +107,14 @@ fn probe(
     probe_at: f64,
     torque_percent: f64,
 ) -> Result<Outcome, Error> {
-    let mut link = CanopenLink::open(bus, std::slice::from_ref(drive), &[NODE], CYCLE, None)?;
+    let mut link = CanopenLink::open(
+        bus,
+        std::slice::from_ref(drive),
+        &[NODE],
+        CYCLE,
+        fieldprobe::bus::can::Bitrate::DEFAULT,
+        None,
+    )?;
 
     // SDO: the drive file's function table says which object the torque limit is.
     let f = drive

@@ -414,7 +414,8 @@ impl Machine {
             meas: channel_meas_config(&cfg.channel),
         };
         // P-AXIS-00777 > 1000: warning 110757 at controller start (FCT-C4 §8.2.2).
-        let startup: Vec<CncMessage> = ch_cfg
+        #[allow(unused_mut)] // the CAN bus-load warning is pushed with feature `sim`
+        let mut startup: Vec<CncMessage> = ch_cfg
             .axes
             .iter()
             .zip(&cfg.axes)
@@ -441,18 +442,49 @@ impl Machine {
         } else {
             Vec::new()
         };
+        let is_can = choice.link == "canopen-emu"
+            || choice.link.starts_with("canopen-udp")
+            || choice.link.starts_with("socketcan:");
+        // The bus load of the cycle (docs/canopen.md "Bus load"): the CANopen link refuses it
+        // above 100 % (bad input: the message names the machine file), warning 900070 above
+        // 70 %.
+        #[cfg(feature = "sim")]
+        let check = if is_can {
+            let bitrate = crate::bus::can::Bitrate::new(cfg.can_bitrate).ok_or_else(|| {
+                MachineError::Config(format!("{}: [can] bitrate = 0", cfg.source))
+            })?;
+            crate::link::canopen::plan_bus_load(&defs, &node_ids, bitrate, cycle)
+                .ok()
+                .map(|l| l.check())
+        } else {
+            None
+        };
+        #[cfg(not(feature = "sim"))]
+        let check: Option<Result<Option<String>, String>> = {
+            let _ = is_can;
+            None
+        };
         let link = crate::link::open(crate::link::LinkRequest {
             link: &choice.link,
             drives: &defs,
             models,
             node_ids: &node_ids,
             cycle,
+            can_bitrate: cfg.can_bitrate,
             pcap: choice.pcap.as_deref(),
             candump: choice.candump.as_deref(),
             #[cfg(feature = "sim")]
             terminals: ethercat_terminals(cfg)?,
         })
-        .map_err(|e| MachineError::Config(format!("--link {}: {e}", choice.link)))?;
+        .map_err(|e| match &check {
+            Some(Err(refusal)) if e.to_string() == *refusal => {
+                MachineError::Config(format!("{}: {refusal}", cfg.source))
+            }
+            _ => MachineError::Config(format!("--link {}: {e}", choice.link)),
+        })?;
+        if let Some(Ok(Some(w))) = check {
+            startup.push(CncMessage::warning(ids::CAN_BUS_LOAD, w));
+        }
         let mut link = link;
         if let Some(path) = &choice.cycle_log {
             let file = std::fs::File::create(path).map_err(|e| {

@@ -187,6 +187,9 @@ pub mod ids {
     pub const LAG_LIMIT: u32 = 900014;
     /// Project: an acyclic drive access (`#DRIVE`, `#IDENT`) failed.
     pub const ACYCLIC_FAILED: u32 = 900050;
+    /// Project (warning, at the start of a run on a CANopen link): the bus load of one cycle
+    /// is above 70 % (docs/canopen.md "Bus load"; above 100 % the link refuses to start, exit 2).
+    pub const CAN_BUS_LOAD: u32 = 900070;
 
     /// Project: an NC expression or command could not be evaluated (unknown variable, bad
     /// `#MSG` format, unknown axis).

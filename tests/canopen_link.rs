@@ -19,6 +19,18 @@ use fieldprobe::units::Nanos;
 
 const Z: usize = 2;
 
+/// The default machine's cycle on CAN (issue 16): its three nodes put 1840 bit times per cycle
+/// on the bus at worst (SYNC and 15 PDOs), 4 ms at 1 Mbit/s keeps the load at 56 %
+/// (docs/canopen.md "Bus load"); the default 1 ms would be 194 %, refused.
+const CAN_CYCLE: &str = "cycle_time_us=4000";
+
+/// The default machine at [`CAN_CYCLE`].
+fn can_machine() -> MachineConfig {
+    let mut cfg = MachineConfig::default_machine();
+    cfg.apply_set(CAN_CYCLE).unwrap();
+    cfg
+}
+
 fn program(name: &str) -> String {
     std::fs::read_to_string(format!(
         "{}/examples/nc/seed004/{name}.nc",
@@ -69,8 +81,8 @@ fn run_on(
 
 #[test]
 fn seed_examples_print_the_same_over_canopen_emu_as_over_sim() {
-    let cfg = MachineConfig::default_machine();
-    let mut fs = MachineConfig::default_machine();
+    let cfg = can_machine();
+    let mut fs = can_machine();
     // Seed 004 §7.3: FIXED_STOP as Z's signal source and a detection criterion.
     fs.apply_set("Z.kenngr.measure.signal=FIXED_STOP").unwrap();
     fs.apply_set("Z.P-AXIS-00774=10000").unwrap();
@@ -102,7 +114,7 @@ fn seed_examples_print_the_same_over_canopen_emu_as_over_sim() {
 
 fn emu(axes: usize) -> CanopenLink {
     let def = Arc::new(fieldprobe::drive::catalogue::load("cia402-generic").unwrap());
-    CanopenLink::emulated(&vec![def; axes], Nanos::from_micros(1000)).unwrap()
+    CanopenLink::emulated(&vec![def; axes], Nanos::from_micros(4000)).unwrap()
 }
 
 #[test]
@@ -182,12 +194,12 @@ fn a_drive_fault_sends_an_emcy() {
     let def = fieldprobe::drive::catalogue::load("cia402-generic").unwrap();
     let mut images = vec![ProcessImage::new(def.rxpdo.len(), def.txpdo.len())];
     for k in 1..=3 {
-        link.exchange(Nanos::from_micros(1000 * k), &mut images)
+        link.exchange(Nanos::from_micros(4000 * k), &mut images)
             .unwrap();
     }
     link.model_mut(0).unwrap().inject_fault(0x8611);
     for k in 4..=6 {
-        link.exchange(Nanos::from_micros(1000 * k), &mut images)
+        link.exchange(Nanos::from_micros(4000 * k), &mut images)
             .unwrap();
     }
     let emcy = link.take_emergencies();
@@ -206,7 +218,7 @@ use measuring::measuring_run;
 #[test]
 fn lost_tpdos_a_lost_heartbeat_or_a_drive_fault_during_a_measuring_run_publish_nothing() {
     for fault in ["lost TPDOs", "lost heartbeat", "drive fault"] {
-        let cfg = MachineConfig::default_machine();
+        let cfg = can_machine();
         let mut m = Machine::with_link(&cfg, &LinkChoice::new("canopen-emu")).unwrap();
         m.add_probe("Z", 80.0).unwrap();
         let (ids, exec) = measuring_run(&mut m, |m, k| match (fault, k) {

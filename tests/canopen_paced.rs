@@ -38,8 +38,10 @@ fn start_up_writes_cycle_period_and_synchronous_window_to_every_node() {
         assert_eq!(link.read_object(device, 0x1007, 0), Ok(2000), "{device}");
     }
     // In the nodes' own dictionaries too (UNSIGNED32 little endian), and the deadline
-    // monitoring of every RPDO in use: event-timer (0x1400 + k sub-index 5, UNSIGNED16 ms) =
-    // five cycles = 20 ms; the RPDOs not in use (COB-ID bit 31 set) keep 0.
+    // monitoring of every cyclic RPDO in use: event-timer (0x1400 + k sub-index 5, UNSIGNED16
+    // ms) = five cycles = 20 ms; the RPDOs not in use (COB-ID bit 31 set) keep 0, and so does
+    // the on-change RPDO (transmission type 0, issue 16: the modes of operation 0x6060 alone,
+    // sent only when it changes, so no deadline).
     for n in link.segment().unwrap().nodes() {
         assert_eq!(n.read_object(0x1006, 0), Ok(4000u32.to_le_bytes().to_vec()));
         assert_eq!(n.read_object(0x1007, 0), Ok(2000u32.to_le_bytes().to_vec()));
@@ -48,9 +50,12 @@ fn start_up_writes_cycle_period_and_synchronous_window_to_every_node() {
             let cob = n.read_object(0x1400 + k, 1).unwrap();
             let valid = cob[3] & 0x80 == 0;
             let timer = n.read_object(0x1400 + k, 5).unwrap();
+            let cyclic = n.read_object(0x1400 + k, 2).unwrap() != [0];
             assert_eq!(
                 timer,
-                if valid { 20u16 } else { 0 }.to_le_bytes().to_vec(),
+                if valid && cyclic { 20u16 } else { 0 }
+                    .to_le_bytes()
+                    .to_vec(),
                 "node {} RPDO {}",
                 n.id(),
                 k + 1
@@ -140,9 +145,12 @@ fn the_master_remaps_a_node_with_the_ipos_pdo_defaults_and_enables_it_by_its_pdo
     );
     let mut link = CanopenLink::with_nodes(vec![node], std::slice::from_ref(&d), Nanos(2_000_000))
         .unwrap_or_else(|e| panic!("{e}"));
-    // The master's start-up remap: synchronous (type 1) PDOs, the unused ones disabled.
+    // The master's start-up remap: synchronous PDOs, the unused ones disabled — every cycle
+    // (type 1) for the set-points and the actual values, on change (type 0) for the touch
+    // probe positions in TPDO1 (issue 16, docs/canopen.md "PDO layout").
     assert_eq!(link.read_object(0, 0x1400, 2), Ok(1));
-    assert_eq!(link.read_object(0, 0x1800, 2), Ok(1));
+    assert_eq!(link.read_object(0, 0x1800, 2), Ok(0));
+    assert_eq!(link.read_object(0, 0x1802, 2), Ok(1));
     assert_ne!(link.read_object(0, 0x1402, 1).unwrap() & 0x8000_0000, 0);
     // Controlword 6, 7, 0xF through the RPDOs, statusword back through the TPDOs.
     let mut images = vec![ProcessImage::new(d.rxpdo.len(), d.txpdo.len())];
@@ -231,6 +239,7 @@ fn paced_cycle_keeps_the_period_and_a_stalled_master_is_reported() {
         std::slice::from_ref(&d),
         &[1],
         Nanos(PERIOD),
+        fieldprobe::bus::can::Bitrate::DEFAULT,
         None,
     )
     .unwrap_or_else(|e| panic!("{e}"));

@@ -215,7 +215,17 @@ fn pcap_write_error_is_an_error_after_a_complete_run() {
 #[test]
 fn candump_write_error_is_an_error() {
     let (_d, p) = program("N10 G01 X10 F1000\nN20 #MSG SYN [\"done\"]\nN30 M30\n");
-    let o = fieldprobe(&["run", &p, "--link", "canopen-emu", "--candump", "/dev/full"]);
+    // Issue 16: the default machine's three nodes need 4 ms at 1 Mbit/s on CAN.
+    let o = fieldprobe(&[
+        "run",
+        &p,
+        "--link",
+        "canopen-emu",
+        "--set",
+        "cycle_time_us=4000",
+        "--candump",
+        "/dev/full",
+    ]);
     let e = stderr(&o);
     assert!(
         e.contains("--candump /dev/full") && e.contains("failed"),

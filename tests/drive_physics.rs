@@ -24,8 +24,29 @@ const INC: f64 = 1e-4;
 /// The links the emulated drives run on.
 const LINKS: [&str; 3] = ["sim", "ethercat-emu", "canopen-emu"];
 
+/// The cycle of the default machine on `link`: 1 ms, and on CAN 4 ms — three nodes put 1840
+/// bit times per cycle on the bus at worst, 194 % of 1 ms at 1 Mbit/s (refused), 56 % of 4 ms
+/// (issue 16, docs/canopen.md "Bus load").
+fn cycle_on(link: &str) -> &'static str {
+    if link == "canopen-emu" {
+        "cycle_time_us=4000"
+    } else {
+        "cycle_time_us=1000"
+    }
+}
+
+/// [`cycle_on`] in seconds.
+fn cycle_s(link: &str) -> f64 {
+    if link == "canopen-emu" {
+        0.004
+    } else {
+        0.001
+    }
+}
+
 fn machine_on(link: &str, sets: &[&str]) -> Machine {
     let mut cfg = MachineConfig::default_machine();
+    cfg.apply_set(cycle_on(link)).unwrap();
     for s in sets {
         cfg.apply_set(s)
             .unwrap_or_else(|e| panic!("--set {s}: {e}"));
@@ -105,8 +126,12 @@ fn following_error_with_feed_forward_is_in_the_micrometre_range_on_every_link() 
     for link in LINKS {
         let (worst, drive_lag) = lag_over_a_block(link, "cia402-generic");
         // Ramp 1 m/s² at T = 1 ms, speed loop 1 ms: the tracking error is a fraction of a µm;
-        // the increments of 0x6064 add half an increment.
-        assert!(worst < 1e-3, "{link}: CNC lag up to {worst} mm");
+        // the increments of 0x6064 add half an increment. At a longer cycle (CAN: 4 ms) the
+        // ramp's position changes by up to a T² / 2 between two samples (8 µm at 4 ms), of
+        // which the lag is a fraction.
+        let t = cycle_s(link);
+        let bound = 1e-3f64.max(0.5 * 1000.0 * t * t);
+        assert!(worst < bound, "{link}: CNC lag up to {worst} mm");
         assert!(
             drive_lag.abs() <= INC,
             "{link}: 0x60F4 at speed {drive_lag}"
@@ -191,7 +216,11 @@ fn fixed_stop_program_latches_the_wall_with_a_0_1_mm_criterion_on_every_family_a
             let t = m.trace().unwrap();
             let steps = t.command[Z].windows(2).map(|w| (w[1] - w[0]).abs());
             let worst = steps.fold(0.0, f64::max);
-            assert!(worst <= 0.2 + 1e-9, "{what}: set-point step {worst} mm");
+            let max_step = 200.0 * cycle_s(link);
+            assert!(
+                worst <= max_step + 1e-9,
+                "{what}: set-point step {worst} mm"
+            );
             // N060 G01 Z100 ended in position.
             assert!(
                 (m.channel().axes()[Z].actual() - 100.0).abs() <= 0.001,

@@ -14,8 +14,21 @@ use measuring::measuring_run;
 const Z: usize = 2;
 const LINKS: [&str; 3] = ["sim", "ethercat-emu", "canopen-emu"];
 
+/// How far past the probe Z may stop: 1.5 mm at the 1 ms cycle; at a longer cycle (CAN: 4 ms)
+/// the axis runs on at 50 mm/s for the extra time of the lost exchanges, the dead time (2
+/// cycles) and the cycle that reads the latch.
+fn stop_bound(link: &str, losses: u64) -> f64 {
+    let cycle = if link == "canopen-emu" { 0.004 } else { 0.001 };
+    81.5 + 50.0 * (losses + 3) as f64 * (cycle - 0.001)
+}
+
 fn machine(link: &str, sets: &[&str]) -> Machine {
     let mut cfg = MachineConfig::default_machine();
+    if link == "canopen-emu" {
+        // Issue 16: three CiA 402 nodes need 4 ms at 1 Mbit/s (56 % bus load; 1 ms would be
+        // 194 %, refused — docs/canopen.md "Bus load").
+        cfg.apply_set("cycle_time_us=4000").unwrap();
+    }
     for s in sets {
         cfg.apply_set(s).unwrap();
     }
@@ -60,7 +73,10 @@ fn up_to_max_lost_cycles_in_a_row_are_ridden_through_with_the_latch_reported_onc
             assert_eq!(m.channel().lost_cycles(), losses, "{link}");
             // The block ran on after the hold: braked just past the probe, not at a jump.
             let c = m.channel().axes()[Z].command();
-            assert!(c > 80.0 && c < 81.5, "{link} {losses}: stopped at {c}");
+            assert!(
+                c > 80.0 && c < stop_bound(link, losses),
+                "{link} {losses}: stopped at {c}"
+            );
         }
     }
 }
@@ -71,7 +87,7 @@ fn one_more_than_max_lost_cycles_is_900012_and_publishes_nothing() {
         let (ids, m, latched) = run_with_losses(link, &[], 79.95, 4);
         assert_eq!(ids, vec![900012], "{link}");
         assert_eq!(latched, None, "{link}: no latch published");
-        assert!(m.channel().axes()[Z].command() < 81.5);
+        assert!(m.channel().axes()[Z].command() < stop_bound(link, 4));
     }
 }
 

@@ -784,8 +784,14 @@ fn machine_toml_syntax_errors_have_lines() {
 #[test]
 fn machine_structure_errors() {
     let cases = [
-        ("[foo]\nx = 1\n", "m.toml:1: unknown table [foo]; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>] and [zero_offset.G54…G59]"),
-        ("cycle_time_us = 1000\n", "m.toml:1: 'cycle_time_us' is outside any table; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>] and [zero_offset.G54…G59]; cycle_time_us belongs in [channel]"),
+        ("[foo]\nx = 1\n", "m.toml:1: unknown table [foo]; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>], [zero_offset.G54…G59] and [can]"),
+        ("cycle_time_us = 1000\n", "m.toml:1: 'cycle_time_us' is outside any table; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>], [zero_offset.G54…G59] and [can]; cycle_time_us belongs in [channel]"),
+        // Issue 16: [can] bitrate.
+        ("bitrate = 500000\n", "m.toml:1: 'bitrate' is outside any table; allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>], [zero_offset.G54…G59] and [can]; bitrate belongs in [can]"),
+        ("[can]\nbitrat = 500000\n[[axis]]\nname = \"X\"\n", "m.toml:2: unknown key 'bitrat' in [can] (did you mean bitrate?); allowed: bitrate"),
+        ("[can]\nbitrate = 1000001\n[[axis]]\nname = \"X\"\n", "m.toml:2: bitrate = 1000001: not a CAN bit rate of CiA 301; allowed: 10k, 20k, 50k, 125k, 250k, 500k, 800k, 1M (bit/s, e.g. bitrate = 500000 or \"500k\" in [can])"),
+        ("[can]\nbitrate = true\n[[axis]]\nname = \"X\"\n", "m.toml:2: bitrate = (not a number): not a CAN bit rate of CiA 301; allowed: 10k, 20k, 50k, 125k, 250k, 500k, 800k, 1M (bit/s, e.g. bitrate = 500000 or \"500k\" in [can])"),
+        ("can = 1\n[[axis]]\nname = \"X\"\n", "m.toml:1: 'can' must be a table: write [can] bitrate = 500000"),
         ("[axis]\nname = \"X\"\n", "m.toml:1: 'axis' must be an array of tables: write [[axis]] once per axis"),
         ("[channel]\nmesstyp = 1\n", "m.toml: no [[axis]] table; a machine needs at least one axis (name = \"X\")"),
         ("[[axis]]\ndrive = \"x\"\n", "m.toml:1: [[axis]] without a name; expected e.g. name = \"X\""),
@@ -803,6 +809,34 @@ fn machine_structure_errors() {
             "{text:?}"
         );
     }
+    // [can] bitrate: every CiA 301 rate, as bit/s or with k / M; the default 1 Mbit/s.
+    let axis = "[[axis]]\nname = \"X\"\n";
+    assert_eq!(
+        MachineConfig::parse(axis, "m.toml").unwrap().can_bitrate,
+        1_000_000
+    );
+    for (v, bps) in [
+        ("10000", 10_000),
+        ("\"20k\"", 20_000),
+        ("\"50K\"", 50_000),
+        ("125000", 125_000),
+        ("\"250k\"", 250_000),
+        ("500000", 500_000),
+        ("\"800k\"", 800_000),
+        ("\"1M\"", 1_000_000),
+    ] {
+        let cfg = MachineConfig::parse(&format!("[can]\nbitrate = {v}\n{axis}"), "m.toml").unwrap();
+        assert_eq!(cfg.can_bitrate, bps, "{v}");
+    }
+    let mut cfg = MachineConfig::parse(axis, "m.toml").unwrap();
+    cfg.apply_set("can.bitrate=125k").unwrap();
+    assert_eq!(cfg.can_bitrate, 125_000);
+    let e = cfg.apply_set("can.bitrate=100k").unwrap_err().to_string();
+    assert!(
+        e.starts_with("--set: bitrate = 100k: not a CAN bit rate"),
+        "{e}"
+    );
+    assert_eq!(cfg.can_bitrate, 125_000, "unchanged on error");
     let e = err_text(MachineConfig::parse(
         "[channel]\n\"P-AXIS-00178\" = 1\n[[axis]]\nname = \"X\"\n",
         "m.toml",

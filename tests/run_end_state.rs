@@ -152,6 +152,9 @@ fn run_emu(program: &Path, log: &Path, extra: &[&str]) -> std::process::Output {
         program.to_str().unwrap(),
         "--link",
         "canopen-emu",
+        // Issue 16: three nodes need 4 ms at 1 Mbit/s (docs/canopen.md "Bus load").
+        "--set",
+        "cycle_time_us=4000",
         "--candump",
         log.to_str().unwrap(),
     ];

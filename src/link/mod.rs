@@ -307,6 +307,8 @@ pub struct LinkRequest<'a> {
     pub node_ids: &'a [u8],
     /// Interpolation cycle.
     pub cycle: Nanos,
+    /// CAN bit rate (bit/s; machine file `[can] bitrate`, CAN links).
+    pub can_bitrate: u32,
     /// Capture every EtherCAT frame into this pcap file (EtherCAT links).
     pub pcap: Option<&'a std::path::Path>,
     /// Log every CAN frame into this file, candump -L format (CAN links).
@@ -331,11 +333,15 @@ pub fn open(req: LinkRequest<'_>) -> Result<Box<dyn Link>, LinkError> {
     if can {
         #[cfg(feature = "sim")]
         {
+            let bitrate = crate::bus::can::Bitrate::new(req.can_bitrate).ok_or_else(|| {
+                LinkError::Other(format!("CAN bit rate {} bit/s", req.can_bitrate))
+            })?;
             return Ok(Box::new(canopen::CanopenLink::on_link(
                 link,
                 req.drives,
                 req.node_ids,
                 req.cycle,
+                bitrate,
                 req.candump,
             )?));
         }

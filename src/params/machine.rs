@@ -30,6 +30,10 @@
 //! esi = "fieldprobe-el5101"            # required: a built-in ESI (esi/*.xml) or an ESI file
 //!                                      # relative to this file
 //! count = 4                            # optional, 1 ..= 1024: ENC1 … ENC4 in a row
+//! [can]
+//! bitrate = 500000                     # project key: CAN bit rate, bit/s ("500k", "1M"): one of
+//!                                      # the CiA 301 rates (default 1M); the CANopen links
+//!                                      # check the bus load against it
 //! ```
 //!
 //! Values are TOML integers, booleans or strings in the seeds' units; each one goes through
@@ -60,6 +64,13 @@ pub const DEFAULT_MAX_LOST_CYCLES: u32 = 3;
 pub const MAX_DEAD_TIME_CYCLES: u32 = 16;
 /// Default drive definition (`drives/cia402-generic.toml`).
 pub const DEFAULT_DRIVE: &str = "cia402-generic";
+/// The bit rates of CiA 301 (§7.1.1 "bit timing": 1 Mbit/s, 800, 500, 250, 125, 50, 20 and
+/// 10 kbit/s), the values `[can] bitrate` accepts, bit/s.
+pub const CAN_BITRATES: [u32; 8] = [
+    10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000,
+];
+/// Default `[can] bitrate`: 1 Mbit/s.
+pub const DEFAULT_CAN_BITRATE: u32 = 1_000_000;
 
 const AXIS_LETTERS: &str = "XYZABCUVW";
 const MAX_DEPTH: usize = 16;
@@ -129,6 +140,9 @@ pub struct MachineConfig {
     /// Consecutive lost process-data exchanges the channel rides through before error 900012
     /// (project key `max_lost_cycles`, 0 ..= 1000; default [`DEFAULT_MAX_LOST_CYCLES`]).
     pub max_lost_cycles: u32,
+    /// The CAN bus's bit rate, bit/s (`[can] bitrate`, one of [`CAN_BITRATES`]; default
+    /// [`DEFAULT_CAN_BITRATE`]): the CANopen links check the bus load against it.
+    pub can_bitrate: u32,
     /// Channel parameter list (P-CHAN-*).
     pub channel: ParamSet,
     /// Manual-mode parameter list (P-MANU-*).
@@ -158,6 +172,7 @@ impl MachineConfig {
             cycle_time_us: DEFAULT_CYCLE_TIME_US,
             in_position_timeout_ms: DEFAULT_IN_POSITION_TIMEOUT_MS,
             max_lost_cycles: DEFAULT_MAX_LOST_CYCLES,
+            can_bitrate: DEFAULT_CAN_BITRATE,
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes: Vec::new(),
@@ -216,6 +231,7 @@ impl MachineConfig {
                     }
                 }
                 "tool" => cfg.parse_tools(&ctx, item, line)?,
+                "can" => cfg.parse_can(&ctx, item, line)?,
                 "zero_offset" => zero_items.push((item, line)),
                 other => return Err(outside_error(other, item, ctx.at(line))),
             }
@@ -284,6 +300,7 @@ impl MachineConfig {
             cycle_time_us: DEFAULT_CYCLE_TIME_US,
             in_position_timeout_ms: DEFAULT_IN_POSITION_TIMEOUT_MS,
             max_lost_cycles: DEFAULT_MAX_LOST_CYCLES,
+            can_bitrate: DEFAULT_CAN_BITRATE,
             channel: ParamSet::new(Scope::Channel),
             manual: ParamSet::new(Scope::Manual),
             axes,
@@ -358,6 +375,10 @@ impl MachineConfig {
         }
         if key == "cycle_time_us" {
             self.cycle_time_us = cycle_time(value, &origin)?;
+            return Ok(());
+        }
+        if key == "can.bitrate" || key == "bitrate" {
+            self.can_bitrate = can_bitrate(value, &origin)?;
             return Ok(());
         }
         if key == "in_position_timeout_ms" {
@@ -537,6 +558,39 @@ impl MachineConfig {
     /// The terminal with this name.
     pub fn terminal(&self, name: &str) -> Option<&TerminalConfig> {
         self.terminals.iter().find(|t| t.name == name)
+    }
+
+    /// `[can]`: `bitrate` (module documentation).
+    fn parse_can(&mut self, ctx: &Ctx<'_>, item: &Item, line: usize) -> Result<(), ParamError> {
+        let table = item.as_table_like().ok_or_else(|| ParamError::Config {
+            origin: ctx.at(line),
+            message: "'can' must be a table: write [can] bitrate = 500000".to_string(),
+        })?;
+        for (k, v) in table.iter() {
+            let kl = ctx.key_line(table, k, v, line);
+            match k {
+                "bitrate" => {
+                    let raw = match v.as_value() {
+                        Some(Value::Integer(i)) => i.value().to_string(),
+                        Some(Value::String(t)) => t.value().clone(),
+                        _ => String::new(),
+                    };
+                    self.can_bitrate = can_bitrate(&raw, &ctx.at(kl))?;
+                }
+                other => {
+                    let hint = if edit_distance(other, "bitrate") <= 2 {
+                        " (did you mean bitrate?)"
+                    } else {
+                        ""
+                    };
+                    return Err(ParamError::Config {
+                        origin: ctx.at(kl),
+                        message: format!("unknown key '{other}' in [can]{hint}; allowed: bitrate"),
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     fn parse_tools(&mut self, ctx: &Ctx<'_>, item: &Item, line: usize) -> Result<(), ParamError> {
@@ -1089,10 +1143,12 @@ fn string_value<'a>(
 }
 
 fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
-    let allowed = "allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>] and [zero_offset.G54…G59]";
+    let allowed = "allowed tables are [channel], [manual], [[axis]], [[terminal]], [tool.<D>], [zero_offset.G54…G59] and [can]";
     let message = if item.is_value() {
         let hint = if name == "cycle_time_us" {
             "; cycle_time_us belongs in [channel]".to_string()
+        } else if name == "bitrate" {
+            "; bitrate belongs in [can]".to_string()
         } else if let Some(def) = find(name) {
             format!("; {} belongs in {}", def.id, def.scope.section())
         } else {
@@ -1103,6 +1159,34 @@ fn outside_error(name: &str, item: &Item, origin: Origin) -> ParamError {
         format!("unknown table [{name}]; {allowed}")
     };
     ParamError::Config { origin, message }
+}
+
+/// `[can] bitrate` / `--set can.bitrate=…`: bit/s as an integer or with a k / M suffix
+/// (`500000`, `"500k"`, `"1M"`), one of [`CAN_BITRATES`]; the error names the key, the value
+/// and the allowed rates.
+fn can_bitrate(raw: &str, origin: &Origin) -> Result<u32, ParamError> {
+    let text = strip_quotes(raw.trim()).trim();
+    let (digits, factor) = match text.char_indices().last() {
+        Some((i, 'k' | 'K')) => (&text[..i], 1_000u64),
+        Some((i, 'M' | 'm')) => (&text[..i], 1_000_000),
+        _ => (text, 1),
+    };
+    let bps = digits
+        .trim()
+        .parse::<u64>()
+        .ok()
+        .and_then(|v| v.checked_mul(factor))
+        .and_then(|v| u32::try_from(v).ok());
+    match bps {
+        Some(v) if CAN_BITRATES.contains(&v) => Ok(v),
+        _ => Err(ParamError::Config {
+            origin: origin.clone(),
+            message: format!(
+                "bitrate = {}: not a CAN bit rate of CiA 301; allowed: 10k, 20k, 50k, 125k, 250k, 500k, 800k, 1M (bit/s, e.g. bitrate = 500000 or \"500k\" in [can])",
+                if raw.trim().is_empty() { "(not a number)" } else { raw.trim() }
+            ),
+        }),
+    }
 }
 
 /// Project keys of an `[[axis]]` table (not parameters).

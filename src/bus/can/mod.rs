@@ -8,6 +8,7 @@ use std::time::Duration;
 pub mod candump;
 pub mod fault;
 pub mod socketcan_bus;
+pub mod timing;
 pub mod udp;
 pub mod udp_wire;
 pub mod virtual_bus;
@@ -15,8 +16,9 @@ pub mod virtual_bus;
 pub use candump::{CandumpError, CandumpRecord, CandumpWriter};
 pub use fault::FaultBus;
 pub use socketcan_bus::SocketCanBus;
+pub use timing::Bitrate;
 pub use udp::{UdpConfig, UdpMulticastBus};
-pub use virtual_bus::{VirtualCan, VirtualEndpoint};
+pub use virtual_bus::{Delivery, VirtualCan, VirtualEndpoint};
 
 /// SocketCAN identifier-word flag: extended frame format (`linux/can.h` `CAN_EFF_FLAG`).
 pub const CAN_EFF_FLAG: u32 = 0x8000_0000;

@@ -1,6 +1,32 @@
 //! PDOs (CiA 301 §7.2.2): packing a drive's process image into PDOs of at most 8 bytes, the
 //! communication and mapping parameters, the remap procedure, and the copy between PDO data and
 //! the drive's image.
+//!
+//! # The master's layout ([`plan_layout`])
+//!
+//! A classic CAN frame costs 47 bit times plus 8 per data byte and its stuff bits
+//! ([`crate::bus::can::timing`]), so the layout sends as few frames per cycle as the axis
+//! needs:
+//!
+//! * **Cyclic** ([`Trigger::Cyclic`]): everything that changes while the axis moves or that the
+//!   adapter reads every cycle (controlword, target position, touch probe function, statusword,
+//!   actual position, following error, torque, modes display, touch probe status) — RPDOs sent
+//!   in every exchange, TPDOs with transmission type 1 (every SYNC).
+//! * **On change** ([`Trigger::OnChange`]): the objects whose value changes only on an event —
+//!   the touch probe positions 0x60BA–0x60BD and edge counters 0x60D5–0x60D8 (a latch), the
+//!   modes of operation 0x6060 and the touch probe source 0x60D0 (a setting). TPDOs with
+//!   transmission type 0 (synchronous, acyclic: sent at a SYNC when their data changed since
+//!   they were last sent, CiA 301 §7.5.2.37), grouped by touch probe so that one latch sends
+//!   one frame; RPDOs the master sends only when their data changed (and after each NMT start),
+//!   without deadline monitoring.
+//!
+//! Each class is packed first fit, largest entries first, into frames of ≤ 8 bytes. The
+//! on-change TPDOs take the lowest numbers, hence the lowest COB-IDs (0x180 + 0x100 k + node):
+//! a node queues every TPDO of a SYNC at once and the lower identifier wins arbitration, so by
+//! the time the master has a node's cyclic TPDOs (the touch probe status 0x60B9 among them) it
+//! has that SYNC's on-change TPDOs of the node too — a latch's position never arrives after the
+//! status bit that announces it. Layouts that do not fit [`MAX_PDOS`] PDOs this way fall back
+//! to [`pack_layout`] (everything cyclic).
 
 use crate::drive::pdo::PdoLayout;
 
@@ -66,6 +92,33 @@ impl Mapped {
     }
 }
 
+/// When a PDO goes on the bus (module documentation, "The master's layout").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Trigger {
+    /// Every cycle: a TPDO with transmission type 1 (every SYNC); an RPDO the master sends in
+    /// every exchange, watched by the node's deadline monitoring (event-timer).
+    Cyclic,
+    /// Only when its data changed: a TPDO with transmission type 0 (synchronous, acyclic); an
+    /// RPDO the master sends when its data changed and after each NMT start.
+    OnChange {
+        /// The touch probe (1 or 2) whose objects it carries, if it carries only touch probe
+        /// objects of one probe (CiA 402: one probe is armed at a time, so only one probe's
+        /// group can change in a cycle).
+        probe: Option<u8>,
+    },
+}
+
+impl Trigger {
+    /// The transmission type (sub-index 2 of the communication parameter) the master writes:
+    /// 1 for cyclic, 0 for on change (CiA 301 §7.5.2.35 / §7.5.2.37).
+    pub const fn transmission_type(self) -> u8 {
+        match self {
+            Trigger::Cyclic => 1,
+            Trigger::OnChange { .. } => 0,
+        }
+    }
+}
+
 /// One PDO: its number, COB-ID and mapped objects.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Pdo {
@@ -77,6 +130,8 @@ pub struct Pdo {
     pub cob: u16,
     /// Mapped objects in PDO order.
     pub mapped: Vec<Mapped>,
+    /// When it is sent.
+    pub trigger: Trigger,
 }
 
 impl Pdo {
@@ -121,15 +176,16 @@ impl Pdo {
     }
 
     /// The SDO writes of the CiA 301 remap procedure, in order: COB-ID invalid (bit 31),
-    /// transmission type 1 (synchronous, every SYNC), mapping count 0, the entries, mapping
-    /// count, COB-ID valid. Each write: (index, sub, little-endian data).
+    /// transmission type ([`Trigger::transmission_type`]: 1 synchronous every SYNC, 0
+    /// synchronous on change), mapping count 0, the entries, mapping count, COB-ID valid. Each
+    /// write: (index, sub, little-endian data).
     pub fn remap_writes(&self) -> Vec<(u16, u8, Vec<u8>)> {
         let comm = self.direction.comm_index(self.number);
         let map = self.direction.mapping_index(self.number);
         let cob = u32::from(self.cob);
         let mut w = vec![
             (comm, 1, (cob | 0x8000_0000).to_le_bytes().to_vec()),
-            (comm, 2, vec![1]),
+            (comm, 2, vec![self.trigger.transmission_type()]),
             (map, 0, vec![0]),
         ];
         for (j, m) in self.mapped.iter().enumerate() {
@@ -145,18 +201,7 @@ impl Pdo {
 /// fit, largest entries first (entries are never split), PDOs then ordered by their first
 /// entry's position in the layout. Errors say why it does not fit.
 pub fn pack_layout(layout: &PdoLayout, direction: Direction, node: u8) -> Result<Vec<Pdo>, String> {
-    let mut order: Vec<usize> = (0..layout.entries().len()).collect();
-    order.sort_by_key(|&i| std::cmp::Reverse(layout.entries()[i].ty.size()));
-    let mut bins: Vec<Vec<usize>> = Vec::new();
-    for i in order {
-        let size = layout.entries()[i].ty.size();
-        let used =
-            |b: &Vec<usize>| -> usize { b.iter().map(|&j| layout.entries()[j].ty.size()).sum() };
-        match bins.iter_mut().find(|b| used(b) + size <= 8) {
-            Some(b) => b.push(i),
-            None => bins.push(vec![i]),
-        }
-    }
+    let bins = first_fit(layout, (0..layout.entries().len()).collect());
     if bins.len() > MAX_PDOS {
         let total: usize = layout.entries().iter().map(|e| e.ty.size()).sum();
         return Err(format!(
@@ -167,19 +212,29 @@ pub fn pack_layout(layout: &PdoLayout, direction: Direction, node: u8) -> Result
             }
         ));
     }
-    for b in &mut bins {
-        b.sort_unstable();
-    }
-    bins.sort_by_key(|b| b.first().copied());
-    Ok(bins
-        .into_iter()
+    Ok(build(
+        layout,
+        direction,
+        node,
+        bins.into_iter().map(|b| (Trigger::Cyclic, b)).collect(),
+    ))
+}
+
+/// PDO *k* of `node` for the *k*-th bin of entries of `layout`, packed back to back.
+fn build(
+    layout: &PdoLayout,
+    direction: Direction,
+    node: u8,
+    bins: Vec<(Trigger, Vec<usize>)>,
+) -> Vec<Pdo> {
+    bins.into_iter()
         .enumerate()
-        .map(|(k, b)| {
+        .map(|(k, (trigger, b))| {
             let mut off = 0;
             let mapped = b
                 .into_iter()
-                .map(|i| {
-                    let e = &layout.entries()[i];
+                .filter_map(|i| layout.entries().get(i))
+                .map(|e| {
                     let m = Mapped {
                         index: e.index,
                         sub: e.sub,
@@ -196,7 +251,178 @@ pub fn pack_layout(layout: &PdoLayout, direction: Direction, node: u8) -> Result
                 number: k as u8,
                 cob: direction.default_cob(k as u8, node),
                 mapped,
+                trigger,
             }
         })
-        .collect())
+        .collect()
+}
+
+/// The class of an object in the master's layout: `None` cyclic, `Some(probe)` on change
+/// (module documentation).
+fn on_change_class(direction: Direction, index: u16) -> Option<Option<u8>> {
+    match (direction, index) {
+        // Touch probe 1 positive / negative edge position and edge counters.
+        (Direction::Tx, 0x60BA | 0x60BB | 0x60D5 | 0x60D6) => Some(Some(1)),
+        // Touch probe 2.
+        (Direction::Tx, 0x60BC | 0x60BD | 0x60D7 | 0x60D8) => Some(Some(2)),
+        // Modes of operation, touch probe source: settings.
+        (Direction::Rx, 0x6060 | 0x60D0) => Some(None),
+        _ => None,
+    }
+}
+
+/// First fit, largest first: the entries `items` of `layout` in bins of ≤ 8 bytes, each bin in
+/// layout order, the bins ordered by their first entry.
+fn first_fit(layout: &PdoLayout, mut items: Vec<usize>) -> Vec<Vec<usize>> {
+    let size = |i: usize| layout.entries()[i].ty.size();
+    items.sort_by_key(|&i| std::cmp::Reverse(size(i)));
+    let mut bins: Vec<Vec<usize>> = Vec::new();
+    for i in items {
+        match bins
+            .iter_mut()
+            .find(|b| b.iter().map(|&j| size(j)).sum::<usize>() + size(i) <= 8)
+        {
+            Some(b) => b.push(i),
+            None => bins.push(vec![i]),
+        }
+    }
+    for b in &mut bins {
+        b.sort_unstable();
+    }
+    bins.sort_by_key(|b| b.first().copied());
+    bins
+}
+
+/// The master's PDO layout of a drive's process data (module documentation, "The master's
+/// layout"): cyclic and on-change classes packed apart, on-change TPDOs first; falls back to
+/// [`pack_layout`] when that needs more than [`MAX_PDOS`] PDOs. Errors say why it does not fit.
+pub fn plan_layout(layout: &PdoLayout, direction: Direction, node: u8) -> Result<Vec<Pdo>, String> {
+    let mut classes: Vec<(Trigger, Vec<usize>)> = Vec::new();
+    let mut cyclic = Vec::new();
+    for (i, e) in layout.entries().iter().enumerate() {
+        match on_change_class(direction, e.index) {
+            None => cyclic.push(i),
+            Some(probe) => {
+                let t = Trigger::OnChange { probe };
+                match classes.iter_mut().find(|(c, _)| *c == t) {
+                    Some((_, v)) => v.push(i),
+                    None => classes.push((t, vec![i])),
+                }
+            }
+        }
+    }
+    // On-change TPDOs first (lowest COB-IDs), probe 1 before probe 2; RPDOs cyclic first.
+    classes.sort_by_key(|(t, _)| match t {
+        Trigger::OnChange { probe: Some(p) } => *p,
+        _ => u8::MAX,
+    });
+    match direction {
+        Direction::Tx => classes.push((Trigger::Cyclic, cyclic)),
+        Direction::Rx => classes.insert(0, (Trigger::Cyclic, cyclic)),
+    }
+    let bins: Vec<(Trigger, Vec<usize>)> = classes
+        .into_iter()
+        .flat_map(|(t, items)| first_fit(layout, items).into_iter().map(move |b| (t, b)))
+        .collect();
+    if bins.len() > MAX_PDOS {
+        return pack_layout(layout, direction, node);
+    }
+    Ok(build(layout, direction, node, bins))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout(specs: &[&str]) -> PdoLayout {
+        PdoLayout::parse(specs).unwrap()
+    }
+
+    /// `drives/cia402-generic.toml`'s process data.
+    fn generic() -> (PdoLayout, PdoLayout) {
+        (
+            layout(&["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"]),
+            layout(&[
+                "0x6041:00",
+                "0x6064:00",
+                "0x60F4:00",
+                "0x6061:00",
+                "0x60B9:00",
+                "0x60BA:00",
+                "0x60BB:00",
+                "0x60BC:00",
+                "0x60BD:00",
+                "0x6077:00",
+            ]),
+        )
+    }
+
+    fn objects(p: &Pdo) -> Vec<u16> {
+        p.mapped.iter().map(|m| m.index).collect()
+    }
+
+    #[test]
+    fn the_master_layout_sends_touch_probe_positions_and_settings_on_change() {
+        let (rx, tx) = generic();
+        let r = plan_layout(&rx, Direction::Rx, 3).unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!(objects(&r[0]), [0x6040, 0x607A, 0x60B8]);
+        assert_eq!((r[0].trigger, r[0].cob), (Trigger::Cyclic, 0x203));
+        assert_eq!(objects(&r[1]), [0x6060]);
+        assert_eq!(r[1].trigger, Trigger::OnChange { probe: None });
+        let t = plan_layout(&tx, Direction::Tx, 3).unwrap();
+        assert_eq!(t.len(), 4);
+        // On-change first: lower COB-IDs than every cyclic TPDO of the node.
+        assert_eq!(objects(&t[0]), [0x60BA, 0x60BB]);
+        assert_eq!(
+            (t[0].trigger, t[0].cob),
+            (Trigger::OnChange { probe: Some(1) }, 0x183)
+        );
+        assert_eq!(objects(&t[1]), [0x60BC, 0x60BD]);
+        assert_eq!(t[1].trigger, Trigger::OnChange { probe: Some(2) });
+        assert_eq!(objects(&t[2]), [0x6041, 0x6061, 0x60B9, 0x6077]);
+        assert_eq!(objects(&t[3]), [0x6064, 0x60F4]);
+        assert!(t[2..]
+            .iter()
+            .all(|p| p.trigger == Trigger::Cyclic && p.len() <= 8));
+        // The transmission types written by the remap procedure.
+        assert_eq!(t[0].remap_writes()[1], (0x1800, 2, vec![0]));
+        assert_eq!(t[3].remap_writes()[1], (0x1803, 2, vec![1]));
+        // Every byte of the image is in exactly one PDO.
+        let mut image = vec![0u8; tx.len()];
+        for (k, b) in image.iter_mut().enumerate() {
+            *b = k as u8 + 1;
+        }
+        let mut back = vec![0u8; tx.len()];
+        for p in &t {
+            assert!(p.unpack(&p.pack(&image), &mut back));
+        }
+        assert_eq!(back, image);
+    }
+
+    #[test]
+    fn a_layout_that_needs_more_pdos_split_falls_back_to_all_cyclic() {
+        // Cyclic 8 bytes, probe 1 and probe 2 10 bytes each: split by class 5 PDOs, packed
+        // together 4.
+        let tx = layout(&[
+            "0x6041:00",
+            "0x6064:00",
+            "0x60BA:00",
+            "0x60BB:00",
+            "0x60BC:00",
+            "0x60BD:00",
+            "0x60D5:00:u16",
+            "0x60D7:00:u16",
+            "0x2000:01:u16",
+        ]);
+        let t = plan_layout(&tx, Direction::Tx, 1).unwrap();
+        assert_eq!(t, pack_layout(&tx, Direction::Tx, 1).unwrap());
+        assert!(t.iter().all(|p| p.trigger == Trigger::Cyclic));
+        // Without anything on change the two are the same.
+        let rx = layout(&["0x6040:00", "0x607A:00"]);
+        assert_eq!(
+            plan_layout(&rx, Direction::Rx, 1).unwrap(),
+            pack_layout(&rx, Direction::Rx, 1).unwrap()
+        );
+    }
 }

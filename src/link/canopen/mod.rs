@@ -2,33 +2,39 @@
 //!
 //! | `--link` | bus | nodes |
 //! |---|---|---|
-//! | `canopen-emu` | in-process [`VirtualCan`]: the master on one endpoint, the [`CanopenSegment`] on another | one emulated CiA 402 node per axis at the node ids the machine gives (default 1, 2, …) |
+//! | `canopen-emu` | in-process [`VirtualCan`] with a wire at the machine's bit rate ([`wire`]): the master on one endpoint, the [`CanopenSegment`] on another | one emulated CiA 402 node per axis at the node ids the machine gives (default 1, 2, …) |
 //! | `canopen-udp[:GROUP:PORT]`, `socketcan:IF` | a [`CanBus`] given to [`CanopenLink::open`] | whatever answers |
 //!
 //! # Start-up
 //!
-//! NMT reset communication → boot-up of every axis node (bounded wait) → per node: SDO reads of
-//! 0x1000 and 0x1018 (identity), the drive file's process data packed into ≤ 4 RPDOs / TPDOs of
-//! ≤ 8 bytes ([`pack_layout`]) and written by the CiA 301 remap procedure, unused PDOs disabled,
-//! producer heartbeat 0x1017 set, 0x1006 communication cycle period (µs = machine cycle) and
-//! 0x1007 synchronous window length (µs = half the cycle, [`paced::sync_window_us`]), the
-//! event-timer of every RPDO (sub-index 5: the node's deadline monitoring, five cycles rounded
-//! up to ms, [`paced::rpdo_event_timer_ms`]) → NMT start. A node without 0x1006 / 0x1007 or
+//! The bus load of one cycle at the bus's bit rate ([`load`]): above 100 % the link refuses to
+//! start before anything is sent. Then NMT reset communication → boot-up of every axis node
+//! (bounded wait) → per node: SDO reads of 0x1000 and 0x1018 (identity), the drive file's
+//! process data in the master's layout ([`plan_layout`]: ≤ 4 RPDOs / TPDOs of ≤ 8 bytes, cyclic
+//! and on-change PDOs) written by the CiA 301 remap procedure, unused PDOs disabled, producer
+//! heartbeat 0x1017 set, 0x1006 communication cycle period (µs = machine cycle) and 0x1007
+//! synchronous window length ([`paced::sync_window`]: half the cycle, or the cycle's frames if
+//! longer), the event-timer of every cyclic RPDO (sub-index 5: the node's deadline monitoring,
+//! five cycles rounded up to ms, [`paced::rpdo_event_timer_ms`]; 0 for an on-change RPDO) → NMT
+//! start. A node without 0x1006 / 0x1007 or
 //! without the event-timer sub-index (abort 0x0602_0000 / 0x0609_0011, e.g. an EDS that lacks
 //! them) is a warning; any other refusal of them is a start-up error naming node and object.
 //!
 //! # One exchange at `now`
 //!
-//! Every axis's RPDOs, then SYNC; the nodes step at SYNC and answer with their TPDOs, which are
-//! copied into the input images only when every expected TPDO came. A missing TPDO, a node whose
+//! Every axis's RPDOs (an on-change one only when its data changed), then SYNC; the nodes step at
+//! SYNC and answer with their TPDOs, which are copied into the input images only when every
+//! expected (cyclic) TPDO came, with the last data of every on-change TPDO (kept whenever it
+//! comes, [`Trigger::OnChange`]). A missing TPDO, a node whose
 //! heartbeat is older than [`HEARTBEAT_TIMEOUT_FACTOR`] × its period, or a boot-up of an
 //! operational node is [`LinkError::Lost`] (the channel rides through up to `max_lost_cycles`
 //! of them, one more is 900012). EMCY messages are collected
 //! ([`CanopenLink::take_emergencies`]).
 //!
-//! `canopen-emu` runs on the virtual time `now` the machine gives: the nodes take the RPDOs at
-//! the time of the previous exchange (right after its SYNC), the SYNC and their TPDOs at `now`;
-//! nothing waits. The links that leave the process (`canopen-udp`, `socketcan:IF`) run the
+//! `canopen-emu` runs on virtual time, on the wire ([`wire`]): every frame takes its wire time
+//! at the bit rate, the bus goes to the lowest identifier, the SYNC of `now` is sent at the bus
+//! time epoch + `now`, the TPDOs are awaited until the synchronous window after it passed;
+//! nothing waits on a wall clock. The links that leave the process (`canopen-udp`, `socketcan:IF`) run the
 //! same order on the wall clock, one SYNC per machine cycle on absolute deadlines: see
 //! [`paced`] (timing, synchronous window, stall rule, cycle statistics).
 //!
@@ -47,8 +53,10 @@
 //! SDO upload / download with our sans-IO client ([`SdoClient`]); sizes as for EtherCAT (drive
 //! file, CiA 402 table, else 4 bytes). Aborts keep the CiA 301 code.
 
+pub mod load;
 pub mod paced;
 mod session;
+pub mod wire;
 
 pub use session::{CanSession, NodeInfo};
 
@@ -57,19 +65,21 @@ use std::time::{Duration, Instant};
 
 use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
 use crate::bus::can::{
-    CanBus, CanError, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus,
-    VirtualCan, VirtualEndpoint,
+    Bitrate, CanBus, CanError, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus,
+    VirtualCan,
 };
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
-use crate::bus::canopen::pdo::{pack_layout, Direction, Pdo, MAX_PDOS};
+use crate::bus::canopen::pdo::{plan_layout, Direction, Pdo, Trigger, MAX_PDOS};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::model::DriveModel;
 use crate::sim::canopen::{CanopenSegment, EmulatedNode};
 use crate::sim::plant::Plant;
 use crate::units::Nanos;
-use paced::{cycle_period_us, rpdo_event_timer_ms, sync_window_us, Pacing};
+use load::BusLoad;
+use paced::{cycle_period_us, rpdo_event_timer_ms, Pacing};
 use std::sync::Arc;
+use wire::Emulated;
 
 /// [`Link::release`] waits this many heartbeat periods for the nodes to report pre-operational.
 pub const RELEASE_HEARTBEATS: u64 = 3;
@@ -90,6 +100,12 @@ struct AxisNode {
     def: Arc<DriveDefinition>,
     rx: Vec<Pdo>,
     tx: Vec<Pdo>,
+    /// Per RPDO: the data an on-change RPDO last carried (`None`: send it with the next
+    /// exchange).
+    rx_sent: Vec<Option<Vec<u8>>>,
+    /// Per TPDO: the data an on-change TPDO last brought (copied into every input image the
+    /// link commits; `None` before the first one).
+    tx_held: Vec<Option<Vec<u8>>>,
     sdo: SdoClient,
     last_heartbeat: Option<Nanos>,
     state: Option<NmtState>,
@@ -104,12 +120,18 @@ pub struct CanopenLink {
     emergencies: Vec<Emcy>,
     t0: Instant,
     now: Nanos,
-    /// Virtual time of the previous exchange (`canopen-emu`: when the nodes take the RPDOs).
-    prev_now: Nanos,
+    /// `canopen-emu`: the bus time of the machine's time 0 (the end of the start-up).
+    epoch: Nanos,
     /// The machine cycle (0x1006, and the SYNC period of a paced link).
     cycle: Nanos,
-    /// COB-IDs of every expected TPDO.
+    /// The synchronous window 0x1007 ([`paced::sync_window`]).
+    window: Nanos,
+    /// The bus load of one cycle, computed at start-up ([`load`]).
+    load: BusLoad,
+    /// COB-IDs of every cyclic TPDO (expected after each SYNC).
     tpdo_cobs: Vec<u32>,
+    /// On-change TPDOs: COB-ID → (axis, index into its `tx`).
+    on_change_cobs: Vec<(u32, usize, usize)>,
     /// The SYNC producer on the wall clock (links that leave the process); `None` on
     /// `canopen-emu`.
     pacing: Option<Pacing>,
@@ -128,10 +150,10 @@ impl std::fmt::Debug for CanopenLink {
 }
 
 /// Where the master's frames go: a CAN bus, and for `canopen-emu` the emulated nodes on the
-/// other endpoint of the same in-process virtual bus.
+/// other endpoint of the same in-process virtual bus ([`wire`]).
 struct Transport {
     bus: Box<dyn CanBus>,
-    emulated: Option<(CanopenSegment, VirtualEndpoint)>,
+    emulated: Option<Emulated>,
     candump: Option<Candump>,
 }
 
@@ -186,7 +208,10 @@ impl Transport {
 
     /// Emulated: the nodes take what reached their endpoint and answer on it.
     fn run_nodes(&mut self, now: Nanos) {
-        let Some((segment, endpoint)) = self.emulated.as_mut() else {
+        let Some(Emulated {
+            segment, endpoint, ..
+        }) = self.emulated.as_mut()
+        else {
             return;
         };
         let mut frames = Vec::new();
@@ -257,12 +282,13 @@ impl Transport {
     }
 
     /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives` at node ids
-    /// `ids`; `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
+    /// `ids`, on a wire at `wire` when given; `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
     fn open(
         link: &str,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
         cycle: Nanos,
+        wire: Option<Bitrate>,
         candump: Option<&std::path::Path>,
     ) -> Result<Transport, LinkError> {
         if link == "canopen-emu" {
@@ -282,13 +308,17 @@ impl Transport {
                         .map_err(|e| other(format!("axis {i}: {e}")))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            let hub = VirtualCan::new();
+            let hub = wire.map_or_else(VirtualCan::new, VirtualCan::with_bitrate);
             let master = hub.endpoint();
             let node_side = hub.endpoint();
             let iface = master.log_interface();
             return Ok(Transport {
                 bus: Box::new(master),
-                emulated: Some((CanopenSegment::new(nodes, cycle), node_side)),
+                emulated: Some(Emulated::new(
+                    CanopenSegment::new(nodes, cycle),
+                    node_side,
+                    wire.map(|_| hub),
+                )),
                 candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
             });
         }
@@ -325,6 +355,9 @@ impl Transport {
         mut pacing: Option<&mut Pacing>,
         other_frames: &mut dyn FnMut(Vec<CanFrame>) -> Result<(), LinkError>,
     ) -> Result<Vec<u8>, (Option<SdoError>, String)> {
+        if self.wire().is_some() {
+            return self.sdo_on_wire(client, first, other_frames);
+        }
         // The client's clock: the wall clock on a real bus; with in-process nodes virtual
         // time, `now` plus one SDO_POLL per poll (they answer within the poll that carries the
         // request, so no wall-clock time-out decides anything there).
@@ -462,11 +495,40 @@ fn check_ids(ids: &[u8]) -> Result<(), LinkError> {
     Ok(())
 }
 
+/// The bus load of `drives` at node ids `ids` with the master's PDO layout
+/// ([`plan_layout`]) at `bitrate` and `cycle` ([`load`]); an error when a drive's process data
+/// do not fit its PDOs. The link checks it at start-up; a machine builder can ask before.
+pub fn plan_bus_load(
+    drives: &[Arc<DriveDefinition>],
+    ids: &[u8],
+    bitrate: Bitrate,
+    cycle: Nanos,
+) -> Result<BusLoad, LinkError> {
+    let nodes = drives
+        .iter()
+        .zip(ids)
+        .map(|(d, &node)| {
+            let (rx, tx) = plan_node(d, node)?;
+            Ok(load::node_frames(&rx, &tx))
+        })
+        .collect::<Result<Vec<_>, LinkError>>()?;
+    Ok(BusLoad::new(&nodes, bitrate, cycle, HEARTBEAT_MS))
+}
+
+/// The master's RPDOs and TPDOs for `def` at `node`.
+fn plan_node(def: &DriveDefinition, node: u8) -> Result<(Vec<Pdo>, Vec<Pdo>), LinkError> {
+    let rx = plan_layout(&def.rxpdo, Direction::Rx, node)
+        .map_err(|e| other(format!("node {node}: {e}")))?;
+    let tx = plan_layout(&def.txpdo, Direction::Tx, node)
+        .map_err(|e| other(format!("node {node}: {e}")))?;
+    Ok((rx, tx))
+}
+
 impl CanopenLink {
     /// `canopen-emu`: one emulated CiA 402 node per drive (node id = position + 1) and the
-    /// master, in process; brought to operational.
+    /// master, in process, on a wire at 1 Mbit/s; brought to operational.
     pub fn emulated(drives: &[Arc<DriveDefinition>], cycle: Nanos) -> Result<Self, LinkError> {
-        CanopenLink::emulated_with(drives, cycle, None)
+        CanopenLink::emulated_at(drives, cycle, Bitrate::DEFAULT, None)
     }
 
     /// [`emulated`](Self::emulated), logging every frame in candump -L format into `candump`.
@@ -475,52 +537,79 @@ impl CanopenLink {
         cycle: Nanos,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
+        CanopenLink::emulated_at(drives, cycle, Bitrate::DEFAULT, candump)
+    }
+
+    /// [`emulated_with`](Self::emulated_with) on a wire at `bitrate`.
+    pub fn emulated_at(
+        drives: &[Arc<DriveDefinition>],
+        cycle: Nanos,
+        bitrate: Bitrate,
+        candump: Option<&std::path::Path>,
+    ) -> Result<Self, LinkError> {
         let ids = default_ids(drives.len())?;
-        let bus = Transport::open("canopen-emu", drives, &ids, cycle, candump)?;
-        CanopenLink::start(bus, drives, &ids, cycle)
+        CanopenLink::on_link("canopen-emu", drives, &ids, cycle, bitrate, candump)
     }
 
     /// `canopen-emu` with the given emulated nodes (e.g. object dictionaries from an EDS,
     /// [`EmulatedNode::from_eds`]): node *i* serves `drives[i]` at its own node id; brought to
-    /// operational on virtual time like [`emulated`](Self::emulated).
+    /// operational on virtual time like [`emulated`](Self::emulated), on a wire at 1 Mbit/s.
     pub fn with_nodes(
         nodes: Vec<EmulatedNode>,
         drives: &[Arc<DriveDefinition>],
         cycle: Nanos,
     ) -> Result<Self, LinkError> {
+        CanopenLink::with_nodes_at(nodes, drives, cycle, Bitrate::DEFAULT)
+    }
+
+    /// [`with_nodes`](Self::with_nodes) on a wire at `bitrate`.
+    pub fn with_nodes_at(
+        nodes: Vec<EmulatedNode>,
+        drives: &[Arc<DriveDefinition>],
+        cycle: Nanos,
+        bitrate: Bitrate,
+    ) -> Result<Self, LinkError> {
         let ids: Vec<u8> = nodes.iter().map(EmulatedNode::id).collect();
         check_ids(&ids)?;
-        let hub = VirtualCan::new();
+        let hub = VirtualCan::with_bitrate(bitrate);
         let bus = Transport {
             bus: Box::new(hub.endpoint()),
-            emulated: Some((CanopenSegment::new(nodes, cycle), hub.endpoint())),
+            emulated: Some(Emulated::new(
+                CanopenSegment::new(nodes, cycle),
+                hub.endpoint(),
+                Some(hub),
+            )),
             candump: None,
         };
-        CanopenLink::start(bus, drives, &ids, cycle)
+        CanopenLink::start(bus, drives, &ids, cycle, bitrate)
     }
 
     /// A master for `drives` at node ids `ids` (one per drive, distinct, 1 … 127) on the CAN
-    /// link named `link` (`canopen-emu`: emulated nodes at those ids, `canopen-udp[:GROUP:PORT]`,
-    /// `socketcan:IF`), brought to operational.
+    /// link named `link` (`canopen-emu`: emulated nodes at those ids on a wire at `bitrate`,
+    /// `canopen-udp[:GROUP:PORT]`, `socketcan:IF`), brought to operational. `bitrate` is the
+    /// bus's (the machine file's `[can] bitrate`): the bus load is checked against it
+    /// ([`load`]).
     pub fn on_link(
         link: &str,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
         cycle: Nanos,
+        bitrate: Bitrate,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
         check_ids(ids)?;
-        let bus = Transport::open(link, drives, ids, cycle, candump)?;
-        CanopenLink::start(bus, drives, ids, cycle)
+        let bus = Transport::open(link, drives, ids, cycle, Some(bitrate), candump)?;
+        CanopenLink::start(bus, drives, ids, cycle, bitrate)
     }
 
-    /// A master on `bus` for nodes `ids` (one per drive), brought to operational; its cycle
-    /// is paced on the wall clock with period `cycle` ([`paced`]).
+    /// A master on `bus` (running at `bitrate`) for nodes `ids` (one per drive), brought to
+    /// operational; its cycle is paced on the wall clock with period `cycle` ([`paced`]).
     pub fn open(
         bus: Box<dyn CanBus>,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
         cycle: Nanos,
+        bitrate: Bitrate,
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
         let iface = bus.log_interface();
@@ -533,6 +622,7 @@ impl CanopenLink {
             drives,
             ids,
             cycle,
+            bitrate,
         )
     }
 
@@ -541,6 +631,7 @@ impl CanopenLink {
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
         cycle: Nanos,
+        bitrate: Bitrate,
     ) -> Result<Self, LinkError> {
         if drives.len() != ids.len() {
             return Err(other(format!(
@@ -553,13 +644,12 @@ impl CanopenLink {
             .iter()
             .zip(ids)
             .map(|(d, &node)| {
-                let rx = pack_layout(&d.rxpdo, Direction::Rx, node)
-                    .map_err(|e| other(format!("node {node}: {e}")))?;
-                let tx = pack_layout(&d.txpdo, Direction::Tx, node)
-                    .map_err(|e| other(format!("node {node}: {e}")))?;
+                let (rx, tx) = plan_node(d, node)?;
                 Ok(AxisNode {
                     node,
                     def: d.clone(),
+                    rx_sent: vec![None; rx.len()],
+                    tx_held: vec![None; tx.len()],
                     rx,
                     tx,
                     sdo: SdoClient::new(node),
@@ -568,6 +658,16 @@ impl CanopenLink {
                 })
             })
             .collect::<Result<Vec<_>, LinkError>>()?;
+        let nodes: Vec<load::NodeFrames> = axes
+            .iter()
+            .map(|a| load::node_frames(&a.rx, &a.tx))
+            .collect();
+        let bus_load = BusLoad::new(&nodes, bitrate, cycle, HEARTBEAT_MS);
+        if let Err(refused) = bus_load.check() {
+            return Err(LinkError::Other(refused));
+        }
+        tracing::info!(target: "fieldprobe::link::canopen", "{}", bus_load.describe());
+        let window = paced::sync_window(cycle, bus_load.wire_time());
         let mut link = CanopenLink {
             bus,
             axes,
@@ -576,27 +676,56 @@ impl CanopenLink {
             emergencies: Vec::new(),
             t0: Instant::now(),
             now: Nanos::ZERO,
-            prev_now: Nanos::ZERO,
+            epoch: Nanos::ZERO,
             cycle,
+            window,
+            load: bus_load,
             tpdo_cobs: Vec::new(),
+            on_change_cobs: Vec::new(),
             pacing: None,
             released: false,
         };
-        link.tpdo_cobs = link
-            .axes
-            .iter()
-            .flat_map(|a| a.tx.iter().map(|p| u32::from(p.cob)))
-            .collect();
+        for (i, a) in link.axes.iter().enumerate() {
+            for (k, p) in a.tx.iter().enumerate() {
+                match p.trigger {
+                    Trigger::Cyclic => link.tpdo_cobs.push(u32::from(p.cob)),
+                    Trigger::OnChange { .. } => {
+                        link.on_change_cobs.push((u32::from(p.cob), i, k));
+                    }
+                }
+            }
+        }
         if link.bus.emulated.is_none() {
-            link.pacing = Some(Pacing::new(cycle));
+            link.pacing = Some(Pacing::new(cycle, window));
         }
         link.boot()?;
+        link.epoch = link.bus.wire_clock().unwrap_or(Nanos::ZERO);
         Ok(link)
     }
 
-    /// Wall-clock time since the link opened (SDO timeouts).
+    /// The bus load of one cycle as computed at start-up ([`load`]).
+    pub fn bus_load(&self) -> &BusLoad {
+        &self.load
+    }
+
+    /// The synchronous window 0x1007 the master configured.
+    pub fn sync_window(&self) -> Nanos {
+        self.window
+    }
+
+    /// `canopen-emu`: the bus clock (virtual) and the bus time of the machine's time 0 (the
+    /// end of the start-up); `None` on a bus that leaves the process.
+    pub fn bus_clock(&self) -> Option<(Nanos, Nanos)> {
+        self.bus.wire_clock().map(|c| (c, self.epoch))
+    }
+
+    /// The link's clock for SDO time-outs and the heartbeat consumer: the bus clock on
+    /// `canopen-emu` ([`wire`]; the emulated nodes produce their heartbeats on it), else the
+    /// wall clock since the link opened (the nodes on a real bus produce on theirs).
     fn wall(&self) -> Nanos {
-        Nanos(self.t0.elapsed().as_nanos() as u64)
+        self.bus
+            .wire_clock()
+            .unwrap_or_else(|| Nanos(self.t0.elapsed().as_nanos() as u64))
     }
 
     fn send(&mut self, f: &CanFrame) -> Result<(), LinkError> {
@@ -611,21 +740,20 @@ impl CanopenLink {
         self.bus.receive_all(wait)
     }
 
-    /// Common handling of heartbeats and EMCY; returns the frames not consumed.
-    /// Time of the heartbeat consumer: the cycle time `now` with emulated nodes (they produce on
-    /// it), the wall clock on a real bus (the nodes produce on theirs).
-    fn heartbeat_clock(&self, now: Nanos) -> Nanos {
-        if self.bus.emulated.is_some() {
-            now
-        } else {
-            self.wall()
-        }
-    }
-
+    /// Common handling of heartbeats, EMCY and on-change TPDOs (kept for the next input image
+    /// the link commits, whenever they come); returns the frames not consumed.
     fn note(&mut self, frames: Vec<CanFrame>, now: Nanos) -> Result<Vec<CanFrame>, LinkError> {
-        let hb_now = self.heartbeat_clock(now);
+        let hb_now = self.wall();
         let mut rest = Vec::new();
         for f in frames {
+            if !f.extended && !f.rtr && !f.error {
+                if let Some(&(_, i, k)) = self.on_change_cobs.iter().find(|c| c.0 == f.id) {
+                    if let Some(slot) = self.axes.get_mut(i).and_then(|a| a.tx_held.get_mut(k)) {
+                        *slot = Some(f.payload().to_vec());
+                    }
+                    continue;
+                }
+            }
             if let Some((node, state)) = nmt::parse_heartbeat(&f) {
                 if let Some(ax) = self.axes.iter_mut().find(|a| a.node == node) {
                     if state == NmtState::BootUp && ax.state == Some(NmtState::Operational) {
@@ -649,34 +777,35 @@ impl CanopenLink {
         Ok(rest)
     }
 
+    /// Let the bus run a little and take what came: on `canopen-emu` the nodes do their
+    /// time-driven work and 1 ms of bus time passes ([`wire`]); elsewhere the emulated nodes
+    /// (none) run and the master waits up to `wait` for a first frame.
+    fn settle(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
+        if self.bus.wire().is_some() {
+            self.bus.wait_wire(Nanos::from_micros(1000))
+        } else {
+            self.run_nodes(self.now);
+            self.receive_all(wait)
+        }
+    }
+
     fn boot(&mut self) -> Result<(), LinkError> {
         self.send(&NmtCommand::ResetCommunication.frame(0))?;
-        // Two seconds: of the wall clock on a real bus, of 20 ms polls (virtual time) with
-        // in-process nodes.
-        let emulated = self.bus.emulated.is_some();
         let deadline = Instant::now() + Duration::from_secs(2);
-        let mut polls = 0u32;
+        let bus_deadline = self.wall().saturating_add(Nanos(2_000_000_000));
         loop {
-            self.run_nodes(self.now);
-            let wait = if emulated {
-                Duration::ZERO
-            } else {
-                Duration::from_millis(20)
-            };
-            let frames = self.receive_all(wait)?;
+            let frames = self.settle(Duration::from_millis(20))?;
             self.note(frames, self.now)?;
             if self.axes.iter().all(|a| {
                 a.state == Some(NmtState::PreOperational) || a.state == Some(NmtState::BootUp)
             }) {
                 break;
             }
-            polls += 1;
-            let expired = if emulated {
-                polls >= 100
-            } else {
-                Instant::now() > deadline
+            let late = match self.bus.wire_clock() {
+                Some(t) => t > bus_deadline,
+                None => Instant::now() > deadline,
             };
-            if expired {
+            if late {
                 let missing: Vec<String> = self
                     .axes
                     .iter()
@@ -718,10 +847,9 @@ impl CanopenLink {
             self.write_sync_timing(i)?;
         }
         self.send(&NmtCommand::Start.frame(0))?;
-        self.run_nodes(self.now);
-        let frames = self.receive_all(Duration::from_millis(20))?;
+        let frames = self.settle(Duration::from_millis(20))?;
         self.note(frames, self.now)?;
-        let hb_start = self.heartbeat_clock(self.now);
+        let hb_start = self.wall();
         for a in &mut self.axes {
             a.state = Some(NmtState::Operational);
             a.last_heartbeat = Some(hb_start);
@@ -730,12 +858,14 @@ impl CanopenLink {
     }
 
     /// Start-up: 0x1006 communication cycle period and 0x1007 synchronous window length
-    /// (CiA 301) of axis `i`'s node, and the event-timer (deadline monitoring) of each of its
-    /// RPDOs. A node without the object or sub-index (abort 0x0602_0000 / 0x0609_0011) runs
-    /// without it: a warning. Any other refusal is an error naming node and object.
+    /// (CiA 301; [`paced::sync_window`]) of axis `i`'s node, and the event-timer (deadline
+    /// monitoring) of each of its RPDOs — 0 (off) for an on-change RPDO, which does not come
+    /// every cycle. A node without the object or sub-index (abort 0x0602_0000 / 0x0609_0011)
+    /// runs without it: a warning. Any other refusal is an error naming node and object.
     fn write_sync_timing(&mut self, i: usize) -> Result<(), LinkError> {
         let node = self.axes[i].node;
         let event_ms = rpdo_event_timer_ms(self.cycle);
+        let window_us = u32::try_from(self.window.0 / 1000).unwrap_or(u32::MAX);
         let mut objects = vec![
             (
                 0x1006u16,
@@ -748,17 +878,21 @@ impl CanopenLink {
                 0x1007,
                 0,
                 "synchronous window length".to_string(),
-                sync_window_us(self.cycle).to_le_bytes().to_vec(),
-                format!("{} µs", sync_window_us(self.cycle)),
+                window_us.to_le_bytes().to_vec(),
+                format!("{window_us} µs"),
             ),
         ];
         for p in &self.axes[i].rx {
+            let ms = match p.trigger {
+                Trigger::Cyclic => event_ms,
+                Trigger::OnChange { .. } => 0,
+            };
             objects.push((
                 Direction::Rx.comm_index(p.number),
                 5,
                 format!("RPDO {} event-timer", p.number + 1),
-                event_ms.to_le_bytes().to_vec(),
-                format!("{event_ms} ms"),
+                ms.to_le_bytes().to_vec(),
+                format!("{ms} ms"),
             ));
         }
         for (index, sub, what, data, value) in objects {
@@ -820,7 +954,9 @@ impl CanopenLink {
     }
 
     /// The end of an exchange: the fault knob, the heartbeat consumer, and the TPDOs (`got`,
-    /// the frames after SYNC) copied into the input images when every expected one came.
+    /// the frames after SYNC) copied into the input images when every expected (cyclic) one
+    /// came, with the last data of every on-change TPDO ([`Trigger::OnChange`], taken by
+    /// [`Self::note`] whenever it came).
     fn finish_exchange(
         &mut self,
         n: u64,
@@ -829,11 +965,11 @@ impl CanopenLink {
         images: &mut [ProcessImage],
     ) -> Result<(), LinkError> {
         if self.lose.contains(&n) {
-            // Fault knob: this cycle's TPDOs never arrive.
+            // Fault knob: this cycle's cyclic TPDOs come too late for it.
             got.retain(|f| !self.tpdo_cobs.contains(&f.id));
         }
         // Heartbeat consumer.
-        let hb_now = self.heartbeat_clock(now);
+        let hb_now = self.wall();
         for ax in &self.axes {
             let limit = u64::from(HEARTBEAT_MS) * 1_000_000 * HEARTBEAT_TIMEOUT_FACTOR;
             if let Some(t) = ax.last_heartbeat {
@@ -851,21 +987,28 @@ impl CanopenLink {
         }
         let mut staged: Vec<Vec<u8>> = images.iter().map(|i| i.inputs.clone()).collect();
         for (ax, inputs) in self.axes.iter().zip(staged.iter_mut()) {
-            for p in &ax.tx {
-                let f = got
-                    .iter()
-                    .rev()
-                    .find(|f| !f.extended && !f.rtr && f.id == u32::from(p.cob));
-                match f {
-                    Some(f) if p.unpack(f.payload(), inputs) => {}
-                    Some(f) => {
+            for (p, held) in ax.tx.iter().zip(&ax.tx_held) {
+                let data = match p.trigger {
+                    Trigger::Cyclic => got
+                        .iter()
+                        .rev()
+                        .find(|f| !f.extended && !f.rtr && f.id == u32::from(p.cob))
+                        .map(CanFrame::payload),
+                    Trigger::OnChange { .. } => match held {
+                        Some(d) => Some(d.as_slice()),
+                        None => continue,
+                    },
+                };
+                match data {
+                    Some(d) if p.unpack(d, inputs) => {}
+                    Some(d) => {
                         return Err(LinkError::Lost {
                             at: now,
                             reason: format!(
                                 "node {}: TPDO {} has {} bytes, expected {}",
                                 ax.node,
                                 p.number + 1,
-                                f.len,
+                                d.len(),
                                 p.len()
                             ),
                         })
@@ -891,22 +1034,27 @@ impl CanopenLink {
 
     /// After [`Link::release`]: NMT start to every axis's node (their PDO configuration is
     /// kept in pre-operational), as at the end of the start-up.
-    fn restart(&mut self, now: Nanos) -> Result<(), LinkError> {
+    fn restart(&mut self) -> Result<(), LinkError> {
         self.released = false;
         let nodes: Vec<u8> = self.axes.iter().map(|a| a.node).collect();
         for node in nodes {
             self.send(&NmtCommand::Start.frame(node))?;
         }
-        let hb = self.heartbeat_clock(now);
+        let hb = self.wall();
         for a in &mut self.axes {
             a.state = Some(NmtState::Operational);
             a.last_heartbeat = Some(hb);
+            // The on-change RPDOs go out again with the next exchange.
+            a.rx_sent.iter_mut().for_each(|d| *d = None);
         }
         Ok(())
     }
 
-    /// Fault knob: the TPDOs of the `n`-th exchange (0-based) are lost on the bus (dropped before
-    /// the master sees them; the exchange then reports the missing TPDO).
+    /// Fault knob: the cyclic TPDOs of the `n`-th exchange (0-based) do not reach the master in
+    /// time (dropped before it sees them; the exchange then reports the missing TPDO). On CAN
+    /// a frame is not lost silently — the controllers acknowledge and repeat it — so what a
+    /// master misses is a frame that came too late; the on-change TPDOs of that SYNC, which
+    /// come before the cyclic ones ([`crate::bus::canopen::pdo`]), are taken as always.
     pub fn lose_exchange_at(&mut self, n: u64) {
         self.lose.insert(n);
     }
@@ -918,12 +1066,79 @@ impl CanopenLink {
 
     /// The emulated nodes (`canopen-emu`).
     pub fn segment(&self) -> Option<&CanopenSegment> {
-        self.bus.emulated.as_ref().map(|(s, _)| s)
+        self.bus.emulated.as_ref().map(|e| &e.segment)
     }
 
     /// The emulated nodes, mutable (fault knobs: a node's 0x1017, model faults).
     pub fn segment_mut(&mut self) -> Option<&mut CanopenSegment> {
-        self.bus.emulated.as_mut().map(|(s, _)| s)
+        self.bus.emulated.as_mut().map(|e| &mut e.segment)
+    }
+
+    /// `canopen-emu`: record every frame the wire completes from now on (`false`: stop and
+    /// forget), for [`take_bus_trace`](Self::take_bus_trace).
+    pub fn trace_bus(&mut self, on: bool) {
+        if let Some(e) = self.bus.emulated.as_mut() {
+            e.trace = on.then(Vec::new);
+        }
+    }
+
+    /// The frames the wire completed since the last call (with [`trace_bus`](Self::trace_bus)
+    /// on), in order: when each won the bus and when it ended.
+    pub fn take_bus_trace(&mut self) -> Vec<crate::bus::can::Delivery> {
+        self.bus
+            .emulated
+            .as_mut()
+            .and_then(|e| e.trace.as_mut())
+            .map(std::mem::take)
+            .unwrap_or_default()
+    }
+
+    /// One exchange on `canopen-emu` ([`wire`]): the RPDOs (sent already, at the bus clock:
+    /// right after the previous exchange's TPDOs) travel while the wire runs to the SYNC's
+    /// time epoch + `now`; the nodes do their time-driven work; SYNC (late, at the bus clock,
+    /// when the bus ran past its time); the wire runs until every cyclic TPDO came or the
+    /// synchronous window after the SYNC passed.
+    fn exchange_on_wire(
+        &mut self,
+        n: u64,
+        now: Nanos,
+        images: &mut [ProcessImage],
+    ) -> Result<(), LinkError> {
+        let t_sync = self.epoch.saturating_add(now);
+        let early = self.bus.run_wire(Some(t_sync), &mut |_, _| false)?;
+        // Heartbeats, EMCY and on-change TPDOs count; a cyclic TPDO before this SYNC belongs
+        // to an earlier one and is dropped.
+        self.note(early, now)?;
+        self.bus.poll_nodes();
+        let sent = self.bus.wire_clock().unwrap_or(t_sync);
+        self.bus.send_sync(now)?;
+        let deadline = sent.saturating_add(self.window);
+        let cobs = &self.tpdo_cobs;
+        let mut seen = vec![false; cobs.len()];
+        let mut missing = cobs.len();
+        let mut synced = false;
+        let mut before = 0;
+        let frames = self.bus.run_wire(Some(deadline), &mut |d, got| {
+            if !synced {
+                synced = d.frame.id == u32::from(nmt::SYNC_COB) && !d.frame.extended;
+                before += got.len();
+                return false;
+            }
+            for f in got.iter().filter(|f| !f.extended && !f.rtr && !f.error) {
+                if let Some(k) = cobs.iter().position(|&c| c == f.id) {
+                    if !seen[k] {
+                        seen[k] = true;
+                        missing -= 1;
+                    }
+                }
+            }
+            missing == 0
+        })?;
+        let mut frames = frames;
+        let after = frames.split_off(before.min(frames.len()));
+        self.note(frames, now)?;
+        let got = self.note(after, now)?;
+        self.finish_exchange(n, now, got, images)
     }
 }
 
@@ -952,14 +1167,21 @@ impl Link for CanopenLink {
         }
         self.now = now;
         if self.released {
-            self.restart(now)?;
+            self.restart()?;
         }
         let n = self.exchanges;
         self.exchanges += 1;
         let mut rpdos = Vec::new();
-        for (ax, img) in self.axes.iter().zip(images.iter()) {
-            for p in &ax.rx {
+        for (ax, img) in self.axes.iter_mut().zip(images.iter()) {
+            for (p, sent) in ax.rx.iter().zip(ax.rx_sent.iter_mut()) {
                 let data = p.pack(&img.outputs);
+                if p.trigger != Trigger::Cyclic {
+                    // On change: only new data go out.
+                    if sent.as_deref() == Some(data.as_slice()) {
+                        continue;
+                    }
+                    *sent = Some(data.clone());
+                }
                 let f = CanFrame::new(p.cob, &data)
                     .map_err(|e| other(format!("node {}: RPDO {}: {e}", ax.node, p.number + 1)))?;
                 rpdos.push(f);
@@ -976,17 +1198,7 @@ impl Link for CanopenLink {
                 self.pacing = Some(pacing);
                 r
             }
-            None => {
-                // Virtual time: the nodes take the RPDOs right after the previous SYNC, then
-                // SYNC and their TPDOs at `now`; they have answered when `run_nodes` returns.
-                self.run_nodes(self.prev_now);
-                self.prev_now = now;
-                self.send(&nmt::sync())?;
-                self.run_nodes(now);
-                let frames = self.receive_all(Duration::ZERO)?;
-                let got = self.note(frames, now)?;
-                self.finish_exchange(n, now, got, images)
-            }
+            None => self.exchange_on_wire(n, now, images),
         }
     }
 
@@ -1006,20 +1218,19 @@ impl Link for CanopenLink {
             axes.iter()
                 .all(|a| a.state == Some(NmtState::PreOperational))
         };
-        if self.bus.emulated.is_some() {
-            // Virtual time: the nodes take the command at `now` and run on in cycle steps
-            // until their heartbeats came (the machine's time is not moved: nothing else runs).
-            let step = self.cycle.0.max(1);
-            let mut t = now;
+        if self.bus.wire().is_some() {
+            // Virtual time: the wire and the nodes run on in cycle steps until their
+            // heartbeats came. The machine's time is not moved (nothing else runs): its next
+            // SYNC, after a restart, follows on a grid that starts here.
+            let start = self.wall();
             loop {
-                self.run_nodes(t);
-                let frames = self.receive_all(Duration::ZERO)?;
-                self.note(frames, t)?;
-                if confirmed(&self.axes) || t.0 - now.0 >= bound {
+                let frames = self.bus.wait_wire(Nanos(self.cycle.0.max(1)))?;
+                self.note(frames, now)?;
+                if confirmed(&self.axes) || self.wall().0.saturating_sub(start.0) >= bound {
                     break;
                 }
-                t = Nanos(t.0 + step);
             }
+            self.epoch = Nanos(self.wall().0.saturating_sub(now.0));
         } else {
             let end = Instant::now() + Duration::from_nanos(bound);
             while !confirmed(&self.axes) && Instant::now() < end {

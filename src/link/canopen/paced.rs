@@ -57,16 +57,28 @@ pub const SYNC_TIMEOUT_PERIODS: u64 = crate::sim::canopen::SYNC_TIMEOUT_PERIODS;
 /// `max_lost_cycles`, so the channel reports it (900012) unless the machine allows more.
 pub const STALL_MISSED: u64 = crate::params::DEFAULT_MAX_LOST_CYCLES as u64 + 1;
 
-/// The synchronous window 0x1007 the master configures, as a fraction of the period: half.
-/// It must hold SYNC, every TPDO and every RPDO of a cycle (on a 1 Mbit/s bus a data frame of
-/// 8 bytes takes at most 135 µs, so half of 4 ms holds 14 of them); the other half is left to
-/// SDO, heartbeat and EMCY traffic.
+/// The synchronous window 0x1007 the master configures, as a fraction of the period: half,
+/// or more when a cycle's frames need more ([`sync_window`]). It must hold SYNC, every TPDO
+/// and every RPDO of a cycle (on a 1 Mbit/s bus a data frame of 8 bytes takes at most 135 µs,
+/// so half of 4 ms holds 14 of them); the rest is left to SDO, heartbeat and EMCY traffic.
 pub const SYNC_WINDOW_DIVISOR: u64 = 2;
 
-/// 0x1007 synchronous window length for `period` (µs, at least 1).
+/// Half the period in µs (at least 1): the synchronous window of a cycle whose frames fit it.
 pub fn sync_window_us(period: Nanos) -> u32 {
     let us = period.0 / 1000 / SYNC_WINDOW_DIVISOR;
     u32::try_from(us.max(1)).unwrap_or(u32::MAX)
+}
+
+/// 0x1007 synchronous window length for `period` when the SYNC and the PDOs of one cycle take
+/// `frames` on the wire at worst ([`super::load::BusLoad::wire_time`]): half the period, or
+/// `frames` rounded up to whole µs when longer, at most the period — the window must hold
+/// them, or a node may drop the TPDOs past it and the master stops waiting there.
+pub fn sync_window(period: Nanos, frames: Nanos) -> Nanos {
+    let half = u64::from(sync_window_us(period));
+    let us = half
+        .max(frames.0.div_ceil(1000))
+        .min((period.0 / 1000).max(1));
+    Nanos::from_micros(us)
 }
 
 /// The RPDO event-timer the master configures (0x1400 + k sub-index 5, ms, deadline
@@ -124,12 +136,12 @@ impl std::fmt::Debug for Pacing {
 }
 
 impl Pacing {
-    /// A SYNC producer with period `period`; the synchronous window is
-    /// [`sync_window_us`]`(period)`.
-    pub(super) fn new(period: Nanos) -> Self {
+    /// A SYNC producer with period `period` and synchronous window `window`
+    /// ([`sync_window`]).
+    pub(super) fn new(period: Nanos, window: Nanos) -> Self {
         Pacing {
             clock: CycleClock::new(period),
-            window_ns: u64::from(sync_window_us(period)) * 1000,
+            window_ns: window.0,
             next: None,
             last_sync: None,
             last_gap: 0,
@@ -338,5 +350,10 @@ mod tests {
         assert_eq!(sync_window_us(Nanos::from_micros(4000)), 2000);
         assert_eq!(cycle_period_us(Nanos::from_micros(4000)), 4000);
         assert_eq!(sync_window_us(Nanos::from_micros(1)), 1);
+        // A cycle whose frames take longer than half of it: the window holds them.
+        let p = Nanos::from_micros(4000);
+        assert_eq!(sync_window(p, Nanos(1_840_000)), Nanos::from_micros(2000));
+        assert_eq!(sync_window(p, Nanos(3_100_500)), Nanos::from_micros(3101));
+        assert_eq!(sync_window(p, Nanos(9_000_000)), p);
     }
 }

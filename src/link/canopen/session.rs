@@ -53,7 +53,7 @@ impl CanSession {
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
         check_ids(ids)?;
-        let bus = Transport::open(link, drives, ids, Nanos::from_micros(1000), candump)?;
+        let bus = Transport::open(link, drives, ids, Nanos::from_micros(1000), None, candump)?;
         let mut s = CanSession {
             bus,
             t0: Instant::now(),

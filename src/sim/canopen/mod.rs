@@ -1127,25 +1127,48 @@ impl CanopenSegment {
     /// and their order are those `run` returns.
     pub fn run_with(&mut self, received: &[CanFrame], now: Nanos, send: &mut dyn FnMut(CanFrame)) {
         for f in received {
-            if !f.extended && !f.rtr && !f.error && f.id == u32::from(nmt::SYNC_COB) {
-                for n in &mut self.nodes {
-                    n.syncs += u64::from(n.state == NmtState::Operational);
-                    n.on_sync(now);
-                    n.send_tpdos(now);
-                    n.take_outgoing().into_iter().for_each(&mut *send);
-                }
-                self.step_models(now);
-            } else {
-                for n in &mut self.nodes {
-                    n.handle(f, now);
-                }
-            }
+            self.receive(f, now, now, send);
+        }
+        self.poll(now, send);
+    }
+
+    /// One frame reaching every node at `at`: NMT, SDO and PDOs are handled at once; a SYNC
+    /// makes every operational node take over its synchronous RPDOs and send its synchronous
+    /// TPDOs at `at`, then the drive models step once at `model_time` — the instant on the
+    /// SYNC producer's grid that the world's clock (plant, probe edges) keeps, which a bus
+    /// with a wire delays by the SYNC's own wire time and any frame in progress. Whatever the
+    /// nodes send goes to `send` in order.
+    pub fn receive(
+        &mut self,
+        f: &CanFrame,
+        at: Nanos,
+        model_time: Nanos,
+        send: &mut dyn FnMut(CanFrame),
+    ) {
+        if !f.extended && !f.rtr && !f.error && f.id == u32::from(nmt::SYNC_COB) {
             for n in &mut self.nodes {
+                n.syncs += u64::from(n.state == NmtState::Operational);
+                n.on_sync(at);
+                n.send_tpdos(at);
                 n.take_outgoing().into_iter().for_each(&mut *send);
+            }
+            self.step_models(model_time);
+        } else {
+            for n in &mut self.nodes {
+                n.handle(f, at);
             }
         }
         for n in &mut self.nodes {
-            n.poll(now);
+            n.take_outgoing().into_iter().for_each(&mut *send);
+        }
+    }
+
+    /// The time-driven work of every node at `at` ([`EmulatedNode::poll`]: boot-up, heartbeat,
+    /// SDO server timeout, EMCY, SYNC watch, RPDO deadlines, event-driven TPDOs); what the
+    /// nodes send goes to `send`.
+    pub fn poll(&mut self, at: Nanos, send: &mut dyn FnMut(CanFrame)) {
+        for n in &mut self.nodes {
+            n.poll(at);
             n.take_outgoing().into_iter().for_each(&mut *send);
         }
     }
