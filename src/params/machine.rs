@@ -140,8 +140,8 @@ pub struct MachineConfig {
     /// Consecutive lost process-data exchanges the channel rides through before error 900012
     /// (project key `max_lost_cycles`, 0 ..= 1000; default [`DEFAULT_MAX_LOST_CYCLES`]).
     pub max_lost_cycles: u32,
-    /// The CAN bus's bit rate, bit/s (`[can] bitrate`, one of [`CAN_BITRATES`]; default
-    /// [`DEFAULT_CAN_BITRATE`]): the CANopen links check the bus load against it.
+    /// The CAN bus's bit rate, bit/s (`[can] bitrate`, one of `CAN_BITRATES`; default
+    /// `DEFAULT_CAN_BITRATE`): the CANopen links check the bus load against it.
     pub can_bitrate: u32,
     /// Channel parameter list (P-CHAN-*).
     pub channel: ParamSet,

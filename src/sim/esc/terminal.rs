@@ -2,7 +2,7 @@
 //!
 //! [`emulated_terminal`] picks the application by what the device is:
 //! * an EL1252-kind timestamp input (ESI type name contains `EL1252`):
-//!   [`emulated_el1252`](super::device::emulated_el1252), two channels, continuous latching, the
+//!   [`emulated_el1252`], two channels, continuous latching, the
 //!   default DC clock; it hosts a model, so a segment with a world steps it at SYNC0;
 //! * a device without process data (a coupler): no application;
 //! * any other device with process data: [`EchoApp`] in loopback (its inputs are its outputs,
