@@ -121,8 +121,9 @@ fn inputs(seg: &mut Segment, now: u64) -> (u16, i32) {
     )
 }
 
-#[test]
-fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
+/// The emulated servo alone on a segment on its own clock (world cycle 1 ms), taken through
+/// PRE-OP to SAFE-OP with the ESI's mailbox and process-data SMs and the FMMUs of [`cycle`].
+fn servo_in_safe_op() -> Segment {
     let esi = fieldprobe::esi::load("esi/fieldprobe-cia402-servo.xml").unwrap();
     let def = catalogue::load("cia402-generic").unwrap();
     let esc = emulated_servo(&esi, &esi.devices[0], &def).unwrap();
@@ -130,8 +131,6 @@ fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
     let mut seg = Segment::new(vec![esc], 0);
     seg.set_world(World::new(Plant::new()), Nanos(MS));
     seg.set_stepping(Stepping::OwnClock);
-
-    // INIT → PRE-OP → SAFE-OP with the ESI's SMs, SYNC0 every 1 ms from 10 ms, OP.
     let r = exchange(
         &mut seg,
         0,
@@ -161,6 +160,31 @@ fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
     fpwr(&mut seg, 0, reg::fmmu(1), &fmmu(9, SM3.1, SM3.0, 1));
     fpwr(&mut seg, 0, reg::AL_CONTROL, &[0x04, 0]);
     assert_eq!(al_status(&mut seg, 0), (0x0004, 0));
+    seg
+}
+
+/// CiA 402 enable through the state machine (controlword 0x06, 0x07, 0x0F), one process-data
+/// cycle per `cycle_with(controlword)` (which returns the statusword), at most 50 per step.
+fn enable(mut cycle_with: impl FnMut(u16) -> u16) {
+    let mut sw = 0;
+    for (cw, want) in [
+        (0x06, READY_TO_SWITCH_ON),
+        (0x07, SWITCHED_ON),
+        (0x0F, OPERATION_ENABLED),
+    ] {
+        let mut n = 0;
+        while sw & SW_MASK != want {
+            sw = cycle_with(cw);
+            n += 1;
+            assert!(n < 50, "controlword {cw:#x}: statusword {sw:#06x}");
+        }
+    }
+}
+
+#[test]
+fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
+    // INIT → PRE-OP → SAFE-OP with the ESI's SMs, SYNC0 every 1 ms from 10 ms, OP.
+    let mut seg = servo_in_safe_op();
     fpwr(&mut seg, MS, reg::DC_SYNC_ACTIVATION, &[0]);
     fpwr(&mut seg, MS, reg::DC_START_TIME, &(10 * MS).to_le_bytes());
     fpwr(
@@ -182,19 +206,7 @@ fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
         assert_eq!(r.0, 3, "LRW working counter");
         (r.1, r.2, k * MS)
     };
-    let mut sw = 0;
-    for (cw, want) in [
-        (0x06, READY_TO_SWITCH_ON),
-        (0x07, SWITCHED_ON),
-        (0x0F, OPERATION_ENABLED),
-    ] {
-        let mut n = 0;
-        while sw & SW_MASK != want {
-            sw = run(&mut seg, cw, 0).0;
-            n += 1;
-            assert!(n < 50, "controlword {cw:#x}: statusword {sw:#06x}");
-        }
-    }
+    enable(|cw| run(&mut seg, cw, 0).0);
     // A ramp of 100 increments per cycle, then hold the end.
     let mut target = 0;
     for _ in 0..50 {
@@ -202,7 +214,7 @@ fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
         run(&mut seg, 0x0F, target);
     }
     let mut last_frame = 0;
-    let mut pos = 0;
+    let (mut sw, mut pos) = (0, 0);
     for _ in 0..20 {
         let r = run(&mut seg, 0x0F, target);
         (sw, pos) = (r.0, r.1);
@@ -263,41 +275,7 @@ fn watchdog_expiry_quick_stops_the_drive_and_the_master_brings_it_back() {
 /// SYNC0 comes any more: QUICK STOP ACTIVE, standing still where the quick stop ended.
 #[test]
 fn a_master_that_leaves_for_init_finds_the_drive_quick_stopped_not_frozen_enabled() {
-    let esi = fieldprobe::esi::load("esi/fieldprobe-cia402-servo.xml").unwrap();
-    let def = catalogue::load("cia402-generic").unwrap();
-    let esc = emulated_servo(&esi, &esi.devices[0], &def).unwrap();
-    let mbx = esc.config().mailbox.expect("the servo has a mailbox");
-    let mut seg = Segment::new(vec![esc], 0);
-    seg.set_world(World::new(Plant::new()), Nanos(MS));
-    seg.set_stepping(Stepping::OwnClock);
-    let r = exchange(
-        &mut seg,
-        0,
-        &[(
-            Command::Apwr,
-            physical_address(0, reg::STATION_ADDRESS),
-            STATION.to_le_bytes().to_vec(),
-        )],
-    );
-    assert_eq!(r[0].0, 1);
-    fpwr(
-        &mut seg,
-        0,
-        reg::sm(0),
-        &sm(mbx.rx_offset, mbx.rx_size, 0x26),
-    );
-    fpwr(
-        &mut seg,
-        0,
-        reg::sm(1),
-        &sm(mbx.tx_offset, mbx.tx_size, 0x22),
-    );
-    fpwr(&mut seg, 0, reg::AL_CONTROL, &[0x02, 0]);
-    fpwr(&mut seg, 0, reg::sm(2), &sm(SM2.0, SM2.1, SM2.2));
-    fpwr(&mut seg, 0, reg::sm(3), &sm(SM3.0, SM3.1, SM3.2));
-    fpwr(&mut seg, 0, reg::fmmu(0), &fmmu(0, SM2.1, SM2.0, 2));
-    fpwr(&mut seg, 0, reg::fmmu(1), &fmmu(9, SM3.1, SM3.0, 1));
-    fpwr(&mut seg, 0, reg::AL_CONTROL, &[0x04, 0]);
+    let mut seg = servo_in_safe_op();
     fpwr(&mut seg, MS, reg::AL_CONTROL, &[0x08, 0]);
     assert_eq!(al_status(&mut seg, MS), (0x0008, 0));
 
@@ -310,19 +288,7 @@ fn a_master_that_leaves_for_init_finds_the_drive_quick_stopped_not_frozen_enable
         assert_eq!(r.0, 3, "LRW working counter");
         (r.1, r.2, k)
     };
-    let mut sw = 0;
-    for (cw, want) in [
-        (0x06, READY_TO_SWITCH_ON),
-        (0x07, SWITCHED_ON),
-        (0x0F, OPERATION_ENABLED),
-    ] {
-        let mut n = 0;
-        while sw & SW_MASK != want {
-            sw = run(&mut seg, cw, 0).0;
-            n += 1;
-            assert!(n < 50, "controlword {cw:#x}: statusword {sw:#06x}");
-        }
-    }
+    enable(|cw| run(&mut seg, cw, 0).0);
     let mut target = 0;
     let mut last = 0;
     for _ in 0..40 {

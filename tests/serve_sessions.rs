@@ -144,11 +144,7 @@ fn inner(python: &Path) {
         EMULATOR_SECONDS,
         // Lockstep: the drives step once per process-data cycle of the master instead of at
         // SYNC0 on the emulator's own clock (bounds in the module documentation).
-        &[
-            "--probe-at".into(),
-            format!("{Z}=100"),
-            "--lockstep".into(),
-        ],
+        &["--probe-at".into(), format!("{Z}=100"), "--lockstep".into()],
     );
     let check_run = |n: usize| {
         let (code, out, err) = run_meas1(n);
