@@ -43,7 +43,7 @@ fn scan_lists_the_emulated_segment_of_the_machine() {
         assert_eq!(cols[1], format!("{:#06x}", 0x1000 + pos), "{line}");
         assert_eq!(cols[2], "0x00000fb0", "{line}");
         assert_eq!(cols[3], format!("{product:#010x}"), "{line}");
-        assert_eq!(cols[5], "PreOp", "{line}");
+        assert_eq!(cols[5], "PREOP", "{line}");
         assert!(line.ends_with(&name), "{line} vs {name}");
     }
 }

@@ -10,7 +10,8 @@
 //! where it stands; the checks between parameters (P-AXIS-00177 < P-AXIS-00178, …) run once
 //! after all of them, so their order does not matter.
 //!
-//! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `idn`,
+//! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `sdos`,
+//! `pdos` ([`sdos`], [`pdos`]: dictionary and PDO configuration read from a device), `idn`,
 //! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (FCT-C14 control areas,
 //! see `docs/areas.md`).
 //!
@@ -35,15 +36,18 @@ macro_rules! outln {
 
 mod areas;
 mod bus;
+mod canopen_od;
 mod check;
 mod esi;
 mod jog;
 mod number;
 mod params;
+mod pdos;
 mod plot;
 mod progress;
 mod run;
 mod sdo;
+mod sdos;
 mod sim;
 mod trace;
 mod value;
@@ -90,6 +94,14 @@ enum Command {
     /// Read or write an object by SDO: CoE on an EtherCAT SubDevice (`--device`) or a CANopen
     /// node (`--node`).
     Sdo(sdo::SdoArgs),
+    /// List a device's object dictionary like IgH `ethercat sdos`: CoE SDO Information on an
+    /// EtherCAT SubDevice (`--device`); the EDS (`--eds`) checked by SDO plus an SDO scan on a
+    /// CANopen node (`--node`).
+    Sdos(sdos::SdosArgs),
+    /// The PDO configuration read from a device: sync managers, assignment 0x1C12/0x1C13 and
+    /// mappings like IgH `ethercat pdos` (`--device`); RPDO/TPDO communication and mapping
+    /// parameters 0x1400–0x1BFF (`--node`).
+    Pdos(pdos::PdosArgs),
     /// CANopen bus: find nodes, dump frames.
     Can(bus::CanArgs),
     /// Read or write a SERCOS IDN (SoE) of an EtherCAT SubDevice.
@@ -123,6 +135,8 @@ pub fn main() -> i32 {
         Command::Sim(a) => sim::run(a),
         Command::Scan(a) => bus::scan(a),
         Command::Sdo(a) => sdo::sdo(a),
+        Command::Sdos(a) => sdos::run(a),
+        Command::Pdos(a) => pdos::run(a),
         Command::Can(a) => bus::can(a),
         Command::Idn(a) => bus::idn(a),
     };

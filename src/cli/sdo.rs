@@ -33,7 +33,7 @@ enum SdoOp {
 
 /// The bus and the device (EtherCAT) or node (CANopen) an SDO goes to.
 #[derive(Debug, clap::Args)]
-struct SdoTo {
+pub(super) struct SdoTo {
     #[command(flatten)]
     bus: SdoBusArgs,
     /// Ring position of the SubDevice, as `scan` prints it (EtherCAT links); decimal or 0x hex.
@@ -76,7 +76,7 @@ struct SdoWrite {
 }
 
 /// Whom an SDO goes to.
-enum Target {
+pub(super) enum Target {
     Device(usize),
     Node(u8),
 }
@@ -92,8 +92,8 @@ impl std::fmt::Display for Target {
 
 /// The bus and the target, checked: the link first (an unknown link is named as such), then
 /// that `--device` / `--node` fits it, and on `canopen-emu` that the node is emulated.
-fn target(to: &SdoTo) -> anyhow::Result<(Bus, Target)> {
-    let bus = to.bus.bus("sdo", to.node.is_some())?;
+pub(super) fn target(to: &SdoTo, command: &str) -> anyhow::Result<(Bus, Target)> {
+    let bus = to.bus.bus(command, to.node.is_some())?;
     let t = match (bus.link.is_can(), to.device, to.node) {
         (false, Some(d), None) => Target::Device(d),
         (true, None, Some(n)) => Target::Node(n),
@@ -138,7 +138,7 @@ pub fn sdo(a: SdoArgs) -> anyhow::Result<i32> {
 
 fn read(r: SdoRead) -> anyhow::Result<i32> {
     let o = object(&r.object)?;
-    let (bus, target) = target(&r.to)?;
+    let (bus, target) = target(&r.to, "sdo")?;
     let result = match target {
         Target::Device(d) => {
             let mut s = bus.open()?;
@@ -216,7 +216,7 @@ fn write(w: SdoWrite) -> anyhow::Result<i32> {
             super::cap_echo(&w.value)
         )
     })?;
-    let (bus, target) = target(&w.to)?;
+    let (bus, target) = target(&w.to, "sdo")?;
     let result = match target {
         Target::Device(d) => {
             let mut s = bus.open()?;

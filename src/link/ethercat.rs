@@ -59,6 +59,7 @@
 
 pub mod cycle_plan;
 pub mod datagrams;
+pub mod dictionary;
 pub mod terminals;
 
 use std::collections::BTreeSet;
@@ -1262,6 +1263,20 @@ fn connect(
     Ok((md, wire_end))
 }
 
+/// An AL state in the words IgH's `ethercat slaves` uses: `INIT`, `PREOP`, `BOOT`, `SAFEOP`,
+/// `OP` (ETG.1000.6 AL control states).
+pub fn igh_state(st: ethercrab::SubDeviceState) -> String {
+    use ethercrab::SubDeviceState as S;
+    match st {
+        S::Init => "INIT".into(),
+        S::PreOp => "PREOP".into(),
+        S::Bootstrap => "BOOT".into(),
+        S::SafeOp => "SAFEOP".into(),
+        S::Op => "OP".into(),
+        other => format!("{other:?}").to_uppercase(),
+    }
+}
+
 /// One SubDevice as [`Session::devices`] reports it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SubDeviceInfo {
@@ -1277,7 +1292,7 @@ pub struct SubDeviceInfo {
     pub revision: u32,
     /// Name from the SII.
     pub name: String,
-    /// AL state.
+    /// AL state, IgH-style ([`igh_state`]: `PREOP`, `SAFEOP`, `OP`).
     pub state: String,
     /// DC support (`none`, `32 bit`, `64 bit`).
     pub dc: String,
@@ -1314,8 +1329,8 @@ impl Session {
             for (position, sd) in group.iter(md).enumerate() {
                 let id = sd.identity();
                 let state = match sd.status().await {
-                    Ok((st, ethercrab::AlStatusCode::NoError)) => format!("{st:?}"),
-                    Ok((st, code)) => format!("{st:?} (AL status {code})"),
+                    Ok((st, ethercrab::AlStatusCode::NoError)) => igh_state(st),
+                    Ok((st, code)) => format!("{} (AL status {code})", igh_state(st)),
                     Err(e) => format!("unknown ({e})"),
                 };
                 let dc = match sd.dc_support() {

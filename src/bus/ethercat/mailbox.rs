@@ -13,8 +13,10 @@ use std::time::{Duration, Instant};
 
 use ethercrab::{Command, MainDevice};
 
+use super::sdo_info;
 use super::wire::{
     CoeHeader, CoeService, MailboxHeader, MailboxType, SdoCommand, SdoDirection, SdoFrame,
+    SdoInfoOpcode,
 };
 
 /// First sync manager register (SM0 start address; ETG.1000.4 register 0x0800).
@@ -81,6 +83,23 @@ pub enum MailboxError {
         /// The error code in words ([`super::soe::error_text`]).
         text: &'static str,
     },
+    /// The device answered an SDO Information request with an SDO Info Error (ETG.1000.6,
+    /// opcode 7) carrying a CiA 301 abort code.
+    #[error("SDO information for {what}: refused with {code:#010x} ({text})")]
+    SdoInfo {
+        /// The request (`OD list`, `object 0x6040`, `entry 0x6040:00`).
+        what: String,
+        /// CiA 301 abort code.
+        code: u32,
+        /// The abort code in words.
+        text: &'static str,
+    },
+    /// The device does not offer the SDO Information service (mailbox error reply
+    /// "service not supported", or no CoE).
+    #[error(
+        "the device does not support the CoE SDO Information service (mailbox error {0:#06x})"
+    )]
+    NoSdoInfo(u16),
     /// A value does not fit the data length / signedness of its target (checked before
     /// anything is sent).
     #[error(
@@ -663,5 +682,134 @@ impl CoeClient {
             toggle = !toggle;
         }
         Ok(())
+    }
+}
+
+/// SDO Information (ETG.1000.6 §5.6.3, CoE service 8): object list and descriptions, for
+/// listing a device's dictionary (`fieldprobe sdos`). Wire layout in [`super::sdo_info`];
+/// fragmented responses are reassembled with the caps of
+/// [`super::sdo_info::FragmentCollector`].
+impl CoeClient {
+    /// Send one SDO information request and collect its (possibly fragmented) response data.
+    async fn sdo_info(
+        &mut self,
+        md: &MainDevice<'_>,
+        opcode: SdoInfoOpcode,
+        data: &[u8],
+        expect: SdoInfoOpcode,
+        what: impl Fn() -> String,
+    ) -> Result<Vec<u8>, MailboxError> {
+        self.send(md, &sdo_info::request(opcode, data))
+            .await
+            .map_err(no_sdo_info)?;
+        let mut c = sdo_info::FragmentCollector::new(expect);
+        loop {
+            let body = self
+                .tp()
+                .receive(md, MailboxType::Coe, "SDO information response")
+                .await
+                .map_err(no_sdo_info)?;
+            match c.push(&body) {
+                Ok(Some(d)) => return Ok(d),
+                Ok(None) => {}
+                Err(sdo_info::SdoInfoError::Refused { code }) => {
+                    return Err(MailboxError::SdoInfo {
+                        what: what(),
+                        code,
+                        text: abort_text(code),
+                    })
+                }
+                Err(e) => return Err(MailboxError::Protocol(format!("{}: {e}", what()))),
+            }
+        }
+    }
+
+    /// Get OD List of `list` ([`sdo_info::list_type`]): the object indexes (type 0: the five
+    /// counts).
+    pub async fn od_list(
+        &mut self,
+        md: &MainDevice<'_>,
+        list: u16,
+    ) -> Result<Vec<u16>, MailboxError> {
+        let d = self
+            .sdo_info(
+                md,
+                SdoInfoOpcode::GetOdListRequest,
+                &list.to_le_bytes(),
+                SdoInfoOpcode::GetOdListResponse,
+                || "OD list".to_string(),
+            )
+            .await?;
+        sdo_info::parse_od_list(list, &d)
+            .map_err(|e| MailboxError::Protocol(format!("OD list: {e}")))
+    }
+
+    /// Get Object Description of `index`.
+    pub async fn object_description(
+        &mut self,
+        md: &MainDevice<'_>,
+        index: u16,
+    ) -> Result<sdo_info::ObjectDescription, MailboxError> {
+        let what = || format!("object {index:#06x}");
+        let d = self
+            .sdo_info(
+                md,
+                SdoInfoOpcode::GetObjectDescriptionRequest,
+                &index.to_le_bytes(),
+                SdoInfoOpcode::GetObjectDescriptionResponse,
+                what,
+            )
+            .await?;
+        let o = sdo_info::ObjectDescription::parse(&d)
+            .map_err(|e| MailboxError::Protocol(format!("{}: {e}", what())))?;
+        if o.index != index {
+            return Err(MailboxError::Protocol(format!(
+                "{}: the response describes object {:#06x}",
+                what(),
+                o.index
+            )));
+        }
+        Ok(o)
+    }
+
+    /// Get Entry Description of `index:sub` (value info 0x07 as SOEM asks: access rights,
+    /// object category, PDO mapping; no unit / default / limits).
+    pub async fn entry_description(
+        &mut self,
+        md: &MainDevice<'_>,
+        index: u16,
+        sub: u8,
+    ) -> Result<sdo_info::EntryDescription, MailboxError> {
+        let what = || format!("entry {index:#06x}:{sub:02x}");
+        let i = index.to_le_bytes();
+        let d = self
+            .sdo_info(
+                md,
+                SdoInfoOpcode::GetEntryDescriptionRequest,
+                &[i[0], i[1], sub, 0x07],
+                SdoInfoOpcode::GetEntryDescriptionResponse,
+                what,
+            )
+            .await?;
+        let e = sdo_info::EntryDescription::parse(&d)
+            .map_err(|e| MailboxError::Protocol(format!("{}: {e}", what())))?;
+        if (e.index, e.sub) != (index, sub) {
+            return Err(MailboxError::Protocol(format!(
+                "{}: the response describes entry {:#06x}:{:02x}",
+                what(),
+                e.index,
+                e.sub
+            )));
+        }
+        Ok(e)
+    }
+}
+
+/// A mailbox error reply "service not supported" (0x0004) or "protocol not supported"
+/// (0x0002) to an SDO information request: the device has no SDO Information service.
+fn no_sdo_info(e: MailboxError) -> MailboxError {
+    match e {
+        MailboxError::MailboxErrorReply(d @ (0x0002 | 0x0004)) => MailboxError::NoSdoInfo(d),
+        e => e,
     }
 }

@@ -55,6 +55,7 @@
 
 pub mod load;
 pub mod paced;
+pub mod pdo_map;
 mod session;
 pub mod wire;
 

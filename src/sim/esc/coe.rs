@@ -25,8 +25,13 @@
 //! * fault knobs ([`CoeFaults`]): hold the answer back for N [`CoeServer::poll`] calls, and
 //!   answer the next SDO request with an EMCY first (the SDO response follows in the queue).
 //!
-//! Not implemented: SDO information (service 8; answered with the mailbox error "service not
-//! supported"), PDO services over the mailbox, block transfers. An abort request from the
+//! * SDO information (service 8, ETG.1000.6 §5.6.3): Get OD List, Get Object Description, Get
+//!   Entry Description, answered from the server's [`OdDescriptions`] (from the ESI dictionary
+//!   for an emulated device, [`super::device`]; else from the table itself), fragmented to the
+//!   read mailbox; the fragments after the first wait in the outgoing queue
+//!   ([`CoeServer::take_outgoing`]) and go out one per mailbox read.
+//!
+//! Not implemented: PDO services over the mailbox, block transfers. An abort request from the
 //! master cancels a running transfer and gets no answer.
 //!
 //! Device-initiated messages (EMCY, delayed replies) are collected in an outgoing queue; the
@@ -41,6 +46,7 @@ use crate::bus::ethercat::wire::{
 use crate::drive::model::DriveModel;
 
 use super::app::EscApplication;
+use super::sdo_info::OdDescriptions;
 
 /// CiA 301 SDO abort codes used by the server (the model's codes are in
 /// [`crate::drive::model::abort`]).
@@ -346,10 +352,13 @@ pub struct CoeServer {
     outgoing: VecDeque<Vec<u8>>,
     delayed: VecDeque<(u32, Vec<u8>)>,
     last_model_error: u16,
+    descriptions: OdDescriptions,
     /// Fault knobs.
     pub faults: CoeFaults,
     /// Number of SDO requests handled.
     pub sdo_requests: usize,
+    /// Number of SDO information requests handled.
+    pub sdo_info_requests: usize,
 }
 
 impl CoeServer {
@@ -358,9 +367,11 @@ impl CoeServer {
     /// sizes.
     pub fn new(model: Box<dyn DriveModel>, entries: Vec<ObjectEntry>, mailbox_size: usize) -> Self {
         let last_model_error = model.last_error_code();
+        let descriptions = OdDescriptions::from_entries(&entries);
         Self {
             model,
             entries,
+            descriptions,
             mbx_size: mailbox_size.max(16),
             counter: MailboxCounter::default(),
             last_request_counter: 0,
@@ -371,7 +382,18 @@ impl CoeServer {
             last_model_error,
             faults: CoeFaults::default(),
             sdo_requests: 0,
+            sdo_info_requests: 0,
         }
+    }
+
+    /// The descriptions the SDO information service gives.
+    pub fn descriptions(&self) -> &OdDescriptions {
+        &self.descriptions
+    }
+
+    /// Replace the descriptions (e.g. with [`OdDescriptions::from_esi`]).
+    pub fn set_descriptions(&mut self, d: OdDescriptions) {
+        self.descriptions = d;
     }
 
     /// The drive model.
@@ -500,6 +522,21 @@ impl CoeServer {
             let c = self.counter.advance();
             return Some(mailbox_error_message(c, mailbox_error::INVALID_HEADER));
         };
+        if coe.service == CoeService::SdoInformation {
+            self.sdo_info_requests += 1;
+            // The data of a fragment: read mailbox − mailbox header − CoE header − SDO info header.
+            let max = self.mbx_size - MailboxHeader::LEN - CoeHeader::LEN - 4;
+            let mut bodies = self.descriptions.respond(rest, max).into_iter();
+            let first = bodies.next()?;
+            let c = self.counter.advance();
+            let reply = mailbox_message(MailboxType::Coe, c, &first);
+            for b in bodies {
+                let c = self.counter.advance();
+                self.outgoing
+                    .push_back(mailbox_message(MailboxType::Coe, c, &b));
+            }
+            return Some(reply);
+        }
         if coe.service != CoeService::SdoRequest {
             let c = self.counter.advance();
             return Some(mailbox_error_message(

@@ -42,6 +42,7 @@ use std::time::Duration;
 
 use super::app::{EscApplication, ProcessDataSizes};
 use super::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
+use super::sdo_info::OdDescriptions;
 use super::soe::{sercos_idns, SoeServer};
 use super::types::{AlState, AlStatusCode};
 use super::{Esc, EscConfig};
@@ -583,7 +584,14 @@ pub fn emulated_drive(
                 entries.extend(identity(0x1018));
                 entries.extend(pdo_objects(0x1C12, &rx_pdos));
                 entries.extend(pdo_objects(0x1C13, &tx_pdos));
-                MailboxServer::Coe(CoeServer::new(model, entries, usize::from(mbx.tx_size)))
+                if let Some(dict) = device.dictionary() {
+                    align_with_esi(&mut entries, dict, model.as_ref());
+                }
+                let mut coe = CoeServer::new(model, entries, usize::from(mbx.tx_size));
+                if let Some(dict) = device.dictionary() {
+                    coe.set_descriptions(OdDescriptions::from_esi(dict, coe.entries()));
+                }
+                MailboxServer::Coe(coe)
             }
         }
         _ => MailboxServer::None(model),
@@ -618,6 +626,67 @@ pub fn emulated_drive(
         esi_bits: 0,
     })?;
     Ok(Esc::new(cfg, Box::new(app)))
+}
+
+/// The server's table as the ESI dictionary declares the device (ETG.2000 `Profile/Dictionary`):
+/// * sub-indices of an object the ESI declares with sub-items that the ESI does not list are
+///   dropped (e.g. the assignment and mapping objects offer as many entries as their ESI data
+///   type has, not [`ASSIGN_CAPACITY`] / [`MAPPING_CAPACITY`]) — unless the object's default
+///   content needs them;
+/// * a single-value object the ESI declares and the table lacks is added: backed by the drive
+///   model when the model answers it (e.g. the touch-probe edge counters 0x60D5–0x60D8), else
+///   a constant with the ESI `DefaultData`; an object with neither is left out.
+fn align_with_esi(
+    entries: &mut Vec<ObjectEntry>,
+    dict: &crate::esi::Dictionary,
+    model: &dyn DriveModel,
+) {
+    use crate::bus::ethercat::sdo_info::data_type_of_esi_name;
+    for o in &dict.objects {
+        let declared: Option<Vec<u8>> = dict
+            .data_type(&o.type_name)
+            .filter(|t| !t.subitems.is_empty() && t.subitems.iter().all(|s| s.subindex.is_some()))
+            .map(|t| t.subitems.iter().filter_map(|s| s.subindex).collect());
+        if let Some(subs) = declared {
+            let used = entries
+                .iter()
+                .filter(|e| e.index == o.index && e.sub == 0)
+                .find_map(|e| e.data.as_ref().and_then(|d| d.first().copied()))
+                .unwrap_or(0);
+            entries.retain(|e| e.index != o.index || subs.contains(&e.sub) || e.sub <= used);
+            continue;
+        }
+        if entries.iter().any(|e| e.index == o.index) {
+            continue;
+        }
+        let ty = match (data_type_of_esi_name(&o.type_name), o.bit_size) {
+            (Some(0x0001 | 0x0005), 8) => DataType::U8,
+            (Some(0x0002), 8) => DataType::I8,
+            (Some(0x0003), 16) => DataType::I16,
+            (Some(0x0006), 16) => DataType::U16,
+            (Some(0x0004), 32) => DataType::I32,
+            (Some(0x0007), 32) => DataType::U32,
+            (Some(0x0015), 64) => DataType::I64,
+            (Some(0x001B), 64) => DataType::U64,
+            _ => continue,
+        };
+        let access = match o.flags.access {
+            Some(crate::esi::Access::ReadWrite) => Access::Rw,
+            Some(crate::esi::Access::WriteOnly) => Access::Wo,
+            _ => Access::Ro,
+        };
+        if model.read_object(o.index, 0).is_ok() {
+            entries.push(ObjectEntry::model(o.index, 0, ty, access));
+        } else if let Some(d) = &o.default_data {
+            if d.len() == ty.size().unwrap_or(0) {
+                entries.push(ObjectEntry {
+                    access,
+                    data: Some(d.clone()),
+                    ..ObjectEntry::constant(o.index, 0, ty, 0)
+                });
+            }
+        }
+    }
 }
 
 /// SERCOS: the ESI telegram sizes must equal the model's image sizes.

@@ -42,6 +42,7 @@ pub mod coe;
 pub mod dc;
 pub mod device;
 pub mod raw;
+pub mod sdo_info;
 pub mod segment;
 pub mod soe;
 pub mod terminal;

@@ -1,0 +1,71 @@
+//! `fieldprobe sdos`: list a device's object dictionary, laid out like IgH's `ethercat sdos`.
+//!
+//! ```text
+//! fieldprobe sdos [--link LINK] (--device N | --node N) [--eds FILE.eds]
+//! ```
+//! EtherCAT (`--device`): the CoE SDO Information service (ETG.1000.6 §5.6.3) — Get OD List,
+//! then each object's and entry's description:
+//! ```text
+//! SDO 0x6040, "Controlword"
+//!   0x6040:00, rwrwrw, uint16, 16 bit, "Controlword"
+//! ```
+//! (access letters: read / write in PREOP, SAFEOP, OP). CANopen (`--node`, CiA 301 has no SDO
+//! information service): the objects of the node's EDS (`--eds`, or the EDS of an emulated
+//! node on `canopen-emu`), each checked by an SDO upload of sub-index 0, plus an SDO scan of
+//! the CiA 301 communication area and the CiA 402 objects fieldprobe knows
+//! ([`fieldprobe::bus::canopen::dictionary`]); every line says where it came from. Exit 0; 1
+//! when the device refuses the service; 2 on bad input or a bus error.
+
+use super::bus::refused;
+use super::sdo::{target, SdoTo, Target};
+use super::EXIT_OK;
+use fieldprobe::bus::ethercat::sdo_info::{access, data_type_name};
+
+/// Arguments of `fieldprobe sdos`.
+#[derive(Debug, clap::Args)]
+pub struct SdosArgs {
+    #[command(flatten)]
+    to: SdoTo,
+    /// CANopen: the node's EDS file, listed and checked against the node (default on
+    /// canopen-emu: the emulated node's own dictionary).
+    #[arg(long, value_name = "FILE.eds")]
+    eds: Option<std::path::PathBuf>,
+}
+
+/// `fieldprobe sdos`.
+pub fn run(a: SdosArgs) -> anyhow::Result<i32> {
+    let (bus, target) = target(&a.to, "sdos")?;
+    match target {
+        Target::Device(d) => {
+            if let Some(p) = &a.eds {
+                anyhow::bail!(
+                    "--eds {}: an EDS describes a CANopen node (--node); an EtherCAT SubDevice describes itself over SDO Information",
+                    p.display()
+                );
+            }
+            let mut s = bus.open()?;
+            let res = s.sdo_dictionary(d);
+            super::finish_capture(s.finish_capture());
+            let objects = match res {
+                Ok(o) => o,
+                Err(e) => return refused(e),
+            };
+            for o in objects {
+                outln!("SDO {:#06x}, \"{}\"", o.object.index, o.object.name);
+                for e in o.entries {
+                    outln!(
+                        "  {:#06x}:{:02x}, {}, {}, {} bit, \"{}\"",
+                        e.index,
+                        e.sub,
+                        access::letters(e.access),
+                        data_type_name(e.data_type),
+                        e.bit_len,
+                        e.name
+                    );
+                }
+            }
+            Ok(EXIT_OK)
+        }
+        Target::Node(n) => super::canopen_od::sdos(&bus, n, a.eds.as_deref()),
+    }
+}
