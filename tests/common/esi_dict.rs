@@ -78,10 +78,17 @@ pub fn igh_type(dt: u16) -> &'static str {
 
 /// IgH's six access letters.
 pub fn letters(a: u16) -> String {
-    [(1, 'r'), (8, 'w'), (2, 'r'), (0x10, 'w'), (4, 'r'), (0x20, 'w')]
-        .iter()
-        .map(|&(b, c)| if a & b != 0 { c } else { '-' })
-        .collect()
+    [
+        (1, 'r'),
+        (8, 'w'),
+        (2, 'r'),
+        (0x10, 'w'),
+        (4, 'r'),
+        (0x20, 'w'),
+    ]
+    .iter()
+    .map(|&(b, c)| if a & b != 0 { c } else { '-' })
+    .collect()
 }
 
 fn child<'a>(n: roxmltree::Node<'a, 'a>, tag: &str) -> Option<roxmltree::Node<'a, 'a>> {
@@ -127,7 +134,9 @@ pub fn dictionary(path: &str) -> Vec<Object> {
         .expect("ESI has a Dictionary");
     let types: Vec<roxmltree::Node> = dict
         .descendants()
-        .filter(|n| n.has_tag_name("DataType") && n.parent().is_some_and(|p| p.has_tag_name("DataTypes")))
+        .filter(|n| {
+            n.has_tag_name("DataType") && n.parent().is_some_and(|p| p.has_tag_name("DataTypes"))
+        })
         .collect();
     let mut out = Vec::new();
     for o in dict.descendants().filter(|n| n.has_tag_name("Object")) {

@@ -205,7 +205,7 @@ impl ObjectDescription {
         v.extend_from_slice(&self.data_type.to_le_bytes());
         v.push(self.max_sub);
         v.push(self.object_code.into());
-        v.extend_from_slice(self.name.as_bytes());
+        v.extend(latin1(&self.name));
         v
     }
 
@@ -256,7 +256,7 @@ impl EntryDescription {
         v.extend_from_slice(&self.data_type.to_le_bytes());
         v.extend_from_slice(&self.bit_len.to_le_bytes());
         v.extend_from_slice(&self.access.to_le_bytes());
-        v.extend_from_slice(self.name.as_bytes());
+        v.extend(latin1(&self.name));
         v
     }
 
@@ -297,6 +297,11 @@ impl EntryDescription {
             name: text(name),
         })
     }
+}
+
+/// Text as name bytes: Latin-1 (the inverse of [`text`]); a character beyond U+00FF is `?`.
+fn latin1(s: &str) -> impl Iterator<Item = u8> + '_ {
+    s.chars().map(|c| u8::try_from(u32::from(c)).unwrap_or(b'?'))
 }
 
 /// Name bytes as text: up to the first NUL (some devices terminate), Latin-1 beyond ASCII.
