@@ -90,7 +90,11 @@ fn leadshine_dictionary_round_trips_through_sdo_information() {
         return;
     };
     // Latin-1, as names travel on the wire (some of the dump's names are raw bytes).
-    let text: String = std::fs::read(p).unwrap().iter().map(|&b| char::from(b)).collect();
+    let text: String = std::fs::read(p)
+        .unwrap()
+        .iter()
+        .map(|&b| char::from(b))
+        .collect();
     let dump = read_dump(&text);
     assert_eq!(dump.len(), 639, "the dump says: 639 entries");
     let mut server = OdDescriptions::default();

@@ -36,6 +36,41 @@ fn access_text(a: AccessType) -> &'static str {
     }
 }
 
+/// CiA 301 names of the communication objects the scan tries.
+fn communication_name(index: u16) -> String {
+    match index {
+        0x1000 => "Device type".into(),
+        0x1001 => "Error register".into(),
+        0x1002 => "Manufacturer status register".into(),
+        0x1003 => "Pre-defined error field".into(),
+        0x1005 => "COB-ID SYNC".into(),
+        0x1006 => "Communication cycle period".into(),
+        0x1007 => "Synchronous window length".into(),
+        0x1008 => "Manufacturer device name".into(),
+        0x1009 => "Manufacturer hardware version".into(),
+        0x100A => "Manufacturer software version".into(),
+        0x100C => "Guard time".into(),
+        0x100D => "Life time factor".into(),
+        0x1010 => "Store parameters".into(),
+        0x1011 => "Restore default parameters".into(),
+        0x1012 => "COB-ID time stamp".into(),
+        0x1014 => "COB-ID EMCY".into(),
+        0x1015 => "Inhibit time EMCY".into(),
+        0x1016 => "Consumer heartbeat time".into(),
+        0x1017 => "Producer heartbeat time".into(),
+        0x1018 => "Identity object".into(),
+        0x1019 => "Synchronous counter overflow value".into(),
+        0x1029 => "Error behavior".into(),
+        0x1200 => "SDO server parameter".into(),
+        0x1280 => "SDO client parameter".into(),
+        0x1400..=0x15FF => format!("RPDO {} communication parameter", index - 0x1400 + 1),
+        0x1600..=0x17FF => format!("RPDO {} mapping parameter", index - 0x1600 + 1),
+        0x1800..=0x19FF => format!("TPDO {} communication parameter", index - 0x1800 + 1),
+        0x1A00..=0x1BFF => format!("TPDO {} mapping parameter", index - 0x1A00 + 1),
+        _ => String::new(),
+    }
+}
+
 /// What an upload of one object said.
 enum Presence {
     Present,
@@ -51,7 +86,9 @@ fn probe(
     match s.sdo_upload(node, index, sub) {
         Ok(_) => Ok(Presence::Present),
         // Write-only objects exist even though they cannot be read.
-        Err(LinkError::Abort { code, .. }) if code == 0x0601_0001 => Ok(Presence::Present),
+        Err(LinkError::Abort {
+            code: 0x0601_0001, ..
+        }) => Ok(Presence::Present),
         Err(LinkError::Abort { code, .. }) => Ok(Presence::Absent(code)),
         Err(e) => Err(e),
     }
@@ -137,7 +174,7 @@ fn list(
         if matches!(p, Presence::Absent(_)) {
             continue;
         }
-        let name = first.map_or("", |o| o.name);
+        let name = first.map_or_else(|| communication_name(index), |o| o.name.to_string());
         let origin = if eds.is_some() {
             "scan, not in the EDS"
         } else {

@@ -301,7 +301,8 @@ impl EntryDescription {
 
 /// Text as name bytes: Latin-1 (the inverse of [`text`]); a character beyond U+00FF is `?`.
 fn latin1(s: &str) -> impl Iterator<Item = u8> + '_ {
-    s.chars().map(|c| u8::try_from(u32::from(c)).unwrap_or(b'?'))
+    s.chars()
+        .map(|c| u8::try_from(u32::from(c)).unwrap_or(b'?'))
 }
 
 /// Name bytes as text: up to the first NUL (some devices terminate), Latin-1 beyond ASCII.
@@ -490,7 +491,7 @@ pub fn parse_od_list(list: u16, data: &[u8]) -> Result<Vec<u16>, SdoInfoError> {
         )));
     }
     let rest = &data[2..];
-    if rest.len() % 2 != 0 {
+    if !rest.len().is_multiple_of(2) {
         return Err(proto(format!(
             "OD list of {} bytes (an odd number; indexes are 2 bytes)",
             rest.len()

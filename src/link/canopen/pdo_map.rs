@@ -90,7 +90,9 @@ impl CanSession {
                 let comm = base + k;
                 let cob_id = match self.sdo_upload(node, comm, 1) {
                     Ok(v) => le(&v),
-                    Err(LinkError::Abort { code, .. }) if code == NO_OBJECT => break,
+                    Err(LinkError::Abort {
+                        code: NO_OBJECT, ..
+                    }) => break,
                     Err(LinkError::Abort { .. }) => continue,
                     Err(e) => return Err(e),
                 };

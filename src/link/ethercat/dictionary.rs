@@ -170,7 +170,7 @@ impl Session {
 
     /// The sync managers and the assigned PDOs with their mapping, read from the SubDevice at
     /// `position`: the sync managers of its SII (start, default size, control byte, enable;
-    /// as IgH's `ethercat pdos` shows them), else registers 0x0800.. of [`MAX_SM`] sync
+    /// as IgH's `ethercat pdos` shows them), else registers 0x0800.. of 8 sync
     /// managers (those with a start address or a length are kept), 0x1C00 for their types (SM2 outputs / SM3 inputs when the device
     /// lacks it), 0x1C10 + n for the PDOs of each process-data sync manager, each PDO's
     /// mapping object, and the names from SDO Information when the device offers it.

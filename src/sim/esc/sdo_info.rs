@@ -249,7 +249,9 @@ impl OdDescriptions {
                 continue;
             }
             let Some(t) = dict.data_type(&o.type_name) else {
-                d.objects.get_mut(&o.index).map(|x| x.name = o.name.clone());
+                if let Some(x) = d.objects.get_mut(&o.index) {
+                    x.name = o.name.clone();
+                }
                 continue;
             };
             let array_type = |name: &str| dict.data_type(name).and_then(|x| x.array.map(|_| x));
