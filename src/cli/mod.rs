@@ -11,7 +11,8 @@
 //! after all of them, so their order does not matter.
 //!
 //! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `idn`,
-//! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (FCT-C14 control areas,
+//! `can`, `sim`, `drive` (definitions from vendor ESI / EDS files), and `areas plot PROGRAM.nc
+//! --out FILE.svg|FILE.png` (FCT-C14 control areas,
 //! see `docs/areas.md`).
 //!
 //! Every number on the command line follows one grammar (decimal or `0x` hex, negative values
@@ -36,6 +37,7 @@ macro_rules! outln {
 mod areas;
 mod bus;
 mod check;
+mod drive;
 mod esi;
 mod jog;
 mod number;
@@ -94,6 +96,8 @@ enum Command {
     Can(bus::CanArgs),
     /// Read or write a SERCOS IDN (SoE) of an EtherCAT SubDevice.
     Idn(bus::IdnArgs),
+    /// Drive definitions: write one from a vendor's ESI or EDS file.
+    Drive(drive::DriveArgs),
 }
 
 /// Parse arguments, run, return the exit code.
@@ -125,6 +129,7 @@ pub fn main() -> i32 {
         Command::Sdo(a) => sdo::sdo(a),
         Command::Can(a) => bus::can(a),
         Command::Idn(a) => bus::idn(a),
+        Command::Drive(a) => drive::run(a),
     };
     let code = match result {
         Ok(code) => code,
