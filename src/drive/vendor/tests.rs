@@ -45,8 +45,10 @@ fn minimal_device_gives_a_definition_without_probe() {
     let def = catalogue::parse(&g.toml, "t").unwrap();
     assert_eq!(def.name, "acme-servo-7");
     assert!(!g.touch_probe && !g.toml.contains("[probe]"));
-    assert_eq!(def.rxpdo.len(), 3);
-    assert_eq!(def.txpdo.len(), 3);
+    // Bytes: 0x6040 + 0x607A + 0x6060 out, 0x6041 + 0x6064 + 0x6061 in.
+    assert_eq!(def.rxpdo.len(), 2 + 4 + 1);
+    assert_eq!(def.txpdo.len(), 2 + 4 + 1);
+    assert!(!def.has_drive_latch());
     assert!(def.functions.is_empty());
     assert!(
         g.notes.iter().any(|n| n.contains("no touch probe")),
