@@ -4,7 +4,8 @@
 //!
 //! The vendor file is first reduced to a [`VendorDevice`] — identity plus the CiA 402 objects
 //! this module looks at, each with its data type, access and PDO direction as the file states
-//! them ([`VendorDevice::from_esi`], [`VendorDevice::from_eds`]); [`generate`] then writes the
+//! them (`VendorDevice::from_esi` with feature `ethercat`, `VendorDevice::from_eds` with feature
+//! `canopen`); [`generate`] then writes the
 //! definition:
 //!
 //! * `[rxpdo]` / `[txpdo]`: the objects a CiA 402 axis in CSP needs (0x6040, 0x607A, 0x6060
