@@ -1132,6 +1132,52 @@ pub struct AxisCheck {
     pub profile: &'static str,
     /// Mismatches in plain words (empty: consistent).
     pub findings: Vec<String>,
+    /// What the user should know that is not a mismatch (a drive without touch probe on an
+    /// axis that measures through the CNC), in plain words.
+    pub notes: Vec<String>,
+}
+
+/// The timestamp input terminals (EL1252 kind) the machine names, in words for `check`: where
+/// PLC_TIMESTAMP gets its timestamps (seed 004 §7.5).
+fn timestamp_inputs_text(cfg: &MachineConfig) -> String {
+    let names: Vec<String> = cfg
+        .terminals
+        .iter()
+        .filter(|t| is_timestamp_terminal(cfg, t))
+        .map(|t| format!("{} ({})", t.name, t.esi))
+        .collect();
+    if names.is_empty() {
+        "the machine names no timestamp input terminal (EL1252 kind) for PLC_TIMESTAMP: add a \
+         [[terminal]] with esi = \"fieldprobe-el1252\" or your EL1252's ESI"
+            .into()
+    } else {
+        format!(
+            "timestamp input terminals on the segment for PLC_TIMESTAMP: {}",
+            names.join(", ")
+        )
+    }
+}
+
+/// Is `[[terminal]]` `t` an EL1252-kind timestamp input (the type name of its ESI device)?
+#[cfg(feature = "sim")]
+fn is_timestamp_terminal(cfg: &MachineConfig, t: &crate::params::TerminalConfig) -> bool {
+    let base = std::path::Path::new(&cfg.source).parent();
+    crate::link::ethercat::terminals::TerminalSpec::resolve(&t.name, &t.esi, base)
+        .ok()
+        .and_then(|s| {
+            s.esi
+                .devices
+                .first()
+                .map(crate::sim::esc::terminal::is_el1252)
+        })
+        .unwrap_or(false)
+}
+
+/// Is `[[terminal]]` `t` an EL1252-kind timestamp input (without the emulator: by its ESI
+/// reference's name)?
+#[cfg(not(feature = "sim"))]
+fn is_timestamp_terminal(_cfg: &MachineConfig, t: &crate::params::TerminalConfig) -> bool {
+    t.esi.to_ascii_uppercase().contains("EL1252")
 }
 
 impl Machine {
@@ -1151,7 +1197,39 @@ impl Machine {
             let link = std::cell::RefCell::new(self.link.as_mut());
             let read = |index: u16, sub: u8| link.borrow_mut().read_object(i, index, sub).ok();
             findings.extend(crate::drive::commissioning_check(&def, p, &read));
-            if measures
+            let mut notes = Vec::new();
+            if !def.has_drive_latch() {
+                // Seed 004 §7: without a latch in the drive the CNC detects the value.
+                let sources = crate::core::measure::SOURCES_WITHOUT_DRIVE_LATCH;
+                let terminals = timestamp_inputs_text(cfg);
+                if measures && signal.uses_drive_latch() {
+                    findings.push(format!(
+                        "drive '{}' has no touch probe (0x60B8 / 0x60B9 are not in its PDO \
+                         mapping): P-AXIS-00516 kenngr.measure.signal {} cannot latch; the \
+                         sources that remain (seed 004 §7): {sources}; {terminals}",
+                        def.name,
+                        signal.name()
+                    ));
+                } else if measures {
+                    notes.push(format!(
+                        "drive '{}' has no touch probe; the axis measures through the CNC with \
+                         {} (seed 004 §7){}",
+                        def.name,
+                        signal.name(),
+                        if signal == SignalSource::PlcTimestamp {
+                            format!("; {terminals}")
+                        } else {
+                            String::new()
+                        }
+                    ));
+                } else {
+                    notes.push(format!(
+                        "drive '{}' has no touch probe: should the axis measure (P-AXIS-00118), \
+                         the sources are (seed 004 §7): {sources}",
+                        def.name
+                    ));
+                }
+            } else if measures
                 && signal.uses_drive_latch()
                 && def.profile == crate::drive::catalogue::Profile::Cia402
             {
@@ -1184,6 +1262,7 @@ impl Machine {
                 drive: def.name.clone(),
                 profile: def.profile.name(),
                 findings,
+                notes,
             });
         }
         out

@@ -183,6 +183,10 @@ pub mod ids {
     pub const MEAS_FEED_REDUCED: u32 = 900044;
     /// Project: G101 for an axis without measured value.
     pub const MEAS_NO_VALUE: u32 = 900045;
+    /// Project: a measurement with a drive-latch source (DRIVE, DRIVE_TYPE_DEFAULT,
+    /// EXT_PROBE_WITH_DRIVE) on an axis whose drive has no latch (a CiA 402 drive without
+    /// touch probe); refused before motion, naming the sources of seed 004 §7 that remain.
+    pub const MEAS_NO_DRIVE_LATCH: u32 = 900046;
     /// Project: CNC position lag monitoring (P-AXIS-00168) tripped.
     pub const LAG_LIMIT: u32 = 900014;
     /// Project: an acyclic drive access (`#DRIVE`, `#IDENT`) failed.

@@ -12,7 +12,8 @@
 //!
 //! Further subcommands in the same style: `check`, `jog`, `params`, `esi`, `scan`, `sdo`, `sdos`,
 //! `pdos` ([`sdos`], [`pdos`]: dictionary and PDO configuration read from a device), `idn`,
-//! `can`, `sim`, and `areas plot PROGRAM.nc --out FILE.svg|FILE.png` (FCT-C14 control areas,
+//! `can`, `sim`, `drive` (definitions from vendor ESI / EDS files), and `areas plot PROGRAM.nc
+//! --out FILE.svg|FILE.png` (FCT-C14 control areas,
 //! see `docs/areas.md`).
 //!
 //! Every number on the command line follows one grammar (decimal or `0x` hex, negative values
@@ -38,6 +39,7 @@ mod areas;
 mod bus;
 mod canopen_od;
 mod check;
+mod drive;
 mod esi;
 mod jog;
 mod number;
@@ -106,6 +108,8 @@ enum Command {
     Can(bus::CanArgs),
     /// Read or write a SERCOS IDN (SoE) of an EtherCAT SubDevice.
     Idn(bus::IdnArgs),
+    /// Drive definitions: write one from a vendor's ESI or EDS file.
+    Drive(drive::DriveArgs),
 }
 
 /// Parse arguments, run, return the exit code.
@@ -139,6 +143,7 @@ pub fn main() -> i32 {
         Command::Pdos(a) => pdos::run(a),
         Command::Can(a) => bus::can(a),
         Command::Idn(a) => bus::idn(a),
+        Command::Drive(a) => drive::run(a),
     };
     let code = match result {
         Ok(code) => code,

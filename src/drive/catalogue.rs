@@ -351,6 +351,17 @@ pub struct DriveDefinition {
 }
 
 impl DriveDefinition {
+    /// The drive can latch a probe edge itself (seed 004 §6, signal DRIVE): a CiA 402 drive
+    /// needs its touch probe, the function 0x60B8 in the RxPDO and the status 0x60B9 in the
+    /// TxPDO (§6.4); the other families carry their latch in their own telegrams (SERCOS
+    /// real-time bits, PROFIdrive encoder interface, Lightbus input 2, the encoder terminal's
+    /// latch). Without it the axis measures through the CNC (§7): PLC, PLC_TIMESTAMP,
+    /// PLC_EXT_LATCH_CONTROL.
+    pub fn has_drive_latch(&self) -> bool {
+        self.profile != Profile::Cia402
+            || (self.rxpdo.contains(0x60B8, 0) && self.txpdo.contains(0x60B9, 0))
+    }
+
     /// The drive function with this key.
     pub fn function(&self, key: &str) -> Option<&DriveFunction> {
         self.functions.iter().find(|f| f.key == key)

@@ -19,6 +19,7 @@ pub mod pdo;
 pub mod profidrive;
 pub mod sercos;
 pub mod terminal;
+pub mod vendor;
 
 use crate::units::Nanos;
 use std::fmt;

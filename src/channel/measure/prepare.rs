@@ -119,6 +119,33 @@ impl Channel {
                 }
                 signal = SignalSource::FixedStop;
             }
+            // Seed 004 §7: "if the drive hardware used provides no latch function, the
+            // measured value can be detected in the CNC" — a drive-latch source on a drive
+            // without one is refused before anything moves, naming what remains.
+            if signal.uses_drive_latch() {
+                if let Some(def) = self.axes[i].definition().filter(|d| !d.has_drive_latch()) {
+                    let name = self.axes[i].name();
+                    return Err(CncMessage::error(
+                        ids::MEAS_NO_DRIVE_LATCH,
+                        format!(
+                            "axis {name}: drive '{}' has no touch probe (0x60B8 / 0x60B9 are not \
+                             in its PDO mapping), so measurement signal {}{} cannot latch; \
+                             select a source the CNC evaluates with kenngr.measure.signal or \
+                             #MEAS [AXNR={} SIGNAL=…]: {}",
+                            def.name,
+                            signal.name(),
+                            if ov.and_then(|o| o.signal).is_some() {
+                                " (#MEAS SIGNAL)"
+                            } else {
+                                ""
+                            },
+                            i + 1,
+                            crate::core::measure::SOURCES_WITHOUT_DRIVE_LATCH
+                        ),
+                    )
+                    .on_axis(name));
+                }
+            }
             let edge = ov.and_then(|o| o.edge).unwrap_or(c.edge);
             let input = ov.and_then(|o| o.input).unwrap_or(c.input);
             let eval = SourceEvaluator::for_source(

@@ -134,6 +134,14 @@ impl SignalSource {
     }
 }
 
+/// The probing-signal sources of seed 004 §7 that measure without a latch in the drive, in
+/// words, for the messages about an axis whose drive has none (`check`, and the refusal
+/// [`crate::messages::ids::MEAS_NO_DRIVE_LATCH`]).
+pub const SOURCES_WITHOUT_DRIVE_LATCH: &str = "PLC (the probe input read by the PLC, sampled \
+     each cycle, seed 004 §7.1), PLC_TIMESTAMP (the probe on a timestamp input terminal such as \
+     an EL1252 on the EtherCAT segment, §7.5) or PLC_EXT_LATCH_CONTROL (external measuring \
+     hardware, §7.4)";
+
 /// Parse P-AXIS-00518 (`POS` / `NEG`; blank = POS).
 pub fn edge_from_text(text: &str) -> Option<ProbeEdge> {
     match text.trim().to_ascii_uppercase().as_str() {

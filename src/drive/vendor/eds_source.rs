@@ -1,0 +1,62 @@
+//! [`VendorDevice`] from an EDS (CiA 306): data types by their CiA 301 codes, PDO directions
+//! from `PDOMapping=1` with `AccessType` (`rww` / `rw` / `wo` into an RPDO, `ro` / `const` /
+//! `rwr` / `rw` into a TPDO), defaults and limits from `DefaultValue`, `LowLimit`, `HighLimit`.
+
+use super::{VendorDevice, VendorObject, OBJECTS_READ};
+use crate::bus::canopen::eds::{AccessType, Eds};
+use crate::drive::pdo::DataType;
+
+impl VendorDevice {
+    /// The device of the EDS `eds` ([`OBJECTS_READ`] from its object sections).
+    pub fn from_eds(eds: &Eds) -> VendorDevice {
+        let node = eds.node_id().unwrap_or(0);
+        let mut objects = Vec::new();
+        for &(index, sub) in OBJECTS_READ {
+            let Some(e) = eds.get(index, sub) else {
+                continue;
+            };
+            let ty = DataType::from_cia301_code(e.data_type.code());
+            let bits = e.data_type.bit_len().map_or(0, u32::from);
+            let access = e.access;
+            let rx = e.pdo_mapping
+                && matches!(
+                    access,
+                    AccessType::WriteOnly | AccessType::ReadWrite | AccessType::ReadWriteOutput
+                );
+            let tx = e.pdo_mapping
+                && matches!(
+                    access,
+                    AccessType::ReadOnly
+                        | AccessType::Const
+                        | AccessType::ReadWrite
+                        | AccessType::ReadWriteInput
+                );
+            objects.push(VendorObject {
+                index,
+                sub,
+                name: e.parameter_name.clone(),
+                type_name: format!("{:?}", e.data_type).to_ascii_uppercase(),
+                ty,
+                bits,
+                rx,
+                tx,
+                writable: access.writable(),
+                default: e.default_value(node).and_then(|v| v.as_i64()),
+                low: e.low_limit_value(node).and_then(|v| v.as_i64()),
+                high: e.high_limit_value(node).and_then(|v| v.as_i64()),
+            });
+        }
+        let id = eds.identity();
+        let info = &eds.device_info;
+        VendorDevice {
+            file: eds.file.clone(),
+            kind: "EDS",
+            vendor: info.vendor_name.clone().unwrap_or_default(),
+            vendor_id: id.vendor_id,
+            product: info.product_name.clone().unwrap_or_default(),
+            product_code: id.product_code,
+            revision: id.revision_number,
+            objects,
+        }
+    }
+}
