@@ -82,19 +82,32 @@ impl Transport {
         stop: &mut dyn FnMut(&Delivery, &[CanFrame]) -> bool,
     ) -> Result<Vec<CanFrame>, LinkError> {
         let mut got = Vec::new();
+        self.run_wire_into(until, stop, &mut got)?;
+        Ok(got)
+    }
+
+    /// [`run_wire`](Self::run_wire) appending the master's frames to `got` (the cyclic
+    /// exchange keeps that buffer: nothing here allocates once the buffers have their size).
+    /// `stop` sees the frames of each delivery only.
+    pub(super) fn run_wire_into(
+        &mut self,
+        until: Option<Nanos>,
+        stop: &mut dyn FnMut(&Delivery, &[CanFrame]) -> bool,
+        got: &mut Vec<CanFrame>,
+    ) -> Result<(), LinkError> {
         loop {
             let Some(em) = self.emulated.as_mut() else {
-                return Ok(got);
+                return Ok(());
             };
             let Some(wire) = em.wire.as_ref() else {
-                return Ok(got);
+                return Ok(());
             };
             let delivery = match until {
                 Some(t) => wire.advance(t),
                 None => wire.advance_next(),
             };
             let Some(d) = delivery else {
-                return Ok(got);
+                return Ok(());
             };
             if let Some(t) = em.trace.as_mut() {
                 t.push(d);
@@ -107,20 +120,15 @@ impl Transport {
                 } else {
                     at
                 };
-                let mut answers = Vec::new();
-                segment.receive(&f, at, model_time, &mut |a| answers.push(a));
-                for a in answers {
-                    if endpoint.send(&a).is_err() {
-                        tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {a:?}");
-                    }
-                }
+                // The answers wait for the bus like any frame (queued, not delivered, here).
+                segment.receive(&f, at, model_time, &mut |a| node_send(endpoint, &a));
             }
             let first = got.len();
             while let Some(f) = self.poll_master()? {
                 got.push(f);
             }
             if stop(&d, &got[first..]) {
-                return Ok(got);
+                return Ok(());
             }
         }
     }
@@ -150,13 +158,8 @@ impl Transport {
         let Some(now) = em.wire.as_ref().map(VirtualCan::now) else {
             return;
         };
-        let mut out = Vec::new();
-        em.segment.poll(now, &mut |f| out.push(f));
-        for f in out {
-            if em.endpoint.send(&f).is_err() {
-                tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
-            }
-        }
+        let endpoint = &mut em.endpoint;
+        em.segment.poll(now, &mut |f| node_send(endpoint, &f));
     }
 
     /// Let `span` of bus time pass: the nodes do their time-driven work now, the wire runs to
@@ -231,6 +234,14 @@ impl Transport {
                 self.send(f).map_err(failed)?;
             }
         }
+    }
+}
+
+/// An emulated node's frame onto its endpoint (a frame out of range is a warning: the node
+/// built it, nothing from outside).
+fn node_send(endpoint: &mut VirtualEndpoint, f: &CanFrame) {
+    if endpoint.send(f).is_err() {
+        tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
     }
 }
 
