@@ -212,25 +212,6 @@ impl Transport {
             .map_err(|e| other(format!("CAN send on {}: {e}", self.bus.describe())))
     }
 
-    /// Emulated: the nodes take what reached their endpoint and answer on it.
-    fn run_nodes(&mut self, now: Nanos) {
-        let Some(Emulated {
-            segment, endpoint, ..
-        }) = self.emulated.as_mut()
-        else {
-            return;
-        };
-        let mut frames = Vec::new();
-        while let Ok(Some(f)) = endpoint.recv(Duration::ZERO) {
-            frames.push(f);
-        }
-        for f in segment.run(&frames, now) {
-            if endpoint.send(&f).is_err() {
-                tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
-            }
-        }
-    }
-
     /// Take every frame that arrived; `wait` bounds the wait for the first one (not waited
     /// for with emulated nodes: they have answered already).
     fn receive_all(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
@@ -288,13 +269,14 @@ impl Transport {
     }
 
     /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives` at node ids
-    /// `ids`, on a wire at `wire` when given; `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
+    /// `ids`, on a wire at `bitrate` ([`wire`]); `canopen-udp[:GROUP:PORT]`; `socketcan:IF`,
+    /// which run at their own bit rate).
     fn open(
         link: &str,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
         cycle: Nanos,
-        wire: Option<Bitrate>,
+        bitrate: Bitrate,
         candump: Option<&std::path::Path>,
     ) -> Result<Transport, LinkError> {
         if link == "canopen-emu" {
@@ -314,7 +296,7 @@ impl Transport {
                         .map_err(|e| other(format!("axis {i}: {e}")))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            let hub = wire.map_or_else(VirtualCan::new, VirtualCan::with_bitrate);
+            let hub = VirtualCan::with_bitrate(bitrate);
             let master = hub.endpoint();
             let node_side = hub.endpoint();
             let iface = master.log_interface();
@@ -323,7 +305,7 @@ impl Transport {
                 emulated: Some(Emulated::new(
                     CanopenSegment::new(nodes, cycle),
                     node_side,
-                    wire.map(|_| hub),
+                    hub,
                 )),
                 candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
             });
@@ -348,7 +330,8 @@ impl Transport {
     }
 
     /// One SDO transfer with `client`, starting with `first`; frames that are not for the
-    /// client go to `other_frames`. Bounded by four client timeouts of wall-clock time.
+    /// client go to `other_frames`. On `canopen-emu` on the wire and its clock
+    /// ([`Transport::sdo_on_wire`]); elsewhere bounded by 4 s of wall-clock time.
     ///
     /// On a paced link (`pacing`) the SYNC keeps running on its grid while the transfer waits
     /// ([`Pacing::keep_alive`]).
@@ -357,26 +340,14 @@ impl Transport {
         client: &mut SdoClient,
         first: Vec<CanFrame>,
         t0: Instant,
-        now: Nanos,
         mut pacing: Option<&mut Pacing>,
         other_frames: &mut dyn FnMut(Vec<CanFrame>) -> Result<(), LinkError>,
     ) -> Result<Vec<u8>, (Option<SdoError>, String)> {
         if self.wire().is_some() {
             return self.sdo_on_wire(client, first, other_frames);
         }
-        // The client's clock: the wall clock on a real bus; with in-process nodes virtual
-        // time, `now` plus one SDO_POLL per poll (they answer within the poll that carries the
-        // request, so no wall-clock time-out decides anything there).
-        let emulated = self.emulated.is_some();
-        let mut polls: u64 = 0;
-        let poll_ns = SDO_POLL.as_nanos() as u64;
-        let clock = |polls: u64| {
-            if emulated {
-                Nanos(now.0.saturating_add(polls.saturating_mul(poll_ns)))
-            } else {
-                Nanos(t0.elapsed().as_nanos() as u64)
-            }
-        };
+        // A bus that leaves the process: the client's clock is the wall clock.
+        let clock = || Nanos(t0.elapsed().as_nanos() as u64);
         for f in &first {
             self.send(f).map_err(|e| (None, e.to_string()))?;
         }
@@ -389,24 +360,13 @@ impl Transport {
                     (Some(e), text)
                 });
             }
-            let expired = if emulated {
-                polls.saturating_mul(poll_ns) > bound.as_nanos() as u64
-            } else {
-                Instant::now() > deadline
-            };
-            if expired {
+            if Instant::now() > deadline {
                 return Err((None, "no answer".into()));
             }
-            polls += 1;
-            self.run_nodes(now);
-            let wait = if emulated {
-                Duration::ZERO
-            } else {
-                pacing
-                    .as_ref()
-                    .and_then(|p| p.until_due())
-                    .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL))
-            };
+            let wait = pacing
+                .as_ref()
+                .and_then(|p| p.until_due())
+                .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL));
             let frames = self.receive_all(wait).map_err(|e| (None, e.to_string()))?;
             let mut replies = Vec::new();
             let mut rest = Vec::new();
@@ -414,13 +374,13 @@ impl Transport {
                 u32::from(crate::bus::canopen::sdo::SDO_TX_BASE) + u32::from(client.node());
             for f in frames {
                 if !f.extended && f.id == response {
-                    replies.extend(client.handle(&f, clock(polls)));
+                    replies.extend(client.handle(&f, clock()));
                 } else {
                     rest.push(f);
                 }
             }
             other_frames(rest).map_err(|e| (None, e.to_string()))?;
-            replies.extend(client.poll(clock(polls)));
+            replies.extend(client.poll(clock()));
             for f in &replies {
                 self.send(f).map_err(|e| (None, e.to_string()))?;
             }
@@ -435,9 +395,19 @@ impl Transport {
         self.bus.log_interface()
     }
 
+    /// Log `f` in the `--candump` file: on `canopen-emu` at the bus clock (the UNIX time of
+    /// bus time 0 plus the bus time), elsewhere at the wall clock.
     fn log(&mut self, f: &CanFrame) {
+        let at = self
+            .emulated
+            .as_ref()
+            .map(|e| e.unix0 + Duration::from_nanos(e.wire.now().0));
         if let Some(c) = self.candump.as_mut().filter(|c| c.failed.is_none()) {
-            if let Err(e) = c.writer.write_frame_now(f) {
+            let written = match at {
+                Some(t) => c.writer.write_frame(t, f),
+                None => c.writer.write_frame_now(f),
+            };
+            if let Err(e) = written {
                 c.fail(&e);
             }
         }
@@ -583,7 +553,7 @@ impl CanopenLink {
             emulated: Some(Emulated::new(
                 CanopenSegment::new(nodes, cycle),
                 hub.endpoint(),
-                Some(hub),
+                hub,
             )),
             candump: None,
         };
@@ -604,7 +574,7 @@ impl CanopenLink {
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
         check_ids(ids)?;
-        let bus = Transport::open(link, drives, ids, cycle, Some(bitrate), candump)?;
+        let bus = Transport::open(link, drives, ids, cycle, bitrate, candump)?;
         CanopenLink::start(bus, drives, ids, cycle, bitrate)
     }
 
@@ -741,10 +711,6 @@ impl CanopenLink {
         self.bus.send(f)
     }
 
-    fn run_nodes(&mut self, now: Nanos) {
-        self.bus.run_nodes(now);
-    }
-
     fn receive_all(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
         self.bus.receive_all(wait)
     }
@@ -810,13 +776,12 @@ impl CanopenLink {
     }
 
     /// Let the bus run a little and take what came: on `canopen-emu` the nodes do their
-    /// time-driven work and 1 ms of bus time passes ([`wire`]); elsewhere the emulated nodes
-    /// (none) run and the master waits up to `wait` for a first frame.
+    /// time-driven work and 1 ms of bus time passes ([`wire`]); elsewhere the master waits up
+    /// to `wait` for a first frame.
     fn settle(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
         if self.bus.wire().is_some() {
             self.bus.wait_wire(Nanos::from_micros(1000))
         } else {
-            self.run_nodes(self.now);
             self.receive_all(wait)
         }
     }
@@ -973,7 +938,6 @@ impl CanopenLink {
             &mut client,
             first,
             t0,
-            now,
             self.pacing.as_mut(),
             &mut |frames| {
                 seen.extend(frames);
