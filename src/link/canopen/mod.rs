@@ -1158,11 +1158,9 @@ impl CanopenLink {
         // frames after it: the TPDOs of this SYNC.
         let before = before.min(frames.len());
         let hb_now = self.wall();
-        for i in 0..before {
-            let f = frames[i];
+        for f in frames.drain(..before) {
             self.note_one(&f, now, hb_now)?;
         }
-        frames.drain(..before);
         self.note_from(&mut frames, 0, now)?;
         let r = self.finish_exchange(n, now, &mut frames, images);
         self.rx_buf = frames;
