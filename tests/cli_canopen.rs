@@ -259,3 +259,145 @@ fn node_ids_from_the_machine_configuration() {
         stderr(&o)
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// The commissioning commands on the wire (issue 16): `can dump`, `can scan` and `sdo --node` on
+// `canopen-emu` run on the same timed virtual bus as `run`, at the machine's bit rate.
+// ---------------------------------------------------------------------------------------------
+
+/// Bit times of a base-format data frame with `n` data bytes (ISO 11898-1: SOF 1, identifier
+/// 11, RTR / IDE / r0 3, DLC 4, data 8 n, CRC 15, CRC delimiter 1, ACK 2, EOF 7, intermission
+/// 3 = 47 + 8 n) without stuff bits, and with the most stuff bits the 34 + 8 n stuffed bits
+/// (SOF … CRC) can need, one per 4 after the first.
+fn wire_bits(n: u64) -> (u64, u64) {
+    let plain = 47 + 8 * n;
+    (plain, plain + (34 + 8 * n - 1) / 4)
+}
+
+/// The frames of candump -L lines (`--plain` output or a `--candump` log) with their times, µs.
+fn frames(text: &str) -> Vec<(u64, fieldprobe::bus::can::CanFrame)> {
+    text.lines()
+        .map(|l| {
+            let r = fieldprobe::bus::can::candump::parse_line(l)
+                .unwrap_or_else(|e| panic!("{l}: {e:?}"));
+            (r.timestamp.as_micros() as u64, r.frame)
+        })
+        .collect()
+}
+
+/// `t` µs lies within the wire time of `bits` = (fewest, most) bit times at `bps`, allowing
+/// 1 µs for the µs resolution of the two timestamps.
+fn within(t: u64, bits: (u64, u64), bps: u64) -> bool {
+    let us = |b: u64| b * 1_000_000 / bps;
+    t + 1 >= us(bits.0) && t <= us(bits.1) + 1
+}
+
+#[test]
+fn can_dump_on_canopen_emu_takes_each_frames_wire_time_at_the_machines_bit_rate() {
+    for (set, bps) in [(None, 1_000_000u64), (Some("can.bitrate=10k"), 10_000)] {
+        let mut args = vec!["can", "dump", "--plain", "--link", "canopen-emu"];
+        args.extend(["--seconds", "0.35"]);
+        if let Some(s) = set {
+            args.extend(["--set", s]);
+        }
+        let o = fieldprobe(&args);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        let out = stdout(&o);
+        let f = frames(&out);
+        // Heartbeats of nodes 1 … 3 every 100 ms (in 0.35 s of bus time: 3 rounds).
+        assert_eq!(f.len(), 9, "{bps} bit/s:\n{out}");
+        for (k, w) in f.windows(2).enumerate() {
+            let ((t0, a), (t1, b)) = (w[0], w[1]);
+            let dt = t1 - t0;
+            // The next frame reaches the master one wire time after the previous one at the
+            // earliest (it cannot use the bus before the previous one left it).
+            let bits = wire_bits(u64::from(b.len));
+            assert!(
+                dt + 1 >= bits.0 * 1_000_000 / bps,
+                "{bps} bit/s, line {k}: {dt} µs after the previous frame, a {}-byte frame \
+                 takes {} µs at least\n{out}",
+                b.len,
+                bits.0 * 1_000_000 / bps
+            );
+            // The three heartbeats of one round are sent together: they go in the order of
+            // their identifiers (arbitration), back to back.
+            if a.id + 1 == b.id {
+                assert!(
+                    within(dt, bits, bps),
+                    "{bps} bit/s, line {k}: heartbeat {:#x} {dt} µs after {:#x}, its wire time \
+                     is {:?} bit times\n{out}",
+                    b.id,
+                    a.id,
+                    bits
+                );
+            }
+        }
+        for round in f.chunks(3) {
+            let ids: Vec<u32> = round.iter().map(|(_, f)| f.id).collect();
+            assert_eq!(ids, [0x701, 0x702, 0x703], "{bps} bit/s:\n{out}");
+        }
+    }
+}
+
+#[test]
+fn can_scan_and_sdo_on_canopen_emu_run_on_the_wire() {
+    let dir = tempfile::tempdir().unwrap();
+    // sdo read at 10 kbit/s: the request (8 bytes) leaves the master onto an idle bus, the node
+    // answers when it has received it, the answer (8 bytes) takes its own wire time — 22.2 to
+    // 27 ms after the request, in the log.
+    let log = dir.path().join("sdo.log");
+    let o = fieldprobe(&[
+        "sdo",
+        "read",
+        "--link",
+        "canopen-emu",
+        "--set",
+        "can.bitrate=10k",
+        "--node",
+        "2",
+        "0x6065",
+        "--candump",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(stdout(&o).trim(), "0x6065:00 = 300000 (0x493e0)");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let f = frames(&text);
+    let req = f.iter().find(|(_, f)| f.id == 0x602).expect("request");
+    let resp = f.iter().find(|(_, f)| f.id == 0x582).expect("answer");
+    let (lo, hi) = (wire_bits(8), wire_bits(8));
+    assert!(
+        within(resp.0 - req.0, (lo.0 + hi.0, lo.1 + hi.1), 10_000),
+        "answer {} µs after the request\n{text}",
+        resp.0 - req.0
+    );
+    // can scan at 1 Mbit/s: 127 SDO requests queued at once; the frames the nodes send
+    // reach the master one after another, each a wire time after the one before.
+    let log = dir.path().join("scan.log");
+    let o = fieldprobe(&[
+        "can",
+        "scan",
+        "--link",
+        "canopen-emu",
+        "--candump",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(stdout(&o).lines().count(), 1 + 3, "{}", stdout(&o));
+    let text = std::fs::read_to_string(&log).unwrap();
+    let from_nodes: Vec<_> = frames(&text)
+        .into_iter()
+        .filter(|(_, f)| (0x581..=0x583).contains(&f.id) || (0x701..=0x703).contains(&f.id))
+        .collect();
+    assert!(from_nodes.len() >= 3 * 5, "{text}");
+    for w in from_nodes.windows(2) {
+        let ((t0, _), (t1, b)) = (w[0], w[1]);
+        let least = wire_bits(u64::from(b.len)).0;
+        assert!(
+            t1 - t0 + 1 >= least,
+            "{:#x} {} µs after the node frame before it (at least {least} µs)\n{text}",
+            b.id,
+            t1 - t0
+        );
+    }
+}

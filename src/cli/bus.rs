@@ -20,6 +20,7 @@
 
 use super::{load_machine, number, prefixed, said_once, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
+use fieldprobe::bus::can::Bitrate;
 use fieldprobe::link::canopen::CanSession;
 use fieldprobe::link::ethercat::{EthercatSpec, Session, Wire};
 use fieldprobe::link::LinkError;
@@ -346,14 +347,19 @@ impl Bus {
         anyhow::anyhow!(prefixed(&format!("--link {}", self.text), e))
     }
 
-    /// Open the CAN link.
+    /// Open the CAN link: `canopen-emu` on a wire at the machine file's `[can] bitrate`
+    /// (default 1 Mbit/s), as `run` does; a real bus at its own.
     pub fn open_can(&self) -> anyhow::Result<CanSession> {
-        let (drives, ids) = if self.link == BusLink::CanopenEmu {
-            self.drives()?
+        let (drives, ids, bitrate) = if self.link == BusLink::CanopenEmu {
+            let cfg = load_machine(self.machine.as_deref(), &self.sets)?;
+            let bitrate = Bitrate::new(cfg.can_bitrate)
+                .ok_or_else(|| anyhow::anyhow!("{}: [can] bitrate = 0", cfg.source))?;
+            let (drives, ids) = self.drives()?;
+            (drives, ids, bitrate)
         } else {
-            (Vec::new(), Vec::new())
+            (Vec::new(), Vec::new(), Bitrate::DEFAULT)
         };
-        CanSession::open(&self.text, &drives, &ids, self.candump.as_deref())
+        CanSession::open(&self.text, &drives, &ids, bitrate, self.candump.as_deref())
             .map_err(|e| self.link_error(e))
     }
 
@@ -631,16 +637,20 @@ pub fn can(a: CanArgs) -> anyhow::Result<i32> {
             let mut session = bus.open_can()?;
             let iface = session.log_interface();
             let plain = d.plain;
-            let heard = session.listen(std::time::Duration::from_secs_f64(seconds), &mut |f| {
-                let t = std::time::UNIX_EPOCH.elapsed().unwrap_or_default();
-                let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
-                let meaning = fieldprobe::bus::canopen::describe(f);
-                if plain || meaning.is_empty() {
-                    outln!("{line}");
-                } else {
-                    outln!("{line}  ; {meaning}");
-                }
-            });
+            // Each frame at the time it came: on canopen-emu the end of its transmission on the
+            // bus clock (virtual), elsewhere when the master took it.
+            let epoch = session.unix_epoch();
+            let heard =
+                session.listen(std::time::Duration::from_secs_f64(seconds), &mut |f, at| {
+                    let t = epoch + std::time::Duration::from_nanos(at.0);
+                    let line = fieldprobe::bus::can::candump::format_line(t, &iface, f);
+                    let meaning = fieldprobe::bus::canopen::describe(f);
+                    if plain || meaning.is_empty() {
+                        outln!("{line}");
+                    } else {
+                        outln!("{line}  ; {meaning}");
+                    }
+                });
             super::finish_capture(session.finish_capture());
             heard.map_err(|e| bus.link_error(e))?;
             Ok(EXIT_OK)

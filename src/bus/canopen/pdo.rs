@@ -28,6 +28,7 @@
 //! status bit that announces it. Layouts that do not fit [`MAX_PDOS`] PDOs this way fall back
 //! to [`pack_layout`] (everything cyclic).
 
+use crate::bus::can::{CanFrame, FrameError};
 use crate::drive::pdo::PdoLayout;
 
 /// Receive (master → node) or transmit (node → master) PDO.
@@ -148,6 +149,25 @@ impl Pdo {
     /// PDO data from the drive image.
     pub fn pack(&self, image: &[u8]) -> Vec<u8> {
         let mut d = vec![0u8; self.len()];
+        self.pack_into(image, &mut d);
+        d
+    }
+
+    /// The PDO as a CAN frame (COB-ID, the data packed from the drive image), built without
+    /// an allocation; an error for a PDO longer than a classic CAN frame carries.
+    pub fn frame(&self, image: &[u8]) -> Result<CanFrame, FrameError> {
+        let n = self.len();
+        let mut d = [0u8; 8];
+        let Some(dst) = d.get_mut(..n) else {
+            return CanFrame::new(self.cob, &self.pack(image));
+        };
+        self.pack_into(image, dst);
+        CanFrame::new(self.cob, dst)
+    }
+
+    /// Pack the mapped objects of the drive image into `d` (the PDO's data, [`len`](Self::len)
+    /// bytes).
+    fn pack_into(&self, image: &[u8], d: &mut [u8]) {
         for m in &self.mapped {
             if let (Some(dst), Some(src)) = (
                 d.get_mut(m.pdo_offset..m.pdo_offset + m.len),
@@ -156,7 +176,6 @@ impl Pdo {
                 dst.copy_from_slice(src);
             }
         }
-        d
     }
 
     /// Copy PDO data into the drive image; `false` (image untouched) if the length is wrong.

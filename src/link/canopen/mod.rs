@@ -101,12 +101,12 @@ struct AxisNode {
     def: Arc<DriveDefinition>,
     rx: Vec<Pdo>,
     tx: Vec<Pdo>,
-    /// Per RPDO: the data an on-change RPDO last carried (`None`: send it with the next
+    /// Per RPDO: the frame an on-change RPDO last went out in (`None`: send it with the next
     /// exchange).
-    rx_sent: Vec<Option<Vec<u8>>>,
-    /// Per TPDO: the data an on-change TPDO last brought (copied into every input image the
-    /// link commits; `None` before the first one).
-    tx_held: Vec<Option<Vec<u8>>>,
+    rx_sent: Vec<Option<CanFrame>>,
+    /// Per TPDO: the frame of the last data an on-change TPDO brought (copied into every input
+    /// image the link commits; `None` before the first one).
+    tx_held: Vec<Option<CanFrame>>,
     sdo: SdoClient,
     last_heartbeat: Option<Nanos>,
     state: Option<NmtState>,
@@ -138,6 +138,12 @@ pub struct CanopenLink {
     pacing: Option<Pacing>,
     /// [`Link::release`] sent the nodes to pre-operational; the next exchange starts them.
     released: bool,
+    /// Buffers of one exchange, kept so that a steady cycle allocates nothing
+    /// (`tests/canopen_alloc.rs`): the RPDOs to send, the frames received, which cyclic
+    /// TPDOs came.
+    rpdo_buf: Vec<CanFrame>,
+    rx_buf: Vec<CanFrame>,
+    tpdo_seen: Vec<bool>,
 }
 
 impl std::fmt::Debug for CanopenLink {
@@ -207,25 +213,6 @@ impl Transport {
             .map_err(|e| other(format!("CAN send on {}: {e}", self.bus.describe())))
     }
 
-    /// Emulated: the nodes take what reached their endpoint and answer on it.
-    fn run_nodes(&mut self, now: Nanos) {
-        let Some(Emulated {
-            segment, endpoint, ..
-        }) = self.emulated.as_mut()
-        else {
-            return;
-        };
-        let mut frames = Vec::new();
-        while let Ok(Some(f)) = endpoint.recv(Duration::ZERO) {
-            frames.push(f);
-        }
-        for f in segment.run(&frames, now) {
-            if endpoint.send(&f).is_err() {
-                tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
-            }
-        }
-    }
-
     /// Take every frame that arrived; `wait` bounds the wait for the first one (not waited
     /// for with emulated nodes: they have answered already).
     fn receive_all(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
@@ -283,13 +270,14 @@ impl Transport {
     }
 
     /// Open a bus for `link` (`canopen-emu` with the emulated nodes of `drives` at node ids
-    /// `ids`, on a wire at `wire` when given; `canopen-udp[:GROUP:PORT]`; `socketcan:IF`).
+    /// `ids`, on a wire at `bitrate` ([`wire`]); `canopen-udp[:GROUP:PORT]`; `socketcan:IF`,
+    /// which run at their own bit rate).
     fn open(
         link: &str,
         drives: &[Arc<DriveDefinition>],
         ids: &[u8],
         cycle: Nanos,
-        wire: Option<Bitrate>,
+        bitrate: Bitrate,
         candump: Option<&std::path::Path>,
     ) -> Result<Transport, LinkError> {
         if link == "canopen-emu" {
@@ -309,7 +297,7 @@ impl Transport {
                         .map_err(|e| other(format!("axis {i}: {e}")))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
-            let hub = wire.map_or_else(VirtualCan::new, VirtualCan::with_bitrate);
+            let hub = VirtualCan::with_bitrate(bitrate);
             let master = hub.endpoint();
             let node_side = hub.endpoint();
             let iface = master.log_interface();
@@ -318,7 +306,7 @@ impl Transport {
                 emulated: Some(Emulated::new(
                     CanopenSegment::new(nodes, cycle),
                     node_side,
-                    wire.map(|_| hub),
+                    hub,
                 )),
                 candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
             });
@@ -343,7 +331,8 @@ impl Transport {
     }
 
     /// One SDO transfer with `client`, starting with `first`; frames that are not for the
-    /// client go to `other_frames`. Bounded by four client timeouts of wall-clock time.
+    /// client go to `other_frames`. On `canopen-emu` on the wire and its clock
+    /// ([`Transport::sdo_on_wire`]); elsewhere bounded by 4 s of wall-clock time.
     ///
     /// On a paced link (`pacing`) the SYNC keeps running on its grid while the transfer waits
     /// ([`Pacing::keep_alive`]).
@@ -352,26 +341,14 @@ impl Transport {
         client: &mut SdoClient,
         first: Vec<CanFrame>,
         t0: Instant,
-        now: Nanos,
         mut pacing: Option<&mut Pacing>,
         other_frames: &mut dyn FnMut(Vec<CanFrame>) -> Result<(), LinkError>,
     ) -> Result<Vec<u8>, (Option<SdoError>, String)> {
         if self.wire().is_some() {
             return self.sdo_on_wire(client, first, other_frames);
         }
-        // The client's clock: the wall clock on a real bus; with in-process nodes virtual
-        // time, `now` plus one SDO_POLL per poll (they answer within the poll that carries the
-        // request, so no wall-clock time-out decides anything there).
-        let emulated = self.emulated.is_some();
-        let mut polls: u64 = 0;
-        let poll_ns = SDO_POLL.as_nanos() as u64;
-        let clock = |polls: u64| {
-            if emulated {
-                Nanos(now.0.saturating_add(polls.saturating_mul(poll_ns)))
-            } else {
-                Nanos(t0.elapsed().as_nanos() as u64)
-            }
-        };
+        // A bus that leaves the process: the client's clock is the wall clock.
+        let clock = || Nanos(t0.elapsed().as_nanos() as u64);
         for f in &first {
             self.send(f).map_err(|e| (None, e.to_string()))?;
         }
@@ -384,24 +361,13 @@ impl Transport {
                     (Some(e), text)
                 });
             }
-            let expired = if emulated {
-                polls.saturating_mul(poll_ns) > bound.as_nanos() as u64
-            } else {
-                Instant::now() > deadline
-            };
-            if expired {
+            if Instant::now() > deadline {
                 return Err((None, "no answer".into()));
             }
-            polls += 1;
-            self.run_nodes(now);
-            let wait = if emulated {
-                Duration::ZERO
-            } else {
-                pacing
-                    .as_ref()
-                    .and_then(|p| p.until_due())
-                    .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL))
-            };
+            let wait = pacing
+                .as_ref()
+                .and_then(|p| p.until_due())
+                .map_or(SDO_POLL, |ns| Duration::from_nanos(ns).min(SDO_POLL));
             let frames = self.receive_all(wait).map_err(|e| (None, e.to_string()))?;
             let mut replies = Vec::new();
             let mut rest = Vec::new();
@@ -409,13 +375,13 @@ impl Transport {
                 u32::from(crate::bus::canopen::sdo::SDO_TX_BASE) + u32::from(client.node());
             for f in frames {
                 if !f.extended && f.id == response {
-                    replies.extend(client.handle(&f, clock(polls)));
+                    replies.extend(client.handle(&f, clock()));
                 } else {
                     rest.push(f);
                 }
             }
             other_frames(rest).map_err(|e| (None, e.to_string()))?;
-            replies.extend(client.poll(clock(polls)));
+            replies.extend(client.poll(clock()));
             for f in &replies {
                 self.send(f).map_err(|e| (None, e.to_string()))?;
             }
@@ -430,9 +396,19 @@ impl Transport {
         self.bus.log_interface()
     }
 
+    /// Log `f` in the `--candump` file: on `canopen-emu` at the bus clock (the UNIX time of
+    /// bus time 0 plus the bus time), elsewhere at the wall clock.
     fn log(&mut self, f: &CanFrame) {
+        let at = self
+            .emulated
+            .as_ref()
+            .map(|e| e.unix0 + Duration::from_nanos(e.wire.now().0));
         if let Some(c) = self.candump.as_mut().filter(|c| c.failed.is_none()) {
-            if let Err(e) = c.writer.write_frame_now(f) {
+            let written = match at {
+                Some(t) => c.writer.write_frame(t, f),
+                None => c.writer.write_frame_now(f),
+            };
+            if let Err(e) = written {
                 c.fail(&e);
             }
         }
@@ -578,7 +554,7 @@ impl CanopenLink {
             emulated: Some(Emulated::new(
                 CanopenSegment::new(nodes, cycle),
                 hub.endpoint(),
-                Some(hub),
+                hub,
             )),
             candump: None,
         };
@@ -599,7 +575,7 @@ impl CanopenLink {
         candump: Option<&std::path::Path>,
     ) -> Result<Self, LinkError> {
         check_ids(ids)?;
-        let bus = Transport::open(link, drives, ids, cycle, Some(bitrate), candump)?;
+        let bus = Transport::open(link, drives, ids, cycle, bitrate, candump)?;
         CanopenLink::start(bus, drives, ids, cycle, bitrate)
     }
 
@@ -685,6 +661,9 @@ impl CanopenLink {
             on_change_cobs: Vec::new(),
             pacing: None,
             released: false,
+            rpdo_buf: Vec::new(),
+            rx_buf: Vec::new(),
+            tpdo_seen: Vec::new(),
         };
         for (i, a) in link.axes.iter().enumerate() {
             for (k, p) in a.tx.iter().enumerate() {
@@ -733,59 +712,77 @@ impl CanopenLink {
         self.bus.send(f)
     }
 
-    fn run_nodes(&mut self, now: Nanos) {
-        self.bus.run_nodes(now);
-    }
-
     fn receive_all(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
         self.bus.receive_all(wait)
     }
 
     /// Common handling of heartbeats, EMCY and on-change TPDOs (kept for the next input image
     /// the link commits, whenever they come); returns the frames not consumed.
-    fn note(&mut self, frames: Vec<CanFrame>, now: Nanos) -> Result<Vec<CanFrame>, LinkError> {
+    fn note(&mut self, mut frames: Vec<CanFrame>, now: Nanos) -> Result<Vec<CanFrame>, LinkError> {
+        self.note_from(&mut frames, 0, now)?;
+        Ok(frames)
+    }
+
+    /// [`note`](Self::note) on `frames[from..]` in place: the frames not consumed stay there,
+    /// in order.
+    fn note_from(
+        &mut self,
+        frames: &mut Vec<CanFrame>,
+        from: usize,
+        now: Nanos,
+    ) -> Result<(), LinkError> {
         let hb_now = self.wall();
-        let mut rest = Vec::new();
-        for f in frames {
-            if !f.extended && !f.rtr && !f.error {
-                if let Some(&(_, i, k)) = self.on_change_cobs.iter().find(|c| c.0 == f.id) {
-                    if let Some(slot) = self.axes.get_mut(i).and_then(|a| a.tx_held.get_mut(k)) {
-                        *slot = Some(f.payload().to_vec());
-                    }
-                    continue;
-                }
+        let mut keep = from;
+        for i in from..frames.len() {
+            let f = frames[i];
+            if !self.note_one(&f, now, hb_now)? {
+                frames[keep] = f;
+                keep += 1;
             }
-            if let Some((node, state)) = nmt::parse_heartbeat(&f) {
-                if let Some(ax) = self.axes.iter_mut().find(|a| a.node == node) {
-                    if state == NmtState::BootUp && ax.state == Some(NmtState::Operational) {
-                        return Err(LinkError::Lost {
-                            at: now,
-                            reason: format!("node {node} rebooted (boot-up message)"),
-                        });
-                    }
-                    ax.state = Some(state);
-                    ax.last_heartbeat = Some(hb_now);
-                }
-                continue;
-            }
-            if let Some(e) = Emcy::parse(&f) {
-                tracing::debug!(target: "fieldprobe::link::canopen", node = e.node, code = e.code, "EMCY {}", e.text());
-                self.emergencies.push(e);
-                continue;
-            }
-            rest.push(f);
         }
-        Ok(rest)
+        frames.truncate(keep);
+        Ok(())
+    }
+
+    /// One frame for [`note`](Self::note), heartbeats taken at `hb_now`: `true` when it was
+    /// consumed.
+    fn note_one(&mut self, f: &CanFrame, now: Nanos, hb_now: Nanos) -> Result<bool, LinkError> {
+        if !f.extended && !f.rtr && !f.error {
+            if let Some(&(_, i, k)) = self.on_change_cobs.iter().find(|c| c.0 == f.id) {
+                if let Some(slot) = self.axes.get_mut(i).and_then(|a| a.tx_held.get_mut(k)) {
+                    *slot = Some(*f);
+                }
+                return Ok(true);
+            }
+        }
+        if let Some((node, state)) = nmt::parse_heartbeat(f) {
+            if let Some(ax) = self.axes.iter_mut().find(|a| a.node == node) {
+                if state == NmtState::BootUp && ax.state == Some(NmtState::Operational) {
+                    return Err(LinkError::Lost {
+                        at: now,
+                        reason: format!("node {node} rebooted (boot-up message)"),
+                    });
+                }
+                ax.state = Some(state);
+                ax.last_heartbeat = Some(hb_now);
+            }
+            return Ok(true);
+        }
+        if let Some(e) = Emcy::parse(f) {
+            tracing::debug!(target: "fieldprobe::link::canopen", node = e.node, code = e.code, "EMCY {}", e.text());
+            self.emergencies.push(e);
+            return Ok(true);
+        }
+        Ok(false)
     }
 
     /// Let the bus run a little and take what came: on `canopen-emu` the nodes do their
-    /// time-driven work and 1 ms of bus time passes ([`wire`]); elsewhere the emulated nodes
-    /// (none) run and the master waits up to `wait` for a first frame.
+    /// time-driven work and 1 ms of bus time passes ([`wire`]); elsewhere the master waits up
+    /// to `wait` for a first frame.
     fn settle(&mut self, wait: Duration) -> Result<Vec<CanFrame>, LinkError> {
         if self.bus.wire().is_some() {
             self.bus.wait_wire(Nanos::from_micros(1000))
         } else {
-            self.run_nodes(self.now);
             self.receive_all(wait)
         }
     }
@@ -942,7 +939,6 @@ impl CanopenLink {
             &mut client,
             first,
             t0,
-            now,
             self.pacing.as_mut(),
             &mut |frames| {
                 seen.extend(frames);
@@ -962,7 +958,7 @@ impl CanopenLink {
         &mut self,
         n: u64,
         now: Nanos,
-        mut got: Vec<CanFrame>,
+        got: &mut Vec<CanFrame>,
         images: &mut [ProcessImage],
     ) -> Result<(), LinkError> {
         if self.lose.contains(&n) {
@@ -986,23 +982,33 @@ impl CanopenLink {
                 }
             }
         }
-        let mut staged: Vec<Vec<u8>> = images.iter().map(|i| i.inputs.clone()).collect();
-        for (ax, inputs) in self.axes.iter().zip(staged.iter_mut()) {
-            for (p, held) in ax.tx.iter().zip(&ax.tx_held) {
-                let data = match p.trigger {
-                    Trigger::Cyclic => got
-                        .iter()
+        // Every expected TPDO first, with its length; only then the input images change (all
+        // or none of them).
+        /// TPDO `p`'s data: `None` for an on-change one that has not come yet, `Some(None)`
+        /// for a missing cyclic one.
+        fn data<'a>(
+            got: &'a [CanFrame],
+            p: &Pdo,
+            held: &'a Option<CanFrame>,
+        ) -> Option<Option<&'a [u8]>> {
+            match p.trigger {
+                Trigger::Cyclic => Some(
+                    got.iter()
                         .rev()
                         .find(|f| !f.extended && !f.rtr && f.id == u32::from(p.cob))
                         .map(CanFrame::payload),
-                    Trigger::OnChange { .. } => match held {
-                        Some(d) => Some(d.as_slice()),
-                        None => continue,
-                    },
-                };
-                match data {
-                    Some(d) if p.unpack(d, inputs) => {}
-                    Some(d) => {
+                ),
+                Trigger::OnChange { .. } => held.as_ref().map(|f| Some(f.payload())),
+            }
+        }
+        let got = &got[..];
+        for ax in &self.axes {
+            for (p, held) in ax.tx.iter().zip(&ax.tx_held) {
+                match data(got, p, held) {
+                    // An on-change TPDO that has not come yet: nothing to copy.
+                    None => {}
+                    Some(Some(d)) if d.len() == p.len() => {}
+                    Some(Some(d)) => {
                         return Err(LinkError::Lost {
                             at: now,
                             reason: format!(
@@ -1014,7 +1020,7 @@ impl CanopenLink {
                             ),
                         })
                     }
-                    None => {
+                    Some(None) => {
                         return Err(LinkError::Lost {
                             at: now,
                             reason: format!(
@@ -1027,8 +1033,12 @@ impl CanopenLink {
                 }
             }
         }
-        for (img, inputs) in images.iter_mut().zip(staged) {
-            img.inputs = inputs;
+        for (ax, img) in self.axes.iter().zip(images.iter_mut()) {
+            for (p, held) in ax.tx.iter().zip(&ax.tx_held) {
+                if let Some(Some(d)) = data(got, p, held) {
+                    p.unpack(d, &mut img.inputs);
+                }
+            }
         }
         Ok(())
     }
@@ -1106,40 +1116,56 @@ impl CanopenLink {
         images: &mut [ProcessImage],
     ) -> Result<(), LinkError> {
         let t_sync = self.epoch.saturating_add(now);
-        let early = self.bus.run_wire(Some(t_sync), &mut |_, _| false)?;
+        let mut frames = std::mem::take(&mut self.rx_buf);
+        frames.clear();
+        self.bus
+            .run_wire_into(Some(t_sync), &mut |_, _| false, &mut frames)?;
         // Heartbeats, EMCY and on-change TPDOs count; a cyclic TPDO before this SYNC belongs
         // to an earlier one and is dropped.
-        self.note(early, now)?;
+        self.note_from(&mut frames, 0, now)?;
+        frames.clear();
         self.bus.poll_nodes();
         let sent = self.bus.wire_clock().unwrap_or(t_sync);
         self.bus.send_sync(now)?;
         let deadline = sent.saturating_add(self.window);
         let cobs = &self.tpdo_cobs;
-        let mut seen = vec![false; cobs.len()];
+        let seen = &mut self.tpdo_seen;
+        seen.clear();
+        seen.resize(cobs.len(), false);
         let mut missing = cobs.len();
         let mut synced = false;
         let mut before = 0;
-        let frames = self.bus.run_wire(Some(deadline), &mut |d, got| {
-            if !synced {
-                synced = d.frame.id == u32::from(nmt::SYNC_COB) && !d.frame.extended;
-                before += got.len();
-                return false;
-            }
-            for f in got.iter().filter(|f| !f.extended && !f.rtr && !f.error) {
-                if let Some(k) = cobs.iter().position(|&c| c == f.id) {
-                    if !seen[k] {
-                        seen[k] = true;
-                        missing -= 1;
+        self.bus.run_wire_into(
+            Some(deadline),
+            &mut |d, got| {
+                if !synced {
+                    synced = d.frame.id == u32::from(nmt::SYNC_COB) && !d.frame.extended;
+                    before += got.len();
+                    return false;
+                }
+                for f in got.iter().filter(|f| !f.extended && !f.rtr && !f.error) {
+                    if let Some(k) = cobs.iter().position(|&c| c == f.id) {
+                        if !seen[k] {
+                            seen[k] = true;
+                            missing -= 1;
+                        }
                     }
                 }
-            }
-            missing == 0
-        })?;
-        let mut frames = frames;
-        let after = frames.split_off(before.min(frames.len()));
-        self.note(frames, now)?;
-        let got = self.note(after, now)?;
-        self.finish_exchange(n, now, got, images)
+                missing == 0
+            },
+            &mut frames,
+        )?;
+        // The frames up to the SYNC: noted, the rest dropped (as before the SYNC above); the
+        // frames after it: the TPDOs of this SYNC.
+        let before = before.min(frames.len());
+        let hb_now = self.wall();
+        for f in frames.drain(..before) {
+            self.note_one(&f, now, hb_now)?;
+        }
+        self.note_from(&mut frames, 0, now)?;
+        let r = self.finish_exchange(n, now, &mut frames, images);
+        self.rx_buf = frames;
+        r
     }
 }
 
@@ -1172,19 +1198,20 @@ impl Link for CanopenLink {
         }
         let n = self.exchanges;
         self.exchanges += 1;
-        let mut rpdos = Vec::new();
+        let mut rpdos = std::mem::take(&mut self.rpdo_buf);
+        rpdos.clear();
         for (ax, img) in self.axes.iter_mut().zip(images.iter()) {
             for (p, sent) in ax.rx.iter().zip(ax.rx_sent.iter_mut()) {
-                let data = p.pack(&img.outputs);
+                let f = p
+                    .frame(&img.outputs)
+                    .map_err(|e| other(format!("node {}: RPDO {}: {e}", ax.node, p.number + 1)))?;
                 if p.trigger != Trigger::Cyclic {
                     // On change: only new data go out.
-                    if sent.as_deref() == Some(data.as_slice()) {
+                    if sent.as_ref().map(CanFrame::payload) == Some(f.payload()) {
                         continue;
                     }
-                    *sent = Some(data.clone());
+                    *sent = Some(f);
                 }
-                let f = CanFrame::new(p.cob, &data)
-                    .map_err(|e| other(format!("node {}: RPDO {}: {e}", ax.node, p.number + 1)))?;
                 rpdos.push(f);
             }
         }
@@ -1193,6 +1220,7 @@ impl Link for CanopenLink {
         for f in &rpdos {
             self.send(f)?;
         }
+        self.rpdo_buf = rpdos;
         match self.pacing.take() {
             Some(mut pacing) => {
                 let r = self.paced_cycle(&mut pacing, n, now, images);

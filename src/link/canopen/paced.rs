@@ -288,7 +288,7 @@ impl super::CanopenLink {
         }
         let result = stale
             .and_then(|_| self.note(got, now))
-            .and_then(|got| self.finish_exchange(n, now, got, images));
+            .and_then(|mut got| self.finish_exchange(n, now, &mut got, images));
         if wake.missed > 0 || result.is_err() {
             tracing::debug!(target: "fieldprobe::link::canopen", exchange = n,
                 missed = wake.missed, late_us = wake.woke.saturating_sub(wake.deadline) / 1000,

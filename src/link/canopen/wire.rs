@@ -33,22 +33,24 @@ pub const SDO_BOUND: Nanos = Nanos(4_000_000_000);
 pub(super) struct Emulated {
     pub(super) segment: CanopenSegment,
     pub(super) endpoint: VirtualEndpoint,
-    /// The bus with its wire: the link's frames take their wire time on virtual time. `None`
-    /// for the commissioning session (`can scan`, `can dump`), whose nodes run on the wall
-    /// clock of the command.
-    pub(super) wire: Option<VirtualCan>,
+    /// The bus with its wire: every frame takes its wire time on virtual time — the link's
+    /// and the commissioning session's (`can scan`, `can dump`, `sdo … --node`) alike.
+    pub(super) wire: VirtualCan,
     /// Model times of the SYNCs sent and not yet delivered to the nodes.
     pub(super) sync_times: VecDeque<Nanos>,
     /// Every frame the wire completed, while recorded
     /// ([`super::CanopenLink::trace_bus`]).
     pub(super) trace: Option<Vec<Delivery>>,
+    /// The UNIX time that bus time 0 stands for in `--candump` logs and `can dump` lines
+    /// (when the bus was made): a label only, nothing runs on it.
+    pub(super) unix0: Duration,
 }
 
 impl Emulated {
     pub(super) fn new(
         segment: CanopenSegment,
         endpoint: VirtualEndpoint,
-        wire: Option<VirtualCan>,
+        wire: VirtualCan,
     ) -> Emulated {
         Emulated {
             segment,
@@ -56,19 +58,21 @@ impl Emulated {
             wire,
             sync_times: VecDeque::new(),
             trace: None,
+            unix0: std::time::UNIX_EPOCH.elapsed().unwrap_or_default(),
         }
     }
 }
 
 impl Transport {
-    /// The bus clock of a bus with a wire (the link's `canopen-emu`).
+    /// The bus clock of the in-process bus (`canopen-emu`); `None` on a bus that leaves the
+    /// process.
     pub(super) fn wire_clock(&self) -> Option<Nanos> {
-        self.emulated.as_ref()?.wire.as_ref().map(VirtualCan::now)
+        self.wire().map(VirtualCan::now)
     }
 
-    /// The bus with a wire, if this is one.
+    /// The in-process bus with its wire (`canopen-emu`), if this is one.
     pub(super) fn wire(&self) -> Option<&VirtualCan> {
-        self.emulated.as_ref()?.wire.as_ref()
+        self.emulated.as_ref().map(|e| &e.wire)
     }
 
     /// Run the wire: complete frames that end by `until` (`None`: until the bus has nothing to
@@ -82,19 +86,30 @@ impl Transport {
         stop: &mut dyn FnMut(&Delivery, &[CanFrame]) -> bool,
     ) -> Result<Vec<CanFrame>, LinkError> {
         let mut got = Vec::new();
+        self.run_wire_into(until, stop, &mut got)?;
+        Ok(got)
+    }
+
+    /// [`run_wire`](Self::run_wire) appending the master's frames to `got` (the cyclic
+    /// exchange keeps that buffer: nothing here allocates once the buffers have their size).
+    /// `stop` sees the frames of each delivery only.
+    pub(super) fn run_wire_into(
+        &mut self,
+        until: Option<Nanos>,
+        stop: &mut dyn FnMut(&Delivery, &[CanFrame]) -> bool,
+        got: &mut Vec<CanFrame>,
+    ) -> Result<(), LinkError> {
         loop {
             let Some(em) = self.emulated.as_mut() else {
-                return Ok(got);
+                return Ok(());
             };
-            let Some(wire) = em.wire.as_ref() else {
-                return Ok(got);
-            };
+            let wire = &em.wire;
             let delivery = match until {
                 Some(t) => wire.advance(t),
                 None => wire.advance_next(),
             };
             let Some(d) = delivery else {
-                return Ok(got);
+                return Ok(());
             };
             if let Some(t) = em.trace.as_mut() {
                 t.push(d);
@@ -107,20 +122,15 @@ impl Transport {
                 } else {
                     at
                 };
-                let mut answers = Vec::new();
-                segment.receive(&f, at, model_time, &mut |a| answers.push(a));
-                for a in answers {
-                    if endpoint.send(&a).is_err() {
-                        tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {a:?}");
-                    }
-                }
+                // The answers wait for the bus like any frame (queued, not delivered, here).
+                segment.receive(&f, at, model_time, &mut |a| node_send(endpoint, &a));
             }
             let first = got.len();
             while let Some(f) = self.poll_master()? {
                 got.push(f);
             }
             if stop(&d, &got[first..]) {
-                return Ok(got);
+                return Ok(());
             }
         }
     }
@@ -147,16 +157,9 @@ impl Transport {
         let Some(em) = self.emulated.as_mut() else {
             return;
         };
-        let Some(now) = em.wire.as_ref().map(VirtualCan::now) else {
-            return;
-        };
-        let mut out = Vec::new();
-        em.segment.poll(now, &mut |f| out.push(f));
-        for f in out {
-            if em.endpoint.send(&f).is_err() {
-                tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
-            }
-        }
+        let now = em.wire.now();
+        let endpoint = &mut em.endpoint;
+        em.segment.poll(now, &mut |f| node_send(endpoint, &f));
     }
 
     /// Let `span` of bus time pass: the nodes do their time-driven work now, the wire runs to
@@ -172,9 +175,7 @@ impl Transport {
     /// Send the SYNC whose drive-model step belongs at `model_time` (machine time).
     pub(super) fn send_sync(&mut self, model_time: Nanos) -> Result<(), LinkError> {
         if let Some(em) = self.emulated.as_mut() {
-            if em.wire.is_some() {
-                em.sync_times.push_back(model_time);
-            }
+            em.sync_times.push_back(model_time);
         }
         self.send(&nmt::sync())
     }
@@ -231,6 +232,14 @@ impl Transport {
                 self.send(f).map_err(failed)?;
             }
         }
+    }
+}
+
+/// An emulated node's frame onto its endpoint (a frame out of range is a warning: the node
+/// built it, nothing from outside).
+fn node_send(endpoint: &mut VirtualEndpoint, f: &CanFrame) {
+    if endpoint.send(f).is_err() {
+        tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
     }
 }
 

@@ -87,7 +87,7 @@
 use crate::bus::can::CanFrame;
 use std::collections::BTreeMap;
 
-use self::pdo::{NodePdo, Place, Slot, Transmission};
+use self::pdo::{NodePdo, PdoData, Place, Slot, Transmission};
 use crate::bus::canopen::eds::{self, AccessType, Eds};
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{pack_layout, Direction, Mapped, Pdo, MAX_PDOS};
@@ -95,7 +95,7 @@ use crate::bus::canopen::sdo::{ObjectAccess, SdoServer, SDO_RX_BASE};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::PdoLayout;
 use crate::sim::esc::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
-use crate::sim::world::{Port, World};
+use crate::sim::world::{Port, PortBuffer, World};
 use crate::units::Nanos;
 
 pub mod pdo;
@@ -252,6 +252,14 @@ fn pdo_entries(direction: Direction, node: u8, pdos: &[Pdo]) -> Vec<ObjectEntry>
         }
     }
     v
+}
+
+/// Up to 4 little-endian bytes as a number (missing high bytes 0).
+fn le_u32(b: &[u8]) -> u32 {
+    let mut a = [0u8; 4];
+    let n = b.len().min(4);
+    a[..n].copy_from_slice(&b[..n]);
+    u32::from_le_bytes(a)
 }
 
 fn check_node_id(id: u8) -> Result<(), String> {
@@ -544,12 +552,14 @@ impl EmulatedNode {
 
     /// A UNSIGNED32 object of the dictionary (0 when absent or refused).
     fn read_u32(&self, index: u16) -> u32 {
-        self.od.read(index, 0).map_or(0, |b| {
-            let mut a = [0u8; 4];
-            let n = b.len().min(4);
-            a[..n].copy_from_slice(&b[..n]);
-            u32::from_le_bytes(a)
-        })
+        self.od.read_with(index, 0, le_u32).unwrap_or(0)
+    }
+
+    /// A UNSIGNED16 object (0 when absent or refused), read without a copy.
+    fn read_u16(&self, index: u16, sub: u8) -> u16 {
+        self.od
+            .read_with(index, sub, |b| le_u32(b) as u16)
+            .unwrap_or(0)
     }
 
     /// 0x1006 communication cycle period in µs, if set (≠ 0).
@@ -581,7 +591,7 @@ impl EmulatedNode {
             self.sync_lost = false;
             for i in 0..self.rx.len() {
                 if let Some(data) = self.rx[i].take_pending() {
-                    self.take_over_rpdo(i, &data, false);
+                    self.take_over_rpdo(i, data.as_slice(), false);
                 }
             }
         }
@@ -776,16 +786,26 @@ impl EmulatedNode {
 
     /// Current data of TPDO `p`: image bytes as the model wrote them at its last step (or
     /// its last acyclic change), other objects as the dictionary has them now.
-    fn tpdo_data(&self, p: &NodePdo) -> Vec<u8> {
-        let mut d = vec![0u8; p.len()];
+    fn tpdo_data(&self, p: &NodePdo) -> PdoData {
+        // At most 8 bytes: `pdos_from_od` refuses a longer mapping.
+        let mut d = PdoData::zeroed(p.len());
         for s in &p.slots {
-            let src = match s.place {
-                Place::Image(off) => self.inputs.get(off..off + s.len).map(<[u8]>::to_vec),
-                Place::Object => self.od.read(s.index, s.sub).ok(),
+            let Some(dst) = d.as_mut_slice().get_mut(s.pdo_offset..s.pdo_offset + s.len) else {
+                continue;
             };
-            if let (Some(dst), Some(src)) = (d.get_mut(s.pdo_offset..s.pdo_offset + s.len), src) {
+            let mut copy = |src: &[u8]| {
                 let n = src.len().min(s.len);
                 dst[..n].copy_from_slice(&src[..n]);
+            };
+            match s.place {
+                Place::Image(off) => {
+                    if let Some(src) = self.inputs.get(off..off + s.len) {
+                        copy(src);
+                    }
+                }
+                Place::Object => {
+                    let _ = self.od.read_with(s.index, s.sub, copy);
+                }
             }
         }
         d
@@ -797,11 +817,12 @@ impl EmulatedNode {
     /// outside the image are written into the dictionary either way. Values the object refuses
     /// (read-only, out of range) are left out, as the model's own step does.
     fn take_over_rpdo(&mut self, i: usize, data: &[u8], at_once: bool) {
-        let Some(p) = self.rx.get(i) else {
+        let Some(slots) = self.rx.get(i).map(|p| p.slots.len()) else {
             return;
         };
         let mut controlword = false;
-        for s in p.slots.clone() {
+        for j in 0..slots {
+            let s = self.rx[i].slots[j];
             let Some(bytes) = data.get(s.pdo_offset..s.pdo_offset + s.len) else {
                 continue;
             };
@@ -946,7 +967,7 @@ impl EmulatedNode {
                         self.rpdo_lost[k] = false;
                     }
                     if let Some(data) = p.receive(f.payload()) {
-                        self.take_over_rpdo(i, &data, true);
+                        self.take_over_rpdo(i, data.as_slice(), true);
                     }
                 }
                 let window = self.read_u32(0x1007);
@@ -969,12 +990,7 @@ impl EmulatedNode {
             self.state = NmtState::PreOperational;
             self.last_heartbeat = Some(now);
         }
-        let period = self
-            .od
-            .read(0x1017, 0)
-            .ok()
-            .and_then(|b| b.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])))
-            .unwrap_or(0);
+        let period = self.read_u16(0x1017, 0);
         if period > 0 {
             let due = self
                 .last_heartbeat
@@ -1009,15 +1025,15 @@ impl EmulatedNode {
                 continue;
             }
             let data = self.tpdo_data(&self.tx[i]);
-            if self.tx[i].event_due(now, &data) {
+            if self.tx[i].event_due(now, data.as_slice()) {
                 self.transmit_tpdo(i, now, data);
             }
         }
     }
 
     /// Send TPDO `i` (index into `self.tx`) with `data` at `now`.
-    fn transmit_tpdo(&mut self, i: usize, now: Nanos, data: Vec<u8>) {
-        if let Ok(f) = CanFrame::new(self.tx[i].cob, &data) {
+    fn transmit_tpdo(&mut self, i: usize, now: Nanos, data: PdoData) {
+        if let Ok(f) = CanFrame::new(self.tx[i].cob, data.as_slice()) {
             self.outgoing.push(f);
         }
         self.tx[i].sent(now, data);
@@ -1035,12 +1051,7 @@ impl EmulatedNode {
             if self.rpdo_lost[k] {
                 continue;
             }
-            let ms = self
-                .od
-                .read(Direction::Rx.comm_index(k as u8), 5)
-                .ok()
-                .and_then(|b| b.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])))
-                .unwrap_or(0);
+            let ms = self.read_u16(Direction::Rx.comm_index(k as u8), 5);
             if ms == 0 || now.0.saturating_sub(last.0) <= u64::from(ms) * 1_000_000 {
                 continue;
             }
@@ -1063,7 +1074,7 @@ impl EmulatedNode {
         }
         for i in 0..self.tx.len() {
             let data = self.tpdo_data(&self.tx[i]);
-            if self.tx[i].sync_due(&data) {
+            if self.tx[i].sync_due(data.as_slice()) {
                 self.transmit_tpdo(i, now, data);
             }
         }
@@ -1073,6 +1084,12 @@ impl EmulatedNode {
     pub fn take_outgoing(&mut self) -> Vec<CanFrame> {
         std::mem::take(&mut self.outgoing)
     }
+
+    /// Hand the frames the node wants to send to `send`, in order; the queue keeps its
+    /// allocation (the segment's cyclic path).
+    fn send_outgoing(&mut self, send: &mut dyn FnMut(CanFrame)) {
+        self.outgoing.drain(..).for_each(send);
+    }
 }
 
 /// The emulated nodes of one bus and their world.
@@ -1081,6 +1098,8 @@ pub struct CanopenSegment {
     nodes: Vec<EmulatedNode>,
     world: World,
     cycle: Nanos,
+    /// The models' ports during a world step (kept: no allocation per SYNC).
+    ports: PortBuffer,
 }
 
 impl CanopenSegment {
@@ -1090,6 +1109,7 @@ impl CanopenSegment {
             nodes,
             world: World::new(crate::sim::plant::Plant::new()),
             cycle,
+            ports: PortBuffer::default(),
         }
     }
 
@@ -1150,7 +1170,7 @@ impl CanopenSegment {
                 n.syncs += u64::from(n.state == NmtState::Operational);
                 n.on_sync(at);
                 n.send_tpdos(at);
-                n.take_outgoing().into_iter().for_each(&mut *send);
+                n.send_outgoing(send);
             }
             self.step_models(model_time);
         } else {
@@ -1159,7 +1179,7 @@ impl CanopenSegment {
             }
         }
         for n in &mut self.nodes {
-            n.take_outgoing().into_iter().for_each(&mut *send);
+            n.send_outgoing(send);
         }
     }
 
@@ -1169,7 +1189,7 @@ impl CanopenSegment {
     pub fn poll(&mut self, at: Nanos, send: &mut dyn FnMut(CanFrame)) {
         for n in &mut self.nodes {
             n.poll(at);
-            n.take_outgoing().into_iter().for_each(&mut *send);
+            n.send_outgoing(send);
         }
     }
 
@@ -1186,16 +1206,13 @@ impl CanopenSegment {
             .filter(|n| n.state == NmtState::Operational)
             .find_map(EmulatedNode::cycle_period_us)
             .map_or(self.cycle, |us| Nanos::from_micros(u64::from(us)));
-        let mut ports: Vec<Port<'_>> = self
-            .nodes
-            .iter_mut()
-            .map(|n| Port {
-                model: n.od.model_mut(),
-                outputs: &n.outputs,
-                inputs: &mut n.inputs,
-            })
-            .collect();
-        self.world.step(now, cycle, &mut ports);
+        let ports = self.nodes.iter_mut().map(|n| Port {
+            model: n.od.model_mut(),
+            outputs: &n.outputs,
+            inputs: &mut n.inputs,
+        });
+        let world = &mut self.world;
+        self.ports.with(ports, |p| world.step(now, cycle, p));
     }
 }
 

@@ -92,6 +92,45 @@ pub struct Slot {
     pub place: Place,
 }
 
+/// The data of one PDO: at most 8 bytes (a classic CAN frame; the node refuses a longer
+/// mapping at NMT start), kept by value so that receiving, taking over and sending a PDO
+/// allocates nothing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PdoData {
+    len: u8,
+    bytes: [u8; 8],
+}
+
+impl PdoData {
+    /// `data` if it has at most 8 bytes.
+    pub fn new(data: &[u8]) -> Option<Self> {
+        let mut bytes = [0u8; 8];
+        bytes.get_mut(..data.len())?.copy_from_slice(data);
+        Some(PdoData {
+            len: data.len() as u8,
+            bytes,
+        })
+    }
+
+    /// `len` zero bytes (at most 8).
+    pub fn zeroed(len: usize) -> Self {
+        PdoData {
+            len: len.min(8) as u8,
+            bytes: [0; 8],
+        }
+    }
+
+    /// The bytes.
+    pub fn as_slice(&self) -> &[u8] {
+        &self.bytes[..usize::from(self.len)]
+    }
+
+    /// The bytes, mutable.
+    pub fn as_mut_slice(&mut self) -> &mut [u8] {
+        &mut self.bytes[..usize::from(self.len)]
+    }
+}
+
 /// One valid PDO of the node in OPERATIONAL, read from its communication and mapping
 /// parameters at NMT start, with its run-time state.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -111,11 +150,11 @@ pub struct NodePdo {
     /// The mapped objects, in PDO order.
     pub slots: Vec<Slot>,
     /// RPDO, synchronous: data received since the last SYNC (the newest wins).
-    pending: Option<Vec<u8>>,
+    pending: Option<PdoData>,
     /// TPDO, types 1 … 240: SYNCs counted since the last transmission.
     syncs: u8,
     /// TPDO: when it was last sent and what it carried.
-    last_sent: Option<(Nanos, Vec<u8>)>,
+    last_sent: Option<(Nanos, PdoData)>,
 }
 
 impl NodePdo {
@@ -151,19 +190,21 @@ impl NodePdo {
         self.slots.is_empty()
     }
 
-    /// RPDO `data` (of the right length) received: `Some(data)` to take over now (types
-    /// 254 / 255 and the reserved ones), `None` when it waits for the next SYNC (0 … 240).
-    pub fn receive(&mut self, data: &[u8]) -> Option<Vec<u8>> {
+    /// RPDO `data` (of the right length, at most 8 bytes) received: `Some(data)` to take over
+    /// now (types 254 / 255 and the reserved ones), `None` when it waits for the next SYNC
+    /// (0 … 240) or is longer than a CAN frame carries.
+    pub fn receive(&mut self, data: &[u8]) -> Option<PdoData> {
+        let data = PdoData::new(data)?;
         if self.transmission.synchronous() {
-            self.pending = Some(data.to_vec());
+            self.pending = Some(data);
             None
         } else {
-            Some(data.to_vec())
+            Some(data)
         }
     }
 
     /// RPDO at a SYNC: the data received since the previous SYNC, if any.
-    pub fn take_pending(&mut self) -> Option<Vec<u8>> {
+    pub fn take_pending(&mut self) -> Option<PdoData> {
         self.pending.take()
     }
 
@@ -172,7 +213,10 @@ impl NodePdo {
     /// the n-th SYNC since the last one, counted from NMT start).
     pub fn sync_due(&mut self, data: &[u8]) -> bool {
         match self.transmission {
-            Transmission::SyncAcyclic => self.last_sent.as_ref().is_none_or(|(_, d)| d != data),
+            Transmission::SyncAcyclic => self
+                .last_sent
+                .as_ref()
+                .is_none_or(|(_, d)| d.as_slice() != data),
             Transmission::SyncEvery(n) => {
                 self.syncs = self.syncs.saturating_add(1);
                 if self.syncs >= n {
@@ -205,7 +249,7 @@ impl NodePdo {
     }
 
     /// The TPDO went out at `now` carrying `data`.
-    pub fn sent(&mut self, now: Nanos, data: Vec<u8>) {
+    pub fn sent(&mut self, now: Nanos, data: PdoData) {
         self.last_sent = Some((now, data));
     }
 }
@@ -243,10 +287,10 @@ mod tests {
         assert_eq!(p.receive(&[1, 2]), None);
         assert_eq!(p.receive(&[3, 4]), None);
         // CiA 301: the newest data received before the SYNC are taken over.
-        assert_eq!(p.take_pending(), Some(vec![3, 4]));
+        assert_eq!(p.take_pending(), PdoData::new(&[3, 4]));
         assert_eq!(p.take_pending(), None);
         let mut p = tpdo(255, 0, 0);
-        assert_eq!(p.receive(&[5]), Some(vec![5]));
+        assert_eq!(p.receive(&[5]), PdoData::new(&[5]));
         assert_eq!(p.take_pending(), None);
     }
 
@@ -262,7 +306,7 @@ mod tests {
         // Inhibit 25 × 100 µs = 2.5 ms, event-timer 10 ms.
         let mut p = tpdo(255, 25, 10);
         assert!(p.event_due(Nanos(0), &[1]), "first transmission");
-        p.sent(Nanos(0), vec![1]);
+        p.sent(Nanos(0), PdoData::new(&[1]).unwrap());
         assert!(!p.event_due(Nanos(1_000_000), &[2]), "inhibited");
         assert!(!p.event_due(Nanos(2_499_999), &[2]), "inhibited");
         assert!(p.event_due(Nanos(2_500_000), &[2]), "inhibit over");

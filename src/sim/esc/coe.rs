@@ -361,6 +361,18 @@ pub struct CoeServer {
     pub sdo_info_requests: usize,
 }
 
+/// Store `data` as an entry's value, in the entry's buffer when it has one (a PDO-mapped
+/// object written every cycle allocates nothing).
+fn store(slot: &mut Option<Vec<u8>>, data: &[u8]) {
+    match slot {
+        Some(d) => {
+            d.clear();
+            d.extend_from_slice(data);
+        }
+        None => *slot = Some(data.to_vec()),
+    }
+}
+
 impl CoeServer {
     /// Server over `model` with the entries `entries`; `mailbox_size` is the size of the read
     /// (device → master) mailbox in bytes (SM1 length), which limits normal uploads and segment
@@ -577,8 +589,14 @@ impl CoeServer {
     /// Read object `index:sub` as bytes (the object dictionary without the CoE framing, e.g.
     /// for a CANopen SDO server); `Err` is the CiA 301 abort code.
     pub fn read(&self, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
+        self.read_with(index, sub, <[u8]>::to_vec)
+    }
+
+    /// [`read`](Self::read) without a copy: `f` sees the object's bytes (the node's cyclic
+    /// work reads its communication objects this way and allocates nothing).
+    pub fn read_with<R>(&self, index: u16, sub: u8, f: impl FnOnce(&[u8]) -> R) -> Result<R, u32> {
         let i = self.find(index, sub)?;
-        self.read_entry(i)
+        self.read_entry_with(i, f)
     }
 
     /// Write object `index:sub` from bytes (data type and access checked); `Err` is the CiA 301
@@ -612,15 +630,22 @@ impl CoeServer {
     }
 
     fn read_entry(&self, i: usize) -> Result<Vec<u8>, u32> {
+        self.read_entry_with(i, <[u8]>::to_vec)
+    }
+
+    /// Entry `i`'s bytes (stored, or the model's value in the entry's type, as
+    /// [`DataType::encode`] gives them) to `f`.
+    fn read_entry_with<R>(&self, i: usize, f: impl FnOnce(&[u8]) -> R) -> Result<R, u32> {
         let e = &self.entries[i];
         if e.access == Access::Wo {
             return Err(abort::WRITE_ONLY);
         }
         if let Some(d) = &e.data {
-            return Ok(d.clone());
+            return Ok(f(d));
         }
         let v = self.model.read_object(e.index, e.sub)?;
-        Ok(e.ty.encode(v))
+        let n = e.ty.size().unwrap_or(8);
+        Ok(f(&v.to_le_bytes()[..n]))
     }
 
     fn write_entry(&mut self, i: usize, data: &[u8]) -> Result<(), u32> {
@@ -633,13 +658,13 @@ impl CoeServer {
                 if data.len() > max {
                     return Err(abort::LENGTH);
                 }
-                self.entries[i].data = Some(data.to_vec());
+                store(&mut self.entries[i].data, data);
                 Ok(())
             }
             ty => {
                 let v = ty.decode(data).ok_or(abort::LENGTH)?;
                 if e.data.is_some() {
-                    self.entries[i].data = Some(data.to_vec());
+                    store(&mut self.entries[i].data, data);
                     return Ok(());
                 }
                 let (index, sub) = (e.index, e.sub);
