@@ -64,17 +64,19 @@ use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
+#[cfg(feature = "sim")]
+use crate::bus::can::VirtualCan;
 use crate::bus::can::{
     Bitrate, CanBus, CanError, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus,
-    VirtualCan,
 };
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{plan_layout, Direction, Pdo, Trigger, MAX_PDOS};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
 use crate::drive::catalogue::DriveDefinition;
+#[cfg(feature = "sim")]
 use crate::drive::model::DriveModel;
+#[cfg(feature = "sim")]
 use crate::sim::canopen::{CanopenSegment, EmulatedNode};
-use crate::sim::plant::Plant;
 use crate::units::Nanos;
 use load::BusLoad;
 use paced::{cycle_period_us, rpdo_event_timer_ms, Pacing};
@@ -208,21 +210,23 @@ impl Transport {
 
     /// Emulated: the nodes take what reached their endpoint and answer on it.
     fn run_nodes(&mut self, now: Nanos) {
-        let Some(Emulated {
+        #[cfg(feature = "sim")]
+        if let Some(Emulated {
             segment, endpoint, ..
         }) = self.emulated.as_mut()
-        else {
-            return;
-        };
-        let mut frames = Vec::new();
-        while let Ok(Some(f)) = endpoint.recv(Duration::ZERO) {
-            frames.push(f);
-        }
-        for f in segment.run(&frames, now) {
-            if endpoint.send(&f).is_err() {
-                tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
+        {
+            let mut frames = Vec::new();
+            while let Ok(Some(f)) = endpoint.recv(Duration::ZERO) {
+                frames.push(f);
+            }
+            for f in segment.run(&frames, now) {
+                if endpoint.send(&f).is_err() {
+                    tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
+                }
             }
         }
+        #[cfg(not(feature = "sim"))]
+        let _ = now; // no emulated nodes in this build
     }
 
     /// Take every frame that arrived; `wait` bounds the wait for the first one (not waited
@@ -291,6 +295,7 @@ impl Transport {
         wire: Option<Bitrate>,
         candump: Option<&std::path::Path>,
     ) -> Result<Transport, LinkError> {
+        #[cfg(feature = "sim")]
         if link == "canopen-emu" {
             let nodes = drives
                 .iter()
@@ -321,6 +326,13 @@ impl Transport {
                 )),
                 candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
             });
+        }
+        #[cfg(not(feature = "sim"))]
+        if link == "canopen-emu" {
+            let _ = (drives, ids, cycle, wire);
+            return Err(other(
+                "canopen-emu: this build of fieldprobe has no CANopen emulator (Cargo feature `sim`); canopen-udp and socketcan:IF need only `canopen` (and `socketcan`)".into(),
+            ));
         }
         let bus: Box<dyn CanBus> = if let Some(ifname) = link.strip_prefix("socketcan:") {
             Box::new(SocketCanBus::open(ifname).map_err(|e| other(e.to_string()))?)
@@ -473,6 +485,7 @@ fn sdo_failure(node: u8, index: u16, sub: u8) -> impl Fn((Option<SdoError>, Stri
 }
 
 /// Node ids 1 … n.
+#[cfg(feature = "sim")]
 fn default_ids(n: usize) -> Result<Vec<u8>, LinkError> {
     if n > 127 {
         return Err(other(format!(
@@ -525,12 +538,14 @@ fn plan_node(def: &DriveDefinition, node: u8) -> Result<(Vec<Pdo>, Vec<Pdo>), Li
 }
 
 impl CanopenLink {
+    #[cfg(feature = "sim")]
     /// `canopen-emu`: one emulated CiA 402 node per drive (node id = position + 1) and the
     /// master, in process, on a wire at 1 Mbit/s; brought to operational.
     pub fn emulated(drives: &[Arc<DriveDefinition>], cycle: Nanos) -> Result<Self, LinkError> {
         CanopenLink::emulated_at(drives, cycle, Bitrate::DEFAULT, None)
     }
 
+    #[cfg(feature = "sim")]
     /// [`emulated`](Self::emulated), logging every frame in candump -L format into `candump`.
     pub fn emulated_with(
         drives: &[Arc<DriveDefinition>],
@@ -540,6 +555,7 @@ impl CanopenLink {
         CanopenLink::emulated_at(drives, cycle, Bitrate::DEFAULT, candump)
     }
 
+    #[cfg(feature = "sim")]
     /// [`emulated_with`](Self::emulated_with) on a wire at `bitrate`.
     pub fn emulated_at(
         drives: &[Arc<DriveDefinition>],
@@ -551,6 +567,7 @@ impl CanopenLink {
         CanopenLink::on_link("canopen-emu", drives, &ids, cycle, bitrate, candump)
     }
 
+    #[cfg(feature = "sim")]
     /// `canopen-emu` with the given emulated nodes (e.g. object dictionaries from an EDS,
     /// [`EmulatedNode::from_eds`]): node *i* serves `drives[i]` at its own node id; brought to
     /// operational on virtual time like [`emulated`](Self::emulated), on a wire at 1 Mbit/s.
@@ -562,6 +579,7 @@ impl CanopenLink {
         CanopenLink::with_nodes_at(nodes, drives, cycle, Bitrate::DEFAULT)
     }
 
+    #[cfg(feature = "sim")]
     /// [`with_nodes`](Self::with_nodes) on a wire at `bitrate`.
     pub fn with_nodes_at(
         nodes: Vec<EmulatedNode>,
@@ -910,7 +928,7 @@ impl CanopenLink {
                     return Err(other(format!(
                         "node {node}: start-up: writing {index:#06x}:{sub:02x} {what} = {value} refused, \
                          abort code {code:#010x} ({})",
-                        crate::bus::ethercat::mailbox::abort_text(code)
+                        crate::bus::abort::abort_text(code)
                     )))
                 }
                 Err(e) => return Err(e),
@@ -1064,11 +1082,13 @@ impl CanopenLink {
         std::mem::take(&mut self.emergencies)
     }
 
+    #[cfg(feature = "sim")]
     /// The emulated nodes (`canopen-emu`).
     pub fn segment(&self) -> Option<&CanopenSegment> {
         self.bus.emulated.as_ref().map(|e| &e.segment)
     }
 
+    #[cfg(feature = "sim")]
     /// The emulated nodes, mutable (fault knobs: a node's 0x1017, model faults).
     pub fn segment_mut(&mut self) -> Option<&mut CanopenSegment> {
         self.bus.emulated.as_mut().map(|e| &mut e.segment)
@@ -1286,18 +1306,22 @@ impl Link for CanopenLink {
             .map(|_| ())
     }
 
-    fn plant(&self) -> Option<&Plant> {
+    #[cfg(feature = "sim")]
+    fn plant(&self) -> Option<&crate::sim::plant::Plant> {
         self.segment().map(|s| s.world().plant())
     }
 
-    fn plant_mut(&mut self) -> Option<&mut Plant> {
+    #[cfg(feature = "sim")]
+    fn plant_mut(&mut self) -> Option<&mut crate::sim::plant::Plant> {
         self.segment_mut().map(|s| s.world_mut().plant_mut())
     }
 
+    #[cfg(feature = "sim")]
     fn model(&self, device: usize) -> Option<&dyn DriveModel> {
         self.segment()?.nodes().get(device).map(|n| n.model())
     }
 
+    #[cfg(feature = "sim")]
     fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
         self.segment_mut()?
             .nodes_mut()

@@ -22,6 +22,7 @@ use crate::bus::can::{CanBus, CanFrame, Delivery, VirtualCan, VirtualEndpoint};
 use crate::bus::canopen::nmt;
 use crate::bus::canopen::sdo::{SdoClient, SdoError, SDO_TX_BASE};
 use crate::link::LinkError;
+#[cfg(feature = "sim")]
 use crate::sim::canopen::CanopenSegment;
 use crate::units::Nanos;
 
@@ -29,8 +30,12 @@ use crate::units::Nanos;
 /// answer"), as a real one is after 4 s of wall-clock time.
 pub const SDO_BOUND: Nanos = Nanos(4_000_000_000);
 
-/// The emulated nodes of `canopen-emu` on the other endpoint of the in-process bus.
+/// The emulated nodes of `canopen-emu` on the other endpoint of the in-process bus. Only a
+/// build with the emulators (feature `sim`) makes one; without it the transport's `emulated` is
+/// always `None` and the wire's functions here have nothing to run.
+#[cfg_attr(not(feature = "sim"), allow(dead_code))]
 pub(super) struct Emulated {
+    #[cfg(feature = "sim")]
     pub(super) segment: CanopenSegment,
     pub(super) endpoint: VirtualEndpoint,
     /// The bus with its wire: the link's frames take their wire time on virtual time. `None`
@@ -44,6 +49,7 @@ pub(super) struct Emulated {
     pub(super) trace: Option<Vec<Delivery>>,
 }
 
+#[cfg(feature = "sim")]
 impl Emulated {
     pub(super) fn new(
         segment: CanopenSegment,
@@ -99,8 +105,10 @@ impl Transport {
             if let Some(t) = em.trace.as_mut() {
                 t.push(d);
             }
+            #[cfg(feature = "sim")]
             let (segment, endpoint, syncs) =
                 (&mut em.segment, &mut em.endpoint, &mut em.sync_times);
+            #[cfg(feature = "sim")]
             while let Some((f, at)) = endpoint.recv_timed() {
                 let model_time = if is_sync(&f) {
                     syncs.pop_front().unwrap_or(at)
@@ -150,8 +158,12 @@ impl Transport {
         let Some(now) = em.wire.as_ref().map(VirtualCan::now) else {
             return;
         };
-        let mut out = Vec::new();
+        #[cfg_attr(not(feature = "sim"), allow(unused_mut))]
+        let mut out: Vec<CanFrame> = Vec::new();
+        #[cfg(feature = "sim")]
         em.segment.poll(now, &mut |f| out.push(f));
+        #[cfg(not(feature = "sim"))]
+        let _ = now;
         for f in out {
             if em.endpoint.send(&f).is_err() {
                 tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
@@ -235,6 +247,7 @@ impl Transport {
 }
 
 /// The SYNC (COB-ID 0x080, CiA 301).
+#[cfg(feature = "sim")]
 fn is_sync(f: &CanFrame) -> bool {
     !f.extended && !f.rtr && !f.error && f.id == u32::from(nmt::SYNC_COB)
 }
