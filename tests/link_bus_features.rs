@@ -8,8 +8,9 @@
 //! - `ethercat:v0` on one end of a veth pair in a private user + network namespace (re-run of
 //!   this test binary under `unshare -rn`, bounded in time): the link opens its raw socket and
 //!   its master puts EtherCAT frames on the wire, which a raw socket on the other end `v1`
-//!   receives; with nothing answering, the start-up fails with ethercrab's init error. Prints
-//!   `SKIP` where unprivileged namespaces or `ip` are missing.
+//!   receives; with nothing answering, the start-up fails with ethercrab's init error. Its
+//!   `--pcap` capture is stamped with the wall clock of the open (issue 18). Prints `SKIP`
+//!   where unprivileged namespaces or `ip` are missing.
 //! - `socketcan:IF` on an interface that does not exist: the SocketCAN error names the
 //!   interface, not a missing feature.
 //! - Without `sim`: `ethercat-emu` and `canopen-emu` say which feature they need.
@@ -24,6 +25,14 @@ use fieldprobe::units::Nanos;
 
 /// `link::open(link)` with no axes, 1 ms cycle, 1 Mbit/s.
 fn open(link: &str) -> Result<Box<dyn link::Link>, LinkError> {
+    open_with_pcap(link, None)
+}
+
+/// [`open`], capturing the EtherCAT frames into `pcap`.
+fn open_with_pcap(
+    link: &str,
+    pcap: Option<&std::path::Path>,
+) -> Result<Box<dyn link::Link>, LinkError> {
     let drives: Vec<Arc<DriveDefinition>> = Vec::new();
     link::open(LinkRequest {
         link,
@@ -32,7 +41,7 @@ fn open(link: &str) -> Result<Box<dyn link::Link>, LinkError> {
         node_ids: &[],
         cycle: Nanos::from_micros(1000),
         can_bitrate: 1_000_000,
-        pcap: None,
+        pcap,
         candump: None,
         #[cfg(feature = "ethercat")]
         terminals: Vec::new(),
@@ -40,7 +49,11 @@ fn open(link: &str) -> Result<Box<dyn link::Link>, LinkError> {
 }
 
 fn open_err(link: &str) -> String {
-    match open(link) {
+    open_err_with_pcap(link, None)
+}
+
+fn open_err_with_pcap(link: &str, pcap: Option<&std::path::Path>) -> String {
+    match open_with_pcap(link, pcap) {
         Ok(_) => panic!("--link {link} opened"),
         Err(e) => e.to_string(),
     }
@@ -120,7 +133,17 @@ fn ethercat_iface_sends_frames_on_a_veth_pair() {
     };
     sh("ip link add v0 type veth peer name v1 && ip link set v0 up && ip link set v1 up");
     let mut peer = fieldprobe::bus::ethercat::raw::RawPort::open("v1").expect("raw socket on v1");
-    let e = open_err("ethercat:v0");
+    let dir = tempfile::tempdir().unwrap();
+    let pcap = dir.path().join("v0.pcap");
+    let unix_ns = || {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as u64
+    };
+    let before = unix_ns();
+    let e = open_err_with_pcap("ethercat:v0", Some(&pcap));
+    let after = unix_ns();
     // Nobody answers: the master's start-up (ethercrab init_single_group) fails on the wire,
     // after the socket opened.
     assert!(e.contains("EtherCAT init"), "{e}");
@@ -133,6 +156,18 @@ fn ethercat_iface_sends_frames_on_a_veth_pair() {
         frames += 1;
     }
     assert!(frames >= 1, "no EtherCAT frame reached v1 ({e})");
+    // The `--pcap` capture of a real link is stamped with the wall clock (issue 18): the
+    // first record of the classic pcap file (ns magic 0xa1b23c4d, little-endian; record
+    // header ts_sec, ts_nsec after the 24-byte global header) lies within the open.
+    let b = std::fs::read(&pcap).unwrap();
+    assert!(b.len() > 40, "empty capture");
+    let u32_at = |at: usize| u64::from(u32::from_le_bytes(b[at..at + 4].try_into().unwrap()));
+    assert_eq!(u32_at(0), 0xa1b2_3c4d);
+    let first = u32_at(24) * 1_000_000_000 + u32_at(28);
+    assert!(
+        (before..=after).contains(&first),
+        "first frame at {first} ns, the open ran from {before} to {after} ns"
+    );
     println!("{frames} EtherCAT frames from ethercat:v0 reached v1; open failed with: {e}");
     println!("INNER OK");
 }

@@ -72,6 +72,7 @@ use crate::bus::can::{
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{plan_layout, Direction, Pdo, Trigger, MAX_PDOS};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
+use crate::bus::capture::CaptureClock;
 use crate::drive::catalogue::DriveDefinition;
 #[cfg(feature = "sim")]
 use crate::drive::model::DriveModel;
@@ -163,10 +164,20 @@ struct Transport {
 /// silent: the first error is kept, later frames are not written, and
 /// [`Transport::finish_capture`] returns it at the end of the command (exit 2, after the axes
 /// stopped as usual).
+///
+/// Timestamps are the wall-clock time of the run ([`CaptureClock`]): the wall clock when the
+/// log opened plus, on `canopen-emu` (virtual time), the bus clock of the wire since then
+/// ([`wire`]: a frame the master sends at the bus time it is handed to the bus, a frame it
+/// receives at the end of its transmission), so the log shows the emulated bus's true SYNC
+/// spacing; elsewhere (a bus that leaves the process, and the nodes of `can scan` / `can dump`
+/// on the emulated bus, which run on the wall clock) the monotonic time since then.
 struct Candump {
     writer: CandumpWriter<std::io::BufWriter<std::fs::File>>,
     path: std::path::PathBuf,
     failed: Option<String>,
+    clock: CaptureClock,
+    /// The bus clock of the wire when the log opened (`canopen-emu`).
+    wire_at_open: Option<Nanos>,
 }
 
 impl Candump {
@@ -317,6 +328,7 @@ impl Transport {
             let master = hub.endpoint();
             let node_side = hub.endpoint();
             let iface = master.log_interface();
+            let wire_now = wire.map(|_| hub.now());
             return Ok(Transport {
                 bus: Box::new(master),
                 emulated: Some(Emulated::new(
@@ -324,7 +336,9 @@ impl Transport {
                     node_side,
                     wire.map(|_| hub),
                 )),
-                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+                candump: candump
+                    .map(|p| open_candump(p, &iface, wire_now))
+                    .transpose()?,
             });
         }
         #[cfg(not(feature = "sim"))]
@@ -349,7 +363,7 @@ impl Transport {
         Ok(Transport {
             bus,
             emulated: None,
-            candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+            candump: candump.map(|p| open_candump(p, &iface, None)).transpose()?,
         })
     }
 
@@ -442,8 +456,13 @@ impl Transport {
     }
 
     fn log(&mut self, f: &CanFrame) {
+        let wire = self.wire_clock();
         if let Some(c) = self.candump.as_mut().filter(|c| c.failed.is_none()) {
-            if let Err(e) = c.writer.write_frame_now(f) {
+            let ns = match (wire, c.wire_at_open) {
+                (Some(now), Some(open)) => c.clock.at_ns(now.0.saturating_sub(open.0)),
+                _ => c.clock.now_ns(),
+            };
+            if let Err(e) = c.writer.write_frame(Duration::from_nanos(ns), f) {
                 c.fail(&e);
             }
         }
@@ -456,13 +475,21 @@ const RECV_POLL: Duration = Duration::from_micros(50);
 /// Longest wait for one SDO answer poll.
 const SDO_POLL: Duration = Duration::from_millis(5);
 
-fn open_candump(path: &std::path::Path, iface: &str) -> Result<Candump, LinkError> {
+/// Open the `--candump` log `path` for a bus whose `candump -L` name is `iface`; `wire` is the
+/// bus clock of the wire now (`canopen-emu`), `None` elsewhere (see [`Candump`]).
+fn open_candump(
+    path: &std::path::Path,
+    iface: &str,
+    wire: Option<Nanos>,
+) -> Result<Candump, LinkError> {
     let f = std::fs::File::create(path)
         .map_err(|e| other(format!("--candump {}: {e}", path.display())))?;
     Ok(Candump {
         writer: CandumpWriter::new(std::io::BufWriter::new(f), iface),
         path: path.to_path_buf(),
         failed: None,
+        clock: CaptureClock::start(),
+        wire_at_open: wire,
     })
 }
 
@@ -635,7 +662,7 @@ impl CanopenLink {
             Transport {
                 bus,
                 emulated: None,
-                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+                candump: candump.map(|p| open_candump(p, &iface, None)).transpose()?,
             },
             drives,
             ids,

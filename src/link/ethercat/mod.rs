@@ -421,6 +421,8 @@ impl EthercatLink {
         link.watchdog_ns = link.read_watchdog();
         link.reach_op()?;
         link.check_images()?;
+        #[cfg(feature = "sim")]
+        link.wire.start_cycles();
         Ok(link)
     }
 
@@ -1372,6 +1374,8 @@ impl Link for EthercatLink {
         if self.clock.is_some() {
             return self.paced_exchange(now, images);
         }
+        #[cfg(feature = "sim")]
+        self.wire.at_cycle(now);
         self.cycle_frame(now)?;
         #[cfg(feature = "sim")]
         if let Some(seg) = self.wire.segment_mut() {

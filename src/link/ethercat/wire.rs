@@ -13,6 +13,7 @@ use ethercrab::{MainDevice, MainDeviceConfig, PduRx, PduTx, Timeouts};
 
 use super::datagrams::DatagramLog;
 use super::{EthercatSpec, Storage, Wire};
+use crate::bus::capture::CaptureClock;
 use crate::bus::ethercat::mailbox::MailboxError;
 use crate::bus::ethercat::pcap::{PcapWriter, TimestampResolution};
 use crate::bus::ethercat::raw::RawPort;
@@ -24,19 +25,28 @@ use crate::sim::esc::segment::Segment;
 /// fails (a full disk, `/dev/full`) is not silent: the first error is kept, later frames are
 /// not written, and [`Tap::finish`] returns it at the end of the run, so the command exits 2
 /// after the axes stopped as usual.
+///
+/// Timestamps are the wall-clock time of the run ([`CaptureClock`]): on an interface the
+/// monotonic time since the capture opened, on the emulated wire its bus time
+/// ([`WireEnd::bus_time`]), so the capture shows the emulated cycle's true spacing.
 pub(super) struct Tap {
     writer: PcapWriter<std::io::BufWriter<std::fs::File>>,
-    t0: Instant,
+    clock: CaptureClock,
     path: std::path::PathBuf,
     failed: Option<String>,
 }
 
 impl Tap {
-    fn record(&mut self, frame: &[u8]) {
+    /// Record `frame` at `virtual_ns` of the emulated wire's bus time, or (`None`, an
+    /// interface) now.
+    fn record(&mut self, frame: &[u8], virtual_ns: Option<u64>) {
         if self.failed.is_some() {
             return;
         }
-        let t = self.t0.elapsed().as_nanos() as u64;
+        let t = match virtual_ns {
+            Some(v) => self.clock.at_ns(v),
+            None => self.clock.now_ns(),
+        };
         if let Err(e) = self.writer.write_packet(t, frame) {
             self.fail(&e);
         }
@@ -78,6 +88,13 @@ pub(super) struct WireEnd {
     lost: bool,
     /// Emulated wire: frames the current [`drive`] call has put through the segment.
     frames: u64,
+    /// Emulated wire: its bus time, ns since the wire was made (the `--pcap` timestamps; see
+    /// [`WireEnd::bus_time`]).
+    #[cfg(feature = "sim")]
+    bus_ns: u64,
+    /// Emulated wire: the bus time of the machine's time 0 ([`WireEnd::start_cycles`]).
+    #[cfg(feature = "sim")]
+    epoch_ns: u64,
     /// The logical datagrams of the current process-data cycle, out and back.
     pub(super) log: DatagramLog,
     /// The buffer of the frame being sent.
@@ -105,6 +122,35 @@ impl WireEnd {
         self.segment.as_mut()
     }
 
+    /// The emulated wire's bus time, ns since the wire was made; `None` on an interface.
+    ///
+    /// The in-process wire has no clock of its own (it runs on virtual time): every frame
+    /// takes its wire time at 100 Mbit/s ([`frame_wire_ns`](super::cycle_plan::frame_wire_ns); the reply is stamped when the
+    /// frame has passed), and the frames of the exchange at machine time `now` start at the
+    /// bus time of the machine's time 0 ([`start_cycles`](Self::start_cycles)) + `now`
+    /// ([`at_cycle`](Self::at_cycle)), or later if the bus is still busy. The start-up's
+    /// frames thus follow each other back to back, the cycles' at the machine's cycle time.
+    fn bus_time(&self) -> Option<u64> {
+        #[cfg(feature = "sim")]
+        if self.segment.is_some() {
+            return Some(self.bus_ns);
+        }
+        None
+    }
+
+    /// Emulated wire: the machine's time 0 is now (the end of the start-up).
+    #[cfg(feature = "sim")]
+    pub(super) fn start_cycles(&mut self) {
+        self.epoch_ns = self.bus_ns;
+    }
+
+    /// Emulated wire: the frames of the exchange at machine time `now` go out now (see
+    /// [`bus_time`](Self::bus_time)).
+    #[cfg(feature = "sim")]
+    pub(super) fn at_cycle(&mut self, now: crate::units::Nanos) {
+        self.bus_ns = self.bus_ns.max(self.epoch_ns.saturating_add(now.0));
+    }
+
     /// See [`Tap::finish`]; `Ok` without `--pcap`.
     pub(super) fn finish_capture(&mut self) -> Result<(), String> {
         self.tap.as_mut().map_or(Ok(()), Tap::finish)
@@ -124,8 +170,9 @@ impl WireEnd {
                 self.buf = buf;
                 continue;
             }
+            let at = self.bus_time();
             if let Some(tap) = self.tap.as_mut() {
-                tap.record(&buf);
+                tap.record(&buf, at);
             }
             self.log.record(&buf, false);
             #[cfg(feature = "sim")]
@@ -133,9 +180,12 @@ impl WireEnd {
                 let now = self.t0.elapsed().as_nanos() as u64;
                 // A dropped (fault knob) or invalid frame is lost on the wire.
                 self.frames += 1;
+                self.bus_ns = self
+                    .bus_ns
+                    .saturating_add(super::cycle_plan::frame_wire_ns(buf.len()));
                 if let Ok(true) = seg.process_frame(&mut buf, now) {
                     if let Some(tap) = self.tap.as_mut() {
-                        tap.record(&buf);
+                        tap.record(&buf, Some(self.bus_ns));
                     }
                     self.log.record(&buf, true);
                     let _ = self.rx.receive_frame(&buf);
@@ -161,7 +211,7 @@ impl WireEnd {
         };
         if let Some(frame) = port.try_receive() {
             if let Some(tap) = self.tap.as_mut() {
-                tap.record(&frame);
+                tap.record(&frame, None);
             }
             self.log.record(&frame, true);
             let _ = self.rx.receive_frame(&frame);
@@ -292,6 +342,10 @@ pub(super) fn connect(
         t0: Instant::now(),
         lost: false,
         frames: 0,
+        #[cfg(feature = "sim")]
+        bus_ns: 0,
+        #[cfg(feature = "sim")]
+        epoch_ns: 0,
         log: DatagramLog::default(),
         buf: Vec::with_capacity(crate::bus::ethercat::wire::MAX_ETHERNET_FRAME),
     };
@@ -334,7 +388,7 @@ pub(super) fn open_tap(path: &Path) -> Result<Tap, LinkError> {
         .map_err(|e| LinkError::Other(format!("--pcap {}: {e}", path.display())))?;
     Ok(Tap {
         writer,
-        t0: Instant::now(),
+        clock: CaptureClock::start(),
         path: path.to_path_buf(),
         failed: None,
     })
