@@ -20,7 +20,7 @@
 //! | you have | you use | example |
 //! |---|---|---|
 //! | your own EtherCAT master: an ethercrab `MainDevice` and `SubDeviceGroup` | [`Ds402Adapter`](drive::ds402::Ds402Adapter) reads and writes your PDI slices (CiA 402 power states, CSP, touch probe); `bus::ethercat::mailbox::CoeClient` does SDOs on your `MainDevice` (segmented transfers, emergencies kept) | `examples/ethercat_touch_probe.rs` (features `sim`) |
-//! | a CAN interface | `link::canopen::CanopenLink::open` on a `bus::can::CanBus` you open (`SocketCanBus`, `VirtualCan`, python-can UDP): fieldprobe's CiA 301 master (NMT, PDO remapping, SYNC, heartbeat, SDO), the same adapter on its process images | `examples/canopen_touch_probe.rs` (features `sim`; SocketCAN: `socketcan`) |
+//! | a CAN interface | `link::canopen::CanopenLink::open` on a `bus::can::CanBus` you open (`SocketCanBus`, `VirtualCan`, python-can UDP): fieldprobe's CiA 301 master (NMT, PDO remapping, SYNC, heartbeat, SDO), the same adapter on its process images | `examples/canopen_touch_probe.rs` (features `sim` for its emulated nodes; your own bus needs `canopen`, SocketCAN `socketcan`) |
 //! | your own interpolator and drive layer | [`MeasurementRun`](core::measure::run::MeasurementRun) (stop request, `V.A.MERF`, missing-signal rules), [`results::compute`](core::measure::results::compute) (`V.A.MESS`, `MEAS.ACS/PCS.VALUE`, `MOFFS`) with [`Frames`](core::frames::Frames), [`SoftLimits`](core::monitor::SoftLimits) | `examples/measurement_core.rs` (no feature) |
 //!
 //! ```text
@@ -61,18 +61,20 @@
 //! | feature | adds | dependencies |
 //! |---|---|---|
 //! | (none) | the core: [`units`], [`params`], [`messages`], [`core`], [`drive`], [`axis`], [`channel`], [`nc`], [`machine`] and [`link`] with the in-memory `sim` link | thiserror, toml_edit, serde, tracing, nalgebra; nix, thread-priority, libc on Linux |
-//! | `ethercat` | `bus::ethercat`, `esi`, the `ethercrab` re-export | ethercrab, futures-lite, roxmltree |
-//! | `canopen` | `bus::can` (virtual bus, python-can UDP, candump, fault injection), `bus::canopen` | socket2 |
-//! | `socketcan` | `canopen` + the Linux SocketCAN bus (without it `SocketCanBus::open` reports the feature missing) | tokio, socketcan |
-//! | `sim` | `ethercat` + `canopen` + the emulators (`sim::esc`, `sim::canopen`) and fieldprobe's bus links `link::ethercat`, `link::canopen`, which serve the emulated and the real bus alike | pnet_datalink |
+//! | `ethercat` | `bus::ethercat`, `esi`, the `ethercrab` re-export, fieldprobe's EtherCAT link `link::ethercat` on a network interface (`ethercat:IFACE`, raw packet socket) | ethercrab, futures-lite, roxmltree, pnet_datalink |
+//! | `canopen` | `bus::can` (virtual bus, python-can UDP, candump, fault injection), `bus::canopen`, fieldprobe's CANopen link `link::canopen` (`canopen-udp`) | socket2 |
+//! | `socketcan` | `canopen` + the Linux SocketCAN bus and the `socketcan:IF` link (without it `SocketCanBus::open` reports the feature missing) | tokio, socketcan |
+//! | `sim` | `ethercat` + `canopen` + the emulators (`sim::esc`, `sim::canopen`) and the in-process links on them (`ethercat-emu`, `canopen-emu`) | — |
 //! | `cli` | everything + the `fieldprobe` binary | clap, plotters, anyhow, tracing-subscriber, serde_json |
 //!
 //! The default is every feature. A drive layer that only wants the CiA 402 adapter and the
 //! measurement core uses `default-features = false`; with its own ethercrab master and
-//! fieldprobe's CoE client, `features = ["ethercat"]`; with fieldprobe's CANopen master,
-//! `features = ["sim"]` (plus `socketcan` on Linux). CI builds `--no-default-features`,
-//! `ethercat`, `canopen`, `canopen,socketcan` and `sim` and runs the core's tests without
-//! features.
+//! fieldprobe's CoE client, or with fieldprobe's EtherCAT link on a network interface,
+//! `features = ["ethercat"]`; with fieldprobe's CANopen master, `features = ["canopen"]` (plus
+//! `socketcan` on Linux). The emulators (`sim`) are only needed to run against emulated buses.
+//! CI builds `--no-default-features`, `ethercat`, `canopen`, `canopen,socketcan` and `sim`, runs
+//! the core's tests without features, and opens `ethercat:IFACE` and `socketcan:IF` through
+//! [`link::open`] in the `ethercat` and `canopen,socketcan` builds.
 //!
 //! # Sources
 //!

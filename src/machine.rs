@@ -414,7 +414,7 @@ impl Machine {
             meas: channel_meas_config(&cfg.channel),
         };
         // P-AXIS-00777 > 1000: warning 110757 at controller start (FCT-C4 §8.2.2).
-        #[allow(unused_mut)] // the CAN bus-load warning is pushed with feature `sim`
+        #[allow(unused_mut)] // the CAN bus-load warning is pushed with feature `canopen`
         let mut startup: Vec<CncMessage> = ch_cfg
             .axes
             .iter()
@@ -448,7 +448,7 @@ impl Machine {
         // The bus load of the cycle (docs/canopen.md "Bus load"): the CANopen link refuses it
         // above 100 % (bad input: the message names the machine file), warning 900070 above
         // 70 %.
-        #[cfg(feature = "sim")]
+        #[cfg(feature = "canopen")]
         let check = if is_can {
             let bitrate = crate::bus::can::Bitrate::new(cfg.can_bitrate).ok_or_else(|| {
                 MachineError::Config(format!("{}: [can] bitrate = 0", cfg.source))
@@ -459,7 +459,7 @@ impl Machine {
         } else {
             None
         };
-        #[cfg(not(feature = "sim"))]
+        #[cfg(not(feature = "canopen"))]
         let check: Option<Result<Option<String>, String>> = {
             let _ = is_can;
             None
@@ -473,7 +473,7 @@ impl Machine {
             can_bitrate: cfg.can_bitrate,
             pcap: choice.pcap.as_deref(),
             candump: choice.candump.as_deref(),
-            #[cfg(feature = "sim")]
+            #[cfg(feature = "ethercat")]
             terminals: ethercat_terminals(cfg)?,
         })
         .map_err(|e| match &check {
@@ -1304,7 +1304,7 @@ fn check_probing_input(
 
 /// The machine's `[[terminal]]` tables with their ESI files loaded (relative paths from the
 /// machine file's directory).
-#[cfg(feature = "sim")]
+#[cfg(feature = "ethercat")]
 fn ethercat_terminals(
     cfg: &MachineConfig,
 ) -> Result<Vec<crate::link::ethercat::terminals::TerminalSpec>, MachineError> {

@@ -7,7 +7,7 @@
 //!   [`ProbeEvent`], [`ProbeState`]);
 //! - the transport seam: [`Link`], [`ProcessImage`], [`LinkError`], and with the buses
 //!   `CoeClient` (feature `ethercat`), `CanBus`, `VirtualCan`, `SocketCanBus` (feature
-//!   `canopen`), `CanopenLink` (feature `sim`);
+//!   `canopen`), `CanopenLink` (feature `canopen`);
 //! - the core: [`MeasurementRun`], [`Latch`], [`RunStep`], [`MeasType`],
 //!   [`MeasurementOutcome`], [`AxisResult`], [`MeasuringBlock`], [`Frames`], [`SoftLimits`],
 //!   [`AxisLimitConfig`], [`Violation`], [`CncMessage`].
@@ -33,5 +33,5 @@ pub use crate::bus::ethercat::mailbox::CoeClient;
 #[cfg(feature = "canopen")]
 pub use crate::bus::can::{CanBus, SocketCanBus, VirtualCan};
 
-#[cfg(feature = "sim")]
+#[cfg(feature = "canopen")]
 pub use crate::link::canopen::CanopenLink;

@@ -11,7 +11,7 @@
 //! Bounds for a loaded machine (issue 15: this test once failed in a busy CI run with "process
 //! data exchange lost ... timeout: PDU"). Both ends are ordinary processes crossing a real
 //! kernel interface; when the machine is busy either may be descheduled for tens of ms. The
-//! link's real-interface timeouts (`src/link/ethercat.rs`: PDU 30 ms, state transition 5 s,
+//! link's real-interface timeouts (`src/link/ethercat/wire.rs`: PDU 30 ms, state transition 5 s,
 //! mailbox 2 s, SII 100 ms) stay as a user gets them; the run allows `max_lost_cycles =`
 //! [`MAX_LOST`] (50 consecutive lost exchanges = 50 ms at the default 1 ms cycle, instead of
 //! 3) so that one late frame (a 30 ms PDU timeout is one lost exchange) does not end it. That

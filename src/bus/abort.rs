@@ -1,6 +1,7 @@
-//! CiA 301 SDO abort codes (CiA 301, "Protocol SDO abort transfer", table of SDO abort codes),
-//! shared by the CANopen SDO client and server and the CoE mailbox client: CoE (CANopen over
-//! EtherCAT, ETG.1000.6 SDO services) carries the same codes.
+//! CiA 301 SDO abort codes (CiA 301, "Protocol SDO abort transfer", table of SDO abort codes)
+//! and emergency error codes (CiA 301 Table 21), shared by the CANopen SDO client and server
+//! and the CoE mailbox client: CoE (CANopen over EtherCAT, ETG.1000.6 SDO and emergency
+//! services) carries the same codes.
 
 /// CiA 301 SDO abort code in words.
 pub fn abort_text(code: u32) -> &'static str {
@@ -37,5 +38,37 @@ pub fn abort_text(code: u32) -> &'static str {
         0x0800_0023 => "object dictionary not present or dynamic generation failed",
         0x0800_0024 => "no data available",
         _ => "unknown abort code",
+    }
+}
+
+/// An emergency error code in words (CiA 301 Table 21 classes, CiA 402 codes the drives use);
+/// the same codes travel in CoE emergencies over EtherCAT.
+pub fn emergency_text(code: u16) -> &'static str {
+    match code {
+        0x0000 => "error reset or no error",
+        0x8611 => "following error (CiA 402)",
+        0x8612 => "reference limit (CiA 402)",
+        0x8100 => "communication",
+        0x8110 => "CAN overrun (objects lost)",
+        0x8120 => "CAN in error passive mode",
+        0x8130 => "life guard or heartbeat error",
+        0x8140 => "recovered from bus off",
+        0x8210 => "PDO not processed due to length error",
+        0x8220 => "PDO length exceeded",
+        0x3220 => "DC link under-voltage",
+        c => match c & 0xF000 {
+            0x1000 => "generic error",
+            0x2000 => "current",
+            0x3000 => "voltage",
+            0x4000 => "temperature",
+            0x5000 => "device hardware",
+            0x6000 => "device software",
+            0x7000 => "additional modules",
+            0x8000 => "monitoring",
+            0x9000 => "external error",
+            0xF000 => "additional functions",
+            0xFF00 => "device specific",
+            _ => "unknown error code",
+        },
     }
 }

@@ -4,15 +4,19 @@
 //! | link | type | feature |
 //! |---|---|---|
 //! | `sim` | [`sim::SimLink`]: drive models in memory, images laid out as the PDO mapping | — |
-//! | `ethercat-emu`, `ethercat:IFACE` | `ethercat::EthercatLink`: ethercrab MainDevice, emulated segment in-process or a raw socket | `sim` |
-//! | `canopen-emu`, `canopen-udp[:GROUP:PORT]`, `socketcan:IF` | `canopen::CanopenLink`: fieldprobe's CiA 301 master on a CAN bus | `sim` (`socketcan:IF` also `socketcan`) |
+//! | `ethercat:IFACE` | `ethercat::EthercatLink`: ethercrab MainDevice on a raw packet socket | `ethercat` |
+//! | `ethercat-emu` | `ethercat::EthercatLink` on the emulated segment, in-process | `sim` |
+//! | `canopen-udp[:GROUP:PORT]` | `canopen::CanopenLink`: fieldprobe's CiA 301 master on a CAN bus | `canopen` |
+//! | `socketcan:IF` | `canopen::CanopenLink` on a Linux SocketCAN interface | `socketcan` |
+//! | `canopen-emu` | `canopen::CanopenLink` with emulated nodes on an in-process virtual bus | `sim` |
 //!
-//! The EtherCAT and CANopen links are built with `sim` because each serves its emulated bus as
-//! well as the real one (and the raw-socket wire of `ethercat:IFACE` is the emulator's).
+//! The links that leave the process need only their bus's feature, not the emulators: a drive
+//! layer built with `default-features = false, features = ["ethercat"]` opens `ethercat:IFACE`
+//! through [`open`], one with `features = ["socketcan"]` opens `socketcan:IF`.
 
-#[cfg(feature = "sim")]
+#[cfg(feature = "canopen")]
 pub mod canopen;
-#[cfg(feature = "sim")]
+#[cfg(feature = "ethercat")]
 pub mod ethercat;
 pub mod sim;
 
@@ -314,7 +318,7 @@ pub struct LinkRequest<'a> {
     /// Log every CAN frame into this file, candump -L format (CAN links).
     pub candump: Option<&'a std::path::Path>,
     /// EtherCAT SubDevices that are not axes (I/O terminals), in ring order after the drives.
-    #[cfg(feature = "sim")]
+    #[cfg(feature = "ethercat")]
     pub terminals: Vec<ethercat::terminals::TerminalSpec>,
 }
 
@@ -331,7 +335,7 @@ pub fn open(req: LinkRequest<'_>) -> Result<Box<dyn Link>, LinkError> {
     let can =
         link == "canopen-emu" || link.starts_with("canopen-udp") || link.starts_with("socketcan:");
     if can {
-        #[cfg(feature = "sim")]
+        #[cfg(feature = "canopen")]
         {
             let bitrate = crate::bus::can::Bitrate::new(req.can_bitrate).ok_or_else(|| {
                 LinkError::Other(format!("CAN bit rate {} bit/s", req.can_bitrate))
@@ -345,13 +349,20 @@ pub fn open(req: LinkRequest<'_>) -> Result<Box<dyn Link>, LinkError> {
                 req.candump,
             )?));
         }
-        #[cfg(not(feature = "sim"))]
-        return Err(LinkError::Other(
-            "this build of fieldprobe has no CANopen link (Cargo feature `sim`)".into(),
-        ));
+        #[cfg(not(feature = "canopen"))]
+        return Err(LinkError::Other(format!(
+            "{link}: this build of fieldprobe has no CANopen link (Cargo feature `canopen`{})",
+            if link.starts_with("socketcan:") {
+                ", with `socketcan` for SocketCAN"
+            } else if link == "canopen-emu" {
+                ", with `sim` for the emulated nodes"
+            } else {
+                ""
+            }
+        )));
     }
     if link == "ethercat-emu" || link.starts_with("ethercat:") {
-        #[cfg(feature = "sim")]
+        #[cfg(feature = "ethercat")]
         if let Some(wire) = ethercat::Wire::from_link(link) {
             let spec = ethercat::EthercatSpec {
                 drives: req.drives.to_vec(),
@@ -362,10 +373,15 @@ pub fn open(req: LinkRequest<'_>) -> Result<Box<dyn Link>, LinkError> {
             };
             return Ok(Box::new(ethercat::EthercatLink::open(&wire, &spec)?));
         }
-        #[cfg(not(feature = "sim"))]
-        return Err(LinkError::Other(
-            "this build of fieldprobe has no EtherCAT link (Cargo feature `sim`)".into(),
-        ));
+        #[cfg(not(feature = "ethercat"))]
+        return Err(LinkError::Other(format!(
+            "{link}: this build of fieldprobe has no EtherCAT link (Cargo feature `ethercat`{})",
+            if link == "ethercat-emu" {
+                ", with `sim` for the emulated segment"
+            } else {
+                ""
+            }
+        )));
     }
     Err(LinkError::Other(format!(
         "unknown link; available: {LINKS}"
@@ -385,7 +401,7 @@ impl<'a> dyn Link + 'a {
 /// (size in bytes, signed) of object `index:sub` for drive `def`: its function / IDN tables,
 /// then the CiA 402 object table, then the CiA 301 communication objects (0x1001, 0x100C,
 /// 0x1017, PDO parameters); 4 bytes unsigned otherwise.
-#[cfg_attr(not(feature = "sim"), allow(dead_code))] // used by the bus links
+#[cfg_attr(not(any(feature = "ethercat", feature = "canopen")), allow(dead_code))] // used by the bus links
 pub(crate) fn object_type(
     def: &crate::drive::catalogue::DriveDefinition,
     index: u16,
@@ -410,7 +426,7 @@ pub(crate) fn object_type(
 }
 
 /// Little-endian bytes as a number (sign-extended when `signed`).
-#[cfg_attr(not(feature = "sim"), allow(dead_code))] // used by the bus links
+#[cfg_attr(not(any(feature = "ethercat", feature = "canopen")), allow(dead_code))] // used by the bus links
 pub(crate) fn decode_le(bytes: &[u8], signed: bool) -> i64 {
     let n = bytes.len().min(8);
     let mut b = [0u8; 8];

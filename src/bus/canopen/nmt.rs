@@ -6,6 +6,11 @@ use crate::bus::can::CanFrame;
 pub const NMT_COB: u16 = 0x000;
 /// COB-ID of SYNC.
 pub const SYNC_COB: u16 = 0x080;
+/// fieldprobe's tolerance for a missing SYNC, in communication cycle periods (0x1006): the
+/// emulated nodes' SYNC watch fires after more than this many periods without a SYNC, and the
+/// master configures its RPDO event-timers (deadline monitoring) to as many cycles. CiA 301
+/// leaves the tolerance to the device.
+pub const SYNC_TIMEOUT_PERIODS: u64 = 5;
 /// Base COB-ID of EMCY (+ node).
 pub const EMCY_BASE: u16 = 0x080;
 /// Base COB-ID of heartbeat / boot-up (+ node).
@@ -188,34 +193,6 @@ impl Emcy {
     }
 }
 
-/// An emergency error code in words (CiA 301 Table 21 classes, CiA 402 codes the drives use);
-/// the same codes travel in CoE emergencies over EtherCAT.
-pub fn emergency_text(code: u16) -> &'static str {
-    match code {
-        0x0000 => "error reset or no error",
-        0x8611 => "following error (CiA 402)",
-        0x8612 => "reference limit (CiA 402)",
-        0x8100 => "communication",
-        0x8110 => "CAN overrun (objects lost)",
-        0x8120 => "CAN in error passive mode",
-        0x8130 => "life guard or heartbeat error",
-        0x8140 => "recovered from bus off",
-        0x8210 => "PDO not processed due to length error",
-        0x8220 => "PDO length exceeded",
-        0x3220 => "DC link under-voltage",
-        c => match c & 0xF000 {
-            0x1000 => "generic error",
-            0x2000 => "current",
-            0x3000 => "voltage",
-            0x4000 => "temperature",
-            0x5000 => "device hardware",
-            0x6000 => "device software",
-            0x7000 => "additional modules",
-            0x8000 => "monitoring",
-            0x9000 => "external error",
-            0xF000 => "additional functions",
-            0xFF00 => "device specific",
-            _ => "unknown error code",
-        },
-    }
-}
+/// An emergency error code in words; defined in [`crate::bus::abort`] (the same codes travel in
+/// CoE emergencies over EtherCAT).
+pub use crate::bus::abort::emergency_text;

@@ -65,17 +65,20 @@ use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
+#[cfg(feature = "sim")]
+use crate::bus::can::VirtualCan;
 use crate::bus::can::{
     Bitrate, CanBus, CanError, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus,
-    VirtualCan,
 };
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{plan_layout, Direction, Pdo, Trigger, MAX_PDOS};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
+use crate::bus::capture::CaptureClock;
 use crate::drive::catalogue::DriveDefinition;
+#[cfg(feature = "sim")]
 use crate::drive::model::DriveModel;
+#[cfg(feature = "sim")]
 use crate::sim::canopen::{CanopenSegment, EmulatedNode};
-use crate::sim::plant::Plant;
 use crate::units::Nanos;
 use load::BusLoad;
 use paced::{cycle_period_us, rpdo_event_timer_ms, Pacing};
@@ -168,10 +171,20 @@ struct Transport {
 /// silent: the first error is kept, later frames are not written, and
 /// [`Transport::finish_capture`] returns it at the end of the command (exit 2, after the axes
 /// stopped as usual).
+///
+/// Timestamps are the wall-clock time of the run ([`CaptureClock`]): the wall clock when the
+/// log opened plus, on `canopen-emu` (virtual time), the bus clock of the wire since then
+/// ([`wire`]: a frame the master sends at the bus time it is handed to the bus, a frame it
+/// receives at the end of its transmission), so the log shows the emulated bus's true SYNC
+/// spacing — `run` and the commissioning commands (`can scan`, `can dump`, `sdo … --node`)
+/// alike; on a bus that leaves the process the monotonic time since then.
 struct Candump {
     writer: CandumpWriter<std::io::BufWriter<std::fs::File>>,
     path: std::path::PathBuf,
     failed: Option<String>,
+    clock: CaptureClock,
+    /// The bus clock of the wire when the log opened (`canopen-emu`).
+    wire_at_open: Option<Nanos>,
 }
 
 impl Candump {
@@ -280,6 +293,7 @@ impl Transport {
         bitrate: Bitrate,
         candump: Option<&std::path::Path>,
     ) -> Result<Transport, LinkError> {
+        #[cfg(feature = "sim")]
         if link == "canopen-emu" {
             let nodes = drives
                 .iter()
@@ -301,6 +315,7 @@ impl Transport {
             let master = hub.endpoint();
             let node_side = hub.endpoint();
             let iface = master.log_interface();
+            let wire_now = Some(hub.now());
             return Ok(Transport {
                 bus: Box::new(master),
                 emulated: Some(Emulated::new(
@@ -308,8 +323,17 @@ impl Transport {
                     node_side,
                     hub,
                 )),
-                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+                candump: candump
+                    .map(|p| open_candump(p, &iface, wire_now))
+                    .transpose()?,
             });
+        }
+        #[cfg(not(feature = "sim"))]
+        if link == "canopen-emu" {
+            let _ = (drives, ids, cycle, bitrate);
+            return Err(other(
+                "canopen-emu: this build of fieldprobe has no CANopen emulator (Cargo feature `sim`); canopen-udp and socketcan:IF need only `canopen` (and `socketcan`)".into(),
+            ));
         }
         let bus: Box<dyn CanBus> = if let Some(ifname) = link.strip_prefix("socketcan:") {
             Box::new(SocketCanBus::open(ifname).map_err(|e| other(e.to_string()))?)
@@ -326,7 +350,7 @@ impl Transport {
         Ok(Transport {
             bus,
             emulated: None,
-            candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+            candump: candump.map(|p| open_candump(p, &iface, None)).transpose()?,
         })
     }
 
@@ -399,16 +423,13 @@ impl Transport {
     /// Log `f` in the `--candump` file: on `canopen-emu` at the bus clock (the UNIX time of
     /// bus time 0 plus the bus time), elsewhere at the wall clock.
     fn log(&mut self, f: &CanFrame) {
-        let at = self
-            .emulated
-            .as_ref()
-            .map(|e| e.unix0 + Duration::from_nanos(e.wire.now().0));
+        let wire = self.wire_clock();
         if let Some(c) = self.candump.as_mut().filter(|c| c.failed.is_none()) {
-            let written = match at {
-                Some(t) => c.writer.write_frame(t, f),
-                None => c.writer.write_frame_now(f),
+            let ns = match (wire, c.wire_at_open) {
+                (Some(now), Some(open)) => c.clock.at_ns(now.0.saturating_sub(open.0)),
+                _ => c.clock.now_ns(),
             };
-            if let Err(e) = written {
+            if let Err(e) = c.writer.write_frame(Duration::from_nanos(ns), f) {
                 c.fail(&e);
             }
         }
@@ -421,13 +442,21 @@ const RECV_POLL: Duration = Duration::from_micros(50);
 /// Longest wait for one SDO answer poll.
 const SDO_POLL: Duration = Duration::from_millis(5);
 
-fn open_candump(path: &std::path::Path, iface: &str) -> Result<Candump, LinkError> {
+/// Open the `--candump` log `path` for a bus whose `candump -L` name is `iface`; `wire` is the
+/// bus clock of the wire now (`canopen-emu`), `None` elsewhere (see [`Candump`]).
+fn open_candump(
+    path: &std::path::Path,
+    iface: &str,
+    wire: Option<Nanos>,
+) -> Result<Candump, LinkError> {
     let f = std::fs::File::create(path)
         .map_err(|e| other(format!("--candump {}: {e}", path.display())))?;
     Ok(Candump {
         writer: CandumpWriter::new(std::io::BufWriter::new(f), iface),
         path: path.to_path_buf(),
         failed: None,
+        clock: CaptureClock::start(),
+        wire_at_open: wire,
     })
 }
 
@@ -450,6 +479,7 @@ fn sdo_failure(node: u8, index: u16, sub: u8) -> impl Fn((Option<SdoError>, Stri
 }
 
 /// Node ids 1 … n.
+#[cfg(feature = "sim")]
 fn default_ids(n: usize) -> Result<Vec<u8>, LinkError> {
     if n > 127 {
         return Err(other(format!(
@@ -502,12 +532,14 @@ fn plan_node(def: &DriveDefinition, node: u8) -> Result<(Vec<Pdo>, Vec<Pdo>), Li
 }
 
 impl CanopenLink {
+    #[cfg(feature = "sim")]
     /// `canopen-emu`: one emulated CiA 402 node per drive (node id = position + 1) and the
     /// master, in process, on a wire at 1 Mbit/s; brought to operational.
     pub fn emulated(drives: &[Arc<DriveDefinition>], cycle: Nanos) -> Result<Self, LinkError> {
         CanopenLink::emulated_at(drives, cycle, Bitrate::DEFAULT, None)
     }
 
+    #[cfg(feature = "sim")]
     /// [`emulated`](Self::emulated), logging every frame in candump -L format into `candump`.
     pub fn emulated_with(
         drives: &[Arc<DriveDefinition>],
@@ -517,6 +549,7 @@ impl CanopenLink {
         CanopenLink::emulated_at(drives, cycle, Bitrate::DEFAULT, candump)
     }
 
+    #[cfg(feature = "sim")]
     /// [`emulated_with`](Self::emulated_with) on a wire at `bitrate`.
     pub fn emulated_at(
         drives: &[Arc<DriveDefinition>],
@@ -528,6 +561,7 @@ impl CanopenLink {
         CanopenLink::on_link("canopen-emu", drives, &ids, cycle, bitrate, candump)
     }
 
+    #[cfg(feature = "sim")]
     /// `canopen-emu` with the given emulated nodes (e.g. object dictionaries from an EDS,
     /// [`EmulatedNode::from_eds`]): node *i* serves `drives[i]` at its own node id; brought to
     /// operational on virtual time like [`emulated`](Self::emulated), on a wire at 1 Mbit/s.
@@ -539,6 +573,7 @@ impl CanopenLink {
         CanopenLink::with_nodes_at(nodes, drives, cycle, Bitrate::DEFAULT)
     }
 
+    #[cfg(feature = "sim")]
     /// [`with_nodes`](Self::with_nodes) on a wire at `bitrate`.
     pub fn with_nodes_at(
         nodes: Vec<EmulatedNode>,
@@ -594,7 +629,7 @@ impl CanopenLink {
             Transport {
                 bus,
                 emulated: None,
-                candump: candump.map(|p| open_candump(p, &iface)).transpose()?,
+                candump: candump.map(|p| open_candump(p, &iface, None)).transpose()?,
             },
             drives,
             ids,
@@ -908,7 +943,7 @@ impl CanopenLink {
                     return Err(other(format!(
                         "node {node}: start-up: writing {index:#06x}:{sub:02x} {what} = {value} refused, \
                          abort code {code:#010x} ({})",
-                        crate::bus::ethercat::mailbox::abort_text(code)
+                        crate::bus::abort::abort_text(code)
                     )))
                 }
                 Err(e) => return Err(e),
@@ -1075,11 +1110,13 @@ impl CanopenLink {
         std::mem::take(&mut self.emergencies)
     }
 
+    #[cfg(feature = "sim")]
     /// The emulated nodes (`canopen-emu`).
     pub fn segment(&self) -> Option<&CanopenSegment> {
         self.bus.emulated.as_ref().map(|e| &e.segment)
     }
 
+    #[cfg(feature = "sim")]
     /// The emulated nodes, mutable (fault knobs: a node's 0x1017, model faults).
     pub fn segment_mut(&mut self) -> Option<&mut CanopenSegment> {
         self.bus.emulated.as_mut().map(|e| &mut e.segment)
@@ -1315,18 +1352,22 @@ impl Link for CanopenLink {
             .map(|_| ())
     }
 
-    fn plant(&self) -> Option<&Plant> {
+    #[cfg(feature = "sim")]
+    fn plant(&self) -> Option<&crate::sim::plant::Plant> {
         self.segment().map(|s| s.world().plant())
     }
 
-    fn plant_mut(&mut self) -> Option<&mut Plant> {
+    #[cfg(feature = "sim")]
+    fn plant_mut(&mut self) -> Option<&mut crate::sim::plant::Plant> {
         self.segment_mut().map(|s| s.world_mut().plant_mut())
     }
 
+    #[cfg(feature = "sim")]
     fn model(&self, device: usize) -> Option<&dyn DriveModel> {
         self.segment()?.nodes().get(device).map(|n| n.model())
     }
 
+    #[cfg(feature = "sim")]
     fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
         self.segment_mut()?
             .nodes_mut()

@@ -50,8 +50,8 @@ use crate::rt::{monotonic_ns, CycleClock, CycleRecord, CycleStats, Wake};
 use crate::units::Nanos;
 
 /// A SYNC gap of more than this many periods stops the emulated drives
-/// ([`crate::sim::canopen::SYNC_TIMEOUT_PERIODS`]).
-pub const SYNC_TIMEOUT_PERIODS: u64 = crate::sim::canopen::SYNC_TIMEOUT_PERIODS;
+/// ([`crate::bus::canopen::nmt::SYNC_TIMEOUT_PERIODS`]).
+pub const SYNC_TIMEOUT_PERIODS: u64 = crate::bus::canopen::nmt::SYNC_TIMEOUT_PERIODS;
 
 /// Missed deadlines from which a cycle is a stall: one more than the default
 /// `max_lost_cycles`, so the channel reports it (900012) unless the machine allows more.
@@ -82,12 +82,10 @@ pub fn sync_window(period: Nanos, frames: Nanos) -> Nanos {
 }
 
 /// The RPDO event-timer the master configures (0x1400 + k sub-index 5, ms, deadline
-/// monitoring in the node): [`crate::sim::canopen::SYNC_TIMEOUT_PERIODS`] cycles, rounded up to
+/// monitoring in the node): [`SYNC_TIMEOUT_PERIODS`] cycles, rounded up to
 /// whole ms, at least 1, at most 65535 — the same tolerance as the nodes' SYNC watch.
 pub fn rpdo_event_timer_ms(period: Nanos) -> u16 {
-    let ns = period
-        .0
-        .saturating_mul(crate::sim::canopen::SYNC_TIMEOUT_PERIODS);
+    let ns = period.0.saturating_mul(SYNC_TIMEOUT_PERIODS);
     u16::try_from(ns.div_ceil(1_000_000).max(1)).unwrap_or(u16::MAX)
 }
 

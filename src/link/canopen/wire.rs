@@ -18,10 +18,13 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use super::Transport;
-use crate::bus::can::{CanBus, CanFrame, Delivery, VirtualCan, VirtualEndpoint};
+#[cfg(feature = "sim")]
+use crate::bus::can::CanBus;
+use crate::bus::can::{CanFrame, Delivery, VirtualCan, VirtualEndpoint};
 use crate::bus::canopen::nmt;
 use crate::bus::canopen::sdo::{SdoClient, SdoError, SDO_TX_BASE};
 use crate::link::LinkError;
+#[cfg(feature = "sim")]
 use crate::sim::canopen::CanopenSegment;
 use crate::units::Nanos;
 
@@ -29,8 +32,12 @@ use crate::units::Nanos;
 /// answer"), as a real one is after 4 s of wall-clock time.
 pub const SDO_BOUND: Nanos = Nanos(4_000_000_000);
 
-/// The emulated nodes of `canopen-emu` on the other endpoint of the in-process bus.
+/// The emulated nodes of `canopen-emu` on the other endpoint of the in-process bus. Only a
+/// build with the emulators (feature `sim`) makes one; without it the transport's `emulated` is
+/// always `None` and the wire's functions here have nothing to run.
+#[cfg_attr(not(feature = "sim"), allow(dead_code))]
 pub(super) struct Emulated {
+    #[cfg(feature = "sim")]
     pub(super) segment: CanopenSegment,
     pub(super) endpoint: VirtualEndpoint,
     /// The bus with its wire: every frame takes its wire time on virtual time — the link's
@@ -46,6 +53,7 @@ pub(super) struct Emulated {
     pub(super) unix0: Duration,
 }
 
+#[cfg(feature = "sim")]
 impl Emulated {
     pub(super) fn new(
         segment: CanopenSegment,
@@ -114,8 +122,10 @@ impl Transport {
             if let Some(t) = em.trace.as_mut() {
                 t.push(d);
             }
+            #[cfg(feature = "sim")]
             let (segment, endpoint, syncs) =
                 (&mut em.segment, &mut em.endpoint, &mut em.sync_times);
+            #[cfg(feature = "sim")]
             while let Some((f, at)) = endpoint.recv_timed() {
                 let model_time = if is_sync(&f) {
                     syncs.pop_front().unwrap_or(at)
@@ -157,9 +167,14 @@ impl Transport {
         let Some(em) = self.emulated.as_mut() else {
             return;
         };
-        let now = em.wire.now();
-        let endpoint = &mut em.endpoint;
-        em.segment.poll(now, &mut |f| node_send(endpoint, &f));
+        #[cfg(feature = "sim")]
+        {
+            let now = em.wire.now();
+            let endpoint = &mut em.endpoint;
+            em.segment.poll(now, &mut |f| node_send(endpoint, &f));
+        }
+        #[cfg(not(feature = "sim"))]
+        let _ = em; // no emulated nodes in this build
     }
 
     /// Let `span` of bus time pass: the nodes do their time-driven work now, the wire runs to
@@ -237,6 +252,7 @@ impl Transport {
 
 /// An emulated node's frame onto its endpoint (a frame out of range is a warning: the node
 /// built it, nothing from outside).
+#[cfg(feature = "sim")]
 fn node_send(endpoint: &mut VirtualEndpoint, f: &CanFrame) {
     if endpoint.send(f).is_err() {
         tracing::warn!(target: "fieldprobe::link::canopen", "emulated node frame refused: {f:?}");
@@ -244,6 +260,7 @@ fn node_send(endpoint: &mut VirtualEndpoint, f: &CanFrame) {
 }
 
 /// The SYNC (COB-ID 0x080, CiA 301).
+#[cfg(feature = "sim")]
 fn is_sync(f: &CanFrame) -> bool {
     !f.extended && !f.rtr && !f.error && f.id == u32::from(nmt::SYNC_COB)
 }

@@ -46,6 +46,13 @@ const MAX_CHECKS_PER_FRAME: usize = 129;
 /// cable runs (5 ns per m) are not counted.
 pub const DEVICE_DELAY_NS: u64 = 1_000;
 
+/// The time an Ethernet frame of `frame_len` bytes (without FCS) takes on the wire at 100
+/// Mbit/s: padded to [`MIN_FRAME`], with preamble, FCS and inter-frame gap.
+pub fn frame_wire_ns(frame_len: usize) -> u64 {
+    let bytes = frame_len.max(MIN_FRAME) + PREAMBLE_SFD + FCS + INTER_FRAME_GAP;
+    (bytes as u64).saturating_mul(NS_PER_BYTE)
+}
+
 /// One frame of a cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PlannedFrame {

@@ -130,7 +130,7 @@ impl Session {
     fn coe(&self, position: usize) -> Result<CoeClient, LinkError> {
         let d = self.device(position)?;
         let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
-        if self.wire.segment.is_some() {
+        if self.wire.is_emulated() {
             c.timeout = EMULATED_TIMEOUT;
         }
         Ok(c)

@@ -12,7 +12,7 @@
 //!
 //! The ESI of a terminal is one of the files the link embeds ([`EMBEDDED_ESI`], by name,
 //! with or without `esi/` and `.xml`) or an ESI file; on `ethercat-emu` the emulator plays it
-//! ([`crate::sim::esc::terminal::emulated_terminal`]).
+//! (`crate::sim::esc::terminal::emulated_terminal`, feature `sim`).
 
 use std::path::Path;
 use std::sync::Arc;

@@ -107,8 +107,8 @@ pub const PRODUCT_CODE: u32 = 0x0002_0402;
 /// Default producer heartbeat time (0x1017), ms.
 pub const DEFAULT_HEARTBEAT_MS: u16 = 100;
 /// The SYNC watch fires after more than this many communication cycle periods (0x1006)
-/// without a SYNC.
-pub const SYNC_TIMEOUT_PERIODS: u64 = 5;
+/// without a SYNC (the tolerance the master assumes too).
+pub use crate::bus::canopen::nmt::SYNC_TIMEOUT_PERIODS;
 /// EMCY error code of a SYNC time-out: 0x8100 "communication" (CiA 301 table 21).
 pub const SYNC_TIMEOUT_EMCY: u16 = 0x8100;
 /// EMCY error code of an RPDO deadline time-out (CiA 301 "RPDO time-out").

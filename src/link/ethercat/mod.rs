@@ -3,7 +3,7 @@
 //!
 //! | `--link` | wire |
 //! |---|---|
-//! | `ethercat-emu` | in-process: frames go straight through an emulated [`Segment`] built from the machine file (an EK1100-kind coupler, then one emulated drive per axis from the embedded ESI files) |
+//! | `ethercat-emu` (feature `sim`) | in-process: frames go straight through an emulated segment (`crate::sim::esc::segment::Segment`, `emulated_segment`) built from the machine file (an EK1100-kind coupler, then one emulated drive per axis from the embedded ESI files) |
 //! | `ethercat:IFACE` | a raw socket on a network interface (real devices, or `fieldprobe sim ethercat` on the other end of a veth pair) |
 //!
 //! # Start-up
@@ -60,37 +60,32 @@
 pub mod cycle_plan;
 pub mod datagrams;
 pub mod dictionary;
+#[cfg(feature = "sim")]
+mod emulated;
 pub mod terminals;
+mod wire;
+
+#[cfg(feature = "sim")]
+pub use emulated::emulated_segment;
 
 use std::collections::BTreeSet;
-use std::future::Future;
-use std::path::Path;
 use std::sync::Arc;
-use std::task::Poll;
 use std::time::{Duration, Instant};
 
 use ethercrab::subdevice_group::{DcConfiguration, HasDc, NoDc, Op};
-use ethercrab::{
-    DcSync, MainDevice, MainDeviceConfig, PduRx, PduStorage, PduTx, SubDeviceGroup, Timeouts,
-};
+use ethercrab::{DcSync, MainDevice, PduStorage, SubDeviceGroup};
 
 use self::cycle_plan::{CyclePlan, WireTime};
-use self::datagrams::{DatagramLog, FmmuWindow, LogicalMap};
+use self::datagrams::{FmmuWindow, LogicalMap};
 use self::terminals::{BusDevice, Role, TerminalSpec};
+use self::wire::{connect, drive, WireEnd, EMULATED_TIMEOUT};
 use super::{decode_le, object_type, Link, LinkError, Peer, ProcessImage};
 use crate::bus::ethercat::mailbox::{CoeClient, MailboxError};
-use crate::bus::ethercat::pcap::{PcapWriter, TimestampResolution};
 use crate::bus::ethercat::soe::SoeClient;
 use crate::drive::catalogue::{DriveDefinition, Profile};
-use crate::drive::model::DriveModel;
 use crate::esi;
 use crate::messages::{ids, CncMessage};
 use crate::rt::{CycleClock, CycleRecord};
-use crate::sim::esc::device::emulated_drive;
-use crate::sim::esc::segment::Segment;
-use crate::sim::esc::{Esc, EscConfig, NullApp};
-use crate::sim::plant::Plant;
-use crate::sim::world::World;
 use crate::units::Nanos;
 
 /// SubDevices a link can hold (a channel of 32 axes with their I/O terminals and couplers:
@@ -109,16 +104,13 @@ const PDU_DATA: usize = crate::bus::ethercat::wire::MAX_ETHERNET_FRAME;
 type Storage = PduStorage<MAX_FRAMES, PDU_DATA>;
 
 /// ESI of the emulated CiA 402 servo (embedded).
-pub const SERVO_ESI: &str = include_str!("../../esi/fieldprobe-cia402-servo.xml");
+pub const SERVO_ESI: &str = include_str!("../../../esi/fieldprobe-cia402-servo.xml");
 /// ESI of the emulated SERCOS drive (embedded).
-pub const SERCOS_ESI: &str = include_str!("../../esi/fieldprobe-ax5000-sercos.xml");
+pub const SERCOS_ESI: &str = include_str!("../../../esi/fieldprobe-ax5000-sercos.xml");
 /// ESI of the emulated EL5101-kind encoder terminal (embedded).
-pub const EL5101_ESI: &str = include_str!("../../esi/fieldprobe-el5101.xml");
+pub const EL5101_ESI: &str = include_str!("../../../esi/fieldprobe-el5101.xml");
 /// ESI of the emulated coupler (embedded).
-pub const COUPLER_ESI: &str = include_str!("../../esi/fieldprobe-ek1100.xml");
-/// Forwarding delay between neighbouring emulated devices.
-const HOP_DELAY_NS: u64 = 500;
-
+pub const COUPLER_ESI: &str = include_str!("../../../esi/fieldprobe-ek1100.xml");
 /// Where the frames go.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Wire {
@@ -186,75 +178,6 @@ fn embedded(text: &'static str, name: &str) -> Result<&'static esi::EsiFile, Lin
     Ok(file)
 }
 
-/// The emulated segment for `spec`: a coupler, then the machine's SubDevices in ring order
-/// ([`terminals::ring_order`]) — one drive per axis (the ESI of its family, the model of its
-/// drive definition) and its terminals (each played as
-/// [`emulated_terminal`](crate::sim::esc::terminal::emulated_terminal) plays it) — then the
-/// extra devices, with an empty plant, synchronised at SYNC0.
-pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
-    let other = |m: String| LinkError::Other(m);
-    let coupler_esi = embedded(COUPLER_ESI, "esi/fieldprobe-ek1100.xml")?;
-    let coupler_dev = coupler_esi
-        .devices
-        .first()
-        .ok_or_else(|| other("coupler ESI has no device".into()))?;
-    let content = esi::to_sii::sii_from_device(coupler_esi, coupler_dev)
-        .map_err(|e| other(format!("coupler SII: {e}")))?;
-    let image =
-        esi::sii::encode_padded(&content).map_err(|e| other(format!("coupler SII: {e}")))?;
-    let mut escs = vec![Esc::new(EscConfig::from_sii(image), Box::new(NullApp))];
-    let cycle = Duration::from_nanos(spec.cycle.0.max(1));
-    let terminal_esc = |t: &TerminalSpec| -> Result<Esc, LinkError> {
-        let device = t
-            .device()
-            .ok_or_else(|| other(format!("terminal {}: the ESI has no device", t.name)))?;
-        crate::sim::esc::terminal::emulated_terminal(&t.esi, device)
-            .map_err(|e| other(format!("terminal {} ({}): {e}", t.name, t.source)))
-    };
-    for d in terminals::ring_order(spec.drives.len(), &spec.terminals) {
-        let k = match d {
-            terminals::Declared::Axis(k) => k,
-            terminals::Declared::Terminal(k) => {
-                if let Some(t) = spec.terminals.get(k) {
-                    escs.push(terminal_esc(t)?);
-                }
-                continue;
-            }
-        };
-        let Some(def) = spec.drives.get(k) else {
-            continue;
-        };
-        let axis = k;
-        let text = esi_for(def).ok_or_else(|| {
-            other(format!(
-                "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives and EL5101 terminals only",
-                def.name,
-                def.profile.name()
-            ))
-        })?;
-        let file = embedded(text, "embedded ESI")?;
-        let device = file
-            .devices
-            .first()
-            .ok_or_else(|| other("ESI has no device".into()))?;
-        let esc = emulated_drive(file, device, def, cycle)
-            .map_err(|e| other(format!("axis {axis}, drive '{}': {e}", def.name)))?;
-        escs.push(esc);
-    }
-    for t in &spec.emulated_extra {
-        escs.push(terminal_esc(t)?);
-    }
-    if escs.len() > MAX_SUBDEVICES {
-        return Err(other(format!(
-            "the emulated segment would have {} SubDevices; the link holds at most {MAX_SUBDEVICES}",
-            escs.len()
-        )));
-    }
-    let mut seg = Segment::new(escs, HOP_DELAY_NS);
-    seg.set_world(World::new(Plant::new()), spec.cycle);
-    Ok(seg)
-}
-
 /// The cyclic group in OP, with or without DC.
 enum Group {
     Dc(SubDeviceGroup<MAX_SUBDEVICES, MAX_PDI, ethercrab::DefaultLock, Op, HasDc>),
@@ -288,208 +211,6 @@ struct TerminalDevice {
     name: String,
     outputs: Vec<u8>,
     inputs: Vec<u8>,
-}
-
-/// Frame tap: every frame sent and received goes into a pcap file (`--pcap`). A write that
-/// fails (a full disk, `/dev/full`) is not silent: the first error is kept, later frames are
-/// not written, and [`Tap::finish`] returns it at the end of the run, so the command exits 2
-/// after the axes stopped as usual.
-struct Tap {
-    writer: PcapWriter<std::io::BufWriter<std::fs::File>>,
-    t0: Instant,
-    path: std::path::PathBuf,
-    failed: Option<String>,
-}
-
-impl Tap {
-    fn record(&mut self, frame: &[u8]) {
-        if self.failed.is_some() {
-            return;
-        }
-        let t = self.t0.elapsed().as_nanos() as u64;
-        if let Err(e) = self.writer.write_packet(t, frame) {
-            self.fail(&e);
-        }
-    }
-
-    fn fail(&mut self, e: &dyn std::fmt::Display) {
-        let m = format!(
-            "--pcap {}: writing the capture failed ({e}); the capture is incomplete",
-            self.path.display()
-        );
-        tracing::warn!(target: "fieldprobe::link::ethercat", "{m}");
-        self.failed = Some(m);
-    }
-
-    /// Flush the file; the first write error of the capture, naming the option and the file.
-    fn finish(&mut self) -> Result<(), String> {
-        if self.failed.is_none() {
-            if let Err(e) = self.writer.flush() {
-                self.fail(&e);
-            }
-        }
-        self.failed.clone().map_or(Ok(()), Err)
-    }
-}
-
-/// The wire end of the PDU loop.
-struct WireEnd {
-    tx: PduTx<'static>,
-    rx: PduRx<'static>,
-    segment: Option<Segment>,
-    tap: Option<Tap>,
-    port: Option<crate::sim::esc::raw::RawPort>,
-    t0: Instant,
-    /// Emulated wire: a frame of the current [`drive`] call was lost (dropped by a fault knob
-    /// or refused as invalid by the segment).
-    lost: bool,
-    /// Emulated wire: frames the current [`drive`] call has put through the segment.
-    frames: u64,
-    /// The logical datagrams of the current process-data cycle, out and back.
-    log: DatagramLog,
-    /// The buffer of the frame being sent.
-    buf: Vec<u8>,
-}
-
-impl WireEnd {
-    /// See [`Tap::finish`]; `Ok` without `--pcap`.
-    fn finish_capture(&mut self) -> Result<(), String> {
-        self.tap.as_mut().map_or(Ok(()), Tap::finish)
-    }
-
-    /// Send every queued frame; emulated: process and hand back at once; interface: send.
-    fn pump(&mut self) {
-        while let Some(frame) = self.tx.next_sendable_frame() {
-            // The frame buffer is kept (no allocation per frame).
-            let mut buf = std::mem::take(&mut self.buf);
-            buf.clear();
-            let sent = frame.send_blocking(|b| {
-                buf.extend_from_slice(b);
-                Ok(b.len())
-            });
-            if sent.is_err() {
-                self.buf = buf;
-                continue;
-            }
-            if let Some(tap) = self.tap.as_mut() {
-                tap.record(&buf);
-            }
-            self.log.record(&buf, false);
-            if let Some(seg) = self.segment.as_mut() {
-                let now = self.t0.elapsed().as_nanos() as u64;
-                // A dropped (fault knob) or invalid frame is lost on the wire.
-                self.frames += 1;
-                if let Ok(true) = seg.process_frame(&mut buf, now) {
-                    if let Some(tap) = self.tap.as_mut() {
-                        tap.record(&buf);
-                    }
-                    self.log.record(&buf, true);
-                    let _ = self.rx.receive_frame(&buf);
-                } else {
-                    self.lost = true;
-                }
-            } else if let Some(port) = self.port.as_mut() {
-                let _ = port.send(&buf);
-            }
-            self.buf = buf;
-        }
-    }
-
-    /// Interface: wait for the next frame (at most the port's receive timeout, [`RX_WAIT`]) and
-    /// hand it to the PDU loop. One frame per call: the caller polls the master's future after
-    /// each, so a reply is processed as soon as it is in, not after a further wait.
-    fn receive(&mut self) {
-        let Some(port) = self.port.as_mut() else {
-            return;
-        };
-        if let Some(frame) = port.try_receive() {
-            if let Some(tap) = self.tap.as_mut() {
-                tap.record(&frame);
-            }
-            self.log.record(&frame, true);
-            let _ = self.rx.receive_frame(&frame);
-        }
-    }
-}
-
-/// Longest wait of one receive on an interface. The socket is polled with it (poll(2) takes
-/// whole ms: a shorter timeout would be 0, a busy loop that keeps a device emulator sharing the
-/// CPU from answering — measured: wire round trip p90 1.4 ms instead of 73 µs at 1 ms). A
-/// frame that arrives ends the wait at once.
-const RX_WAIT: Duration = Duration::from_millis(1);
-
-/// Frames one [`drive`] call may put through the emulated segment before it gives up (the
-/// in-process wire's bound in place of ethercrab's wall-clock timeouts: a master loop that
-/// polls a device which never reaches the awaited state ends here). Start-up with 100 DC
-/// static-sync iterations takes a few thousand frames, an SDO transfer a few dozen.
-const EMULATED_FRAMES_PER_CALL: u64 = 1_000_000;
-
-/// ethercrab's timeouts on the in-process wire: never reached. The emulated segment answers
-/// every frame synchronously inside [`WireEnd::pump`], so a reply can only be missing because
-/// the segment dropped the frame, which [`drive`] sees at once and reports; a wall-clock
-/// timeout there would only fire when the test machine is busy (it did, with 20 ms, under CPU
-/// load: "frame lost: timeout: PDU").
-const EMULATED_TIMEOUT: Duration = Duration::from_secs(24 * 3600);
-
-/// ethercrab's timeouts on the in-process wire ([`EMULATED_TIMEOUT`]'s reason): `Duration::MAX`,
-/// which ethercrab's std timer (`async_io::Timer::after`) turns into a timer that never fires
-/// and is never registered with the async-io reactor — a 24 h timer would be, once per frame
-/// (a syscall to wake the reactor thread, and its bookkeeping, per frame).
-const EMULATED_ETHERCRAB_TIMEOUT: Duration = Duration::MAX;
-
-/// The value a master future gives when [`drive`] ends it because the emulated wire lost one
-/// of its frames (or it exceeded [`EMULATED_FRAMES_PER_CALL`]), the in-process, virtual-time
-/// counterpart of ethercrab's PDU timeout.
-trait LostOnWire {
-    fn lost_on_wire() -> Self;
-}
-
-impl<T> LostOnWire for Result<T, ethercrab::error::Error> {
-    fn lost_on_wire() -> Self {
-        Err(ethercrab::error::Error::ReceiveFrame)
-    }
-}
-
-impl<T> LostOnWire for Result<T, MailboxError> {
-    fn lost_on_wire() -> Self {
-        Err(MailboxError::Datagram(
-            "frame lost on the emulated wire".into(),
-        ))
-    }
-}
-
-impl<T> LostOnWire for Result<T, LinkError> {
-    fn lost_on_wire() -> Self {
-        Err(LinkError::Other(
-            "EtherCAT: a frame was lost on the emulated wire".into(),
-        ))
-    }
-}
-
-/// Run `fut` to completion while pumping frames through `wire` (single thread): send what the
-/// master queued, then wait for one frame, then poll the master again. On the emulated wire a
-/// frame the segment drops ends `fut` at once with [`LostOnWire`] (ethercrab releases the
-/// frame when its future is dropped); no clock decides.
-fn drive<T: LostOnWire>(wire: &mut WireEnd, fut: impl Future<Output = T>) -> T {
-    wire.lost = false;
-    wire.frames = 0;
-    let pump = std::future::poll_fn(|cx| {
-        wire.tx.replace_waker(cx.waker());
-        wire.pump();
-        if wire.lost || wire.frames > EMULATED_FRAMES_PER_CALL {
-            tracing::debug!(target: "fieldprobe::link::ethercat", frames = wire.frames,
-                "emulated wire: frame lost or no progress; the master operation ends");
-            return Poll::Ready(T::lost_on_wire());
-        }
-        wire.receive();
-        if wire.port.is_some() {
-            // Nothing wakes us when a frame arrives on the socket: the receive above waited
-            // for it; poll the master again.
-            cx.waker().wake_by_ref();
-        }
-        Poll::<T>::Pending
-    });
-    futures_lite::future::block_on(futures_lite::future::or(fut, pump))
 }
 
 /// The EtherCAT link (see the module documentation).
@@ -558,7 +279,7 @@ impl EthercatLink {
     /// Open the link on `wire` for the axes of `spec` and bring every device to OP.
     pub fn open(wire: &Wire, spec: &EthercatSpec) -> Result<Self, LinkError> {
         let (md, mut wire_end) = connect(wire, spec)?;
-        let emulated = wire_end.segment.is_some();
+        let emulated = wire_end.is_emulated();
         let now = ethercrab::std::ethercat_now;
         let cycle_ns = spec.cycle.0;
         let (group, axes, terminals, bus, map, plan) = drive(&mut wire_end, async {
@@ -701,6 +422,8 @@ impl EthercatLink {
         link.watchdog_ns = link.read_watchdog();
         link.reach_op()?;
         link.check_images()?;
+        #[cfg(feature = "sim")]
+        link.wire.start_cycles();
         Ok(link)
     }
 
@@ -981,16 +704,6 @@ impl EthercatLink {
         self.expected_wkc
     }
 
-    /// The emulated segment (`ethercat-emu`), if any.
-    pub fn segment(&self) -> Option<&Segment> {
-        self.wire.segment.as_ref()
-    }
-
-    /// The emulated segment, mutable (plant, fault knobs).
-    pub fn segment_mut(&mut self) -> Option<&mut Segment> {
-        self.wire.segment.as_mut()
-    }
-
     /// One LRW; returns the working counter and, with DC, the time from now to the next cycle
     /// start at its shift from SYNC0 (ethercrab's `CycleInfo::next_cycle_wait`).
     fn tx_rx(&mut self) -> Result<(u16, Option<Duration>), ethercrab::error::Error> {
@@ -1086,8 +799,9 @@ impl EthercatLink {
     }
 
     /// The emulated segment drops / miscounts the frames of exchange `n` the fault knobs name.
+    #[cfg(feature = "sim")]
     fn arm_fault_knobs(&mut self, n: u64) {
-        let Some(seg) = self.wire.segment.as_mut() else {
+        let Some(seg) = self.wire.segment_mut() else {
             return;
         };
         let next = seg.offered_frames();
@@ -1193,74 +907,6 @@ fn check_wire_time(w: &WireTime, cycle_ns: u64) -> Result<(), LinkError> {
             w.shortest_cycle_us()
         ),
     )))
-}
-
-/// Leak a PDU storage and a MainDevice for `wire` (emulated segment per `spec`).
-fn connect(
-    wire: &Wire,
-    spec: &EthercatSpec,
-) -> Result<(&'static MainDevice<'static>, WireEnd), LinkError> {
-    let storage: &'static Storage = Box::leak(Box::new(Storage::new()));
-    let (tx, rx, pdu_loop) = storage
-        .try_split()
-        .map_err(|()| LinkError::Other("EtherCAT PDU storage already in use".into()))?;
-    let tap = match &spec.pcap {
-        None => None,
-        Some(p) => Some(open_tap(p)?),
-    };
-    let (segment, port) = match wire {
-        Wire::Emulated => (Some(emulated_segment(spec)?), None),
-        Wire::Interface(i) => (
-            None,
-            Some(
-                crate::sim::esc::raw::RawPort::open_with_timeout(i, RX_WAIT)
-                    .map_err(|e| LinkError::Other(format!("ethercat:{i}: {e}")))?,
-            ),
-        ),
-    };
-    let emulated = segment.is_some();
-    let wire_end = WireEnd {
-        tx,
-        rx,
-        segment,
-        tap,
-        port,
-        t0: Instant::now(),
-        lost: false,
-        frames: 0,
-        log: DatagramLog::default(),
-        buf: Vec::with_capacity(crate::bus::ethercat::wire::MAX_ETHERNET_FRAME),
-    };
-    let timeouts = if emulated {
-        Timeouts {
-            pdu: EMULATED_ETHERCRAB_TIMEOUT,
-            state_transition: EMULATED_ETHERCRAB_TIMEOUT,
-            mailbox_echo: EMULATED_ETHERCRAB_TIMEOUT,
-            mailbox_response: EMULATED_ETHERCRAB_TIMEOUT,
-            eeprom: EMULATED_ETHERCRAB_TIMEOUT,
-            ..Timeouts::default()
-        }
-    } else {
-        Timeouts {
-            pdu: Duration::from_millis(30),
-            state_transition: Duration::from_secs(5),
-            mailbox_response: Duration::from_secs(2),
-            // One SII (EEPROM) word read, busy bit polled over the wire: ethercrab's 10 ms is
-            // shorter than a raw-socket round trip to a busy emulator (or a long segment) can
-            // take; it only matters at start-up.
-            eeprom: Duration::from_millis(100),
-            ..Timeouts::default()
-        }
-    };
-    let md: &'static MainDevice<'static> = Box::leak(Box::new(MainDevice::new(
-        pdu_loop,
-        timeouts,
-        MainDeviceConfig {
-            dc_static_sync_iterations: if emulated { 100 } else { 10_000 },
-            ..MainDeviceConfig::default()
-        },
-    )));
-    Ok((md, wire_end))
 }
 
 /// An AL state in the words IgH's `ethercat slaves` uses: `INIT`, `PREOP`, `BOOT`, `SAFEOP`,
@@ -1437,7 +1083,7 @@ impl Session {
     pub fn sdo_read(&mut self, position: usize, index: u16, sub: u8) -> Result<Vec<u8>, LinkError> {
         let d = self.device(position)?;
         let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
-        if self.wire.segment.is_some() {
+        if self.wire.is_emulated() {
             c.timeout = EMULATED_TIMEOUT;
         }
         let md = self.md;
@@ -1454,7 +1100,7 @@ impl Session {
     ) -> Result<(), LinkError> {
         let d = self.device(position)?;
         let mut c = CoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
-        if self.wire.segment.is_some() {
+        if self.wire.is_emulated() {
             c.timeout = EMULATED_TIMEOUT;
         }
         let md = self.md;
@@ -1466,7 +1112,7 @@ impl Session {
     pub fn idn_read(&mut self, position: usize, idn: u16) -> Result<(i64, String), LinkError> {
         let d = self.device(position)?;
         let mut c = SoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
-        if self.wire.segment.is_some() {
+        if self.wire.is_emulated() {
             c.timeout = EMULATED_TIMEOUT;
         }
         let md = self.md;
@@ -1482,7 +1128,7 @@ impl Session {
     pub fn idn_write(&mut self, position: usize, idn: u16, value: i64) -> Result<(), LinkError> {
         let d = self.device(position)?;
         let mut c = SoeClient::new(d.address, d.mailbox.0, d.mailbox.1);
-        if self.wire.segment.is_some() {
+        if self.wire.is_emulated() {
             c.timeout = EMULATED_TIMEOUT;
         }
         let md = self.md;
@@ -1496,19 +1142,6 @@ fn image_lengths(def: &DriveDefinition) -> (usize, usize) {
         Ok(m) => (m.rx_len(), m.tx_len()),
         Err(_) => (def.rxpdo.len(), def.txpdo.len()),
     }
-}
-
-fn open_tap(path: &Path) -> Result<Tap, LinkError> {
-    let f = std::fs::File::create(path)
-        .map_err(|e| LinkError::Other(format!("--pcap {}: {e}", path.display())))?;
-    let writer = PcapWriter::new(std::io::BufWriter::new(f), TimestampResolution::Nano)
-        .map_err(|e| LinkError::Other(format!("--pcap {}: {e}", path.display())))?;
-    Ok(Tap {
-        writer,
-        t0: Instant::now(),
-        path: path.to_path_buf(),
-        failed: None,
-    })
 }
 
 /// Match axes and terminals to SubDevices: axis `k` takes the next SubDevice (ring order) with
@@ -1732,7 +1365,7 @@ impl Link for EthercatLink {
             out.extend(list.into_iter().map(|e| super::DriveEmergency {
                 device,
                 code: e.code,
-                text: crate::bus::canopen::nmt::emergency_text(e.code),
+                text: crate::bus::abort::emergency_text(e.code),
             }));
         }
         out
@@ -1745,9 +1378,9 @@ impl Link for EthercatLink {
                 images: images.len(),
             });
         }
-        let n = self.exchanges;
+        #[cfg(feature = "sim")]
+        self.arm_fault_knobs(self.exchanges);
         self.exchanges += 1;
-        self.arm_fault_knobs(n);
         // The frames of one cycle, as on the bus: they carry this cycle's set-points and read
         // the inputs the devices latched at the previous SYNC0; the emulated segment's SYNC0
         // follows (a network interface's emulator steps by itself). The actual values thus
@@ -1756,11 +1389,12 @@ impl Link for EthercatLink {
         if self.clock.is_some() {
             return self.paced_exchange(now, images);
         }
+        #[cfg(feature = "sim")]
+        self.wire.at_cycle(now);
         self.cycle_frame(now)?;
-        if self.emulated {
-            if let Some(seg) = self.wire.segment.as_mut() {
-                seg.sync0(now);
-            }
+        #[cfg(feature = "sim")]
+        if let Some(seg) = self.wire.segment_mut() {
+            seg.sync0(now);
         }
         self.copy_inputs(images)
     }
@@ -1817,24 +1451,30 @@ impl Link for EthercatLink {
         }
     }
 
-    fn plant(&self) -> Option<&Plant> {
-        self.wire.segment.as_ref()?.world().map(World::plant)
-    }
-
-    fn plant_mut(&mut self) -> Option<&mut Plant> {
+    #[cfg(feature = "sim")]
+    fn plant(&self) -> Option<&crate::sim::plant::Plant> {
         self.wire
-            .segment
-            .as_mut()?
+            .segment()?
+            .world()
+            .map(crate::sim::world::World::plant)
+    }
+
+    #[cfg(feature = "sim")]
+    fn plant_mut(&mut self) -> Option<&mut crate::sim::plant::Plant> {
+        self.wire
+            .segment_mut()?
             .world_mut()
-            .map(World::plant_mut)
+            .map(crate::sim::world::World::plant_mut)
     }
 
-    fn model(&self, device: usize) -> Option<&dyn DriveModel> {
-        self.wire.segment.as_ref()?.model(device)
+    #[cfg(feature = "sim")]
+    fn model(&self, device: usize) -> Option<&dyn crate::drive::model::DriveModel> {
+        self.wire.segment()?.model(device)
     }
 
-    fn model_mut(&mut self, device: usize) -> Option<&mut dyn DriveModel> {
-        self.wire.segment.as_mut()?.model_mut(device)
+    #[cfg(feature = "sim")]
+    fn model_mut(&mut self, device: usize) -> Option<&mut dyn crate::drive::model::DriveModel> {
+        self.wire.segment_mut()?.model_mut(device)
     }
 
     fn lose_exchange_at(&mut self, n: u64) {

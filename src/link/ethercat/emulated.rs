@@ -1,0 +1,99 @@
+//! `ethercat-emu`: the in-process emulated segment the link's frames go through (feature
+//! `sim`). The segment is built from the machine ([`emulated_segment`]); the link reaches it for
+//! the plant, the drive models and the fault knobs.
+
+use std::time::Duration;
+
+use super::terminals::{self, TerminalSpec};
+use super::{embedded, esi_for, EthercatLink, EthercatSpec, COUPLER_ESI, MAX_SUBDEVICES};
+use crate::esi;
+use crate::link::LinkError;
+use crate::sim::esc::device::emulated_drive;
+use crate::sim::esc::segment::Segment;
+use crate::sim::esc::{Esc, EscConfig, NullApp};
+use crate::sim::plant::Plant;
+use crate::sim::world::World;
+
+/// Forwarding delay between neighbouring emulated devices.
+const HOP_DELAY_NS: u64 = 500;
+
+/// The emulated segment for `spec`: a coupler, then the machine's SubDevices in ring order
+/// ([`terminals::ring_order`]) — one drive per axis (the ESI of its family, the model of its
+/// drive definition) and its terminals (each played as
+/// [`emulated_terminal`](crate::sim::esc::terminal::emulated_terminal) plays it) — then the
+/// extra devices, with an empty plant, synchronised at SYNC0.
+pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
+    let other = |m: String| LinkError::Other(m);
+    let coupler_esi = embedded(COUPLER_ESI, "esi/fieldprobe-ek1100.xml")?;
+    let coupler_dev = coupler_esi
+        .devices
+        .first()
+        .ok_or_else(|| other("coupler ESI has no device".into()))?;
+    let content = esi::to_sii::sii_from_device(coupler_esi, coupler_dev)
+        .map_err(|e| other(format!("coupler SII: {e}")))?;
+    let image =
+        esi::sii::encode_padded(&content).map_err(|e| other(format!("coupler SII: {e}")))?;
+    let mut escs = vec![Esc::new(EscConfig::from_sii(image), Box::new(NullApp))];
+    let cycle = Duration::from_nanos(spec.cycle.0.max(1));
+    let terminal_esc = |t: &TerminalSpec| -> Result<Esc, LinkError> {
+        let device = t
+            .device()
+            .ok_or_else(|| other(format!("terminal {}: the ESI has no device", t.name)))?;
+        crate::sim::esc::terminal::emulated_terminal(&t.esi, device)
+            .map_err(|e| other(format!("terminal {} ({}): {e}", t.name, t.source)))
+    };
+    for d in terminals::ring_order(spec.drives.len(), &spec.terminals) {
+        let k = match d {
+            terminals::Declared::Axis(k) => k,
+            terminals::Declared::Terminal(k) => {
+                if let Some(t) = spec.terminals.get(k) {
+                    escs.push(terminal_esc(t)?);
+                }
+                continue;
+            }
+        };
+        let Some(def) = spec.drives.get(k) else {
+            continue;
+        };
+        let axis = k;
+        let text = esi_for(def).ok_or_else(|| {
+            other(format!(
+                "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives and EL5101 terminals only",
+                def.name,
+                def.profile.name()
+            ))
+        })?;
+        let file = embedded(text, "embedded ESI")?;
+        let device = file
+            .devices
+            .first()
+            .ok_or_else(|| other("ESI has no device".into()))?;
+        let esc = emulated_drive(file, device, def, cycle)
+            .map_err(|e| other(format!("axis {axis}, drive '{}': {e}", def.name)))?;
+        escs.push(esc);
+    }
+    for t in &spec.emulated_extra {
+        escs.push(terminal_esc(t)?);
+    }
+    if escs.len() > MAX_SUBDEVICES {
+        return Err(other(format!(
+            "the emulated segment would have {} SubDevices; the link holds at most {MAX_SUBDEVICES}",
+            escs.len()
+        )));
+    }
+    let mut seg = Segment::new(escs, HOP_DELAY_NS);
+    seg.set_world(World::new(Plant::new()), spec.cycle);
+    Ok(seg)
+}
+
+impl EthercatLink {
+    /// The emulated segment (`ethercat-emu`), if any.
+    pub fn segment(&self) -> Option<&Segment> {
+        self.wire.segment()
+    }
+
+    /// The emulated segment, mutable (plant, fault knobs).
+    pub fn segment_mut(&mut self) -> Option<&mut Segment> {
+        self.wire.segment_mut()
+    }
+}
