@@ -67,10 +67,12 @@ use fieldprobe::esi::{self, Device, EsiFile};
 use fieldprobe::limits::MAX_SEGMENT_DEVICES;
 use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
-    device::{emulated_servo, DEFAULT_CYCLE},
+    device::{emulated_servo, ServoError, DEFAULT_CYCLE},
     raw,
     segment::{Segment, Stepping},
-    terminal, Esc,
+    terminal,
+    vendor::emulated_vendor_drive,
+    Esc,
 };
 use fieldprobe::sim::plant::{FixedStop, Plant, ProbeSurface};
 use fieldprobe::sim::world::World;
@@ -210,12 +212,28 @@ fn build_device(
         .devices
         .first()
         .with_context(|| format!("--device {shown}: the ESI file describes no device"))?;
+    let given = drive.is_some();
     let drive = drive.or(is_cia402(device).then_some(DEFAULT_DRIVE));
     if let Some(drive) = drive {
         let def = catalogue::load(drive)
             .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
-        let esc = emulated_servo(file, device, &def)
-            .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
+        let esc = match emulated_servo(file, device, &def) {
+            // A vendor's CiA 402 device: its own dictionary and default PDOs, the drive's
+            // model wired by object index.
+            Err(ServoError::PdoMismatch { .. }) if !given => {
+                let esc = emulated_vendor_drive(file, device, &def, DEFAULT_CYCLE)
+                    .map_err(|e| anyhow::anyhow!("device {position} ({shown}): {e}"))?;
+                eprintln!(
+                    "fieldprobe sim ethercat: device {position}: {} (vendor CiA 402 drive: \
+                     object dictionary and default PDO mapping from the ESI, drive model {})",
+                    device.type_name, def.name
+                );
+                return Ok((esc, Hosted::Servo(def.scaling)));
+            }
+            r => {
+                r.map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?
+            }
+        };
         eprintln!(
             "fieldprobe sim ethercat: device {position}: {} (CiA 402 servo, drive {})",
             device.type_name, def.name
