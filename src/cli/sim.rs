@@ -20,7 +20,11 @@
 //!   `--drive` a 402 device gets the built-in `cia402-generic` (= `drives/cia402-generic.toml`,
 //!   whose layout is the default mapping of `esi/fieldprobe-cia402-servo.xml`). The drive's PDO
 //!   layout must hold the entries of the ESI's default mapping, else the command fails with
-//!   exit 2;
+//!   exit 2 — except for a 402 device without `--drive` whose default mapping is not the
+//!   built-in drive's (a vendor's ESI): it is played as that vendor's device
+//!   ([`emulated_vendor_drive`](fieldprobe::sim::esc::vendor::emulated_vendor_drive): the
+//!   ESI's dictionary, default PDOs and remapping rules, the `cia402-generic` model wired by
+//!   object index, no touch probe unless the ESI declares 0x60B8 / 0x60B9);
 //! * a device whose ESI type name contains `EL1252` is a timestamp terminal
 //!   ([`emulated_el1252`](fieldprobe::sim::esc::device::emulated_el1252): 2 channels, continuous
 //!   latching, DC clock of the emulator); every `--probe-at` surface is also wired to its

@@ -1,6 +1,6 @@
 //! PDO configuration rules of an emulated vendor device: which SDO downloads to the PDO mapping
 //! objects (0x1600–0x17FF RxPDO, 0x1A00–0x1BFF TxPDO) and the PDO assignment objects
-//! (0x1C12 outputs, 0x1C13 inputs) a [`CoeServer`](super::coe::CoeServer) accepts, and the SDO
+//! (0x1C12 outputs, 0x1C13 inputs) a [`CoeServer`] accepts, and the SDO
 //! abort code of a refusal.
 //!
 //! The rules (CiA 301 §7.5.2.35 / §7.5.2.36 PDO mapping procedure, ETG.1000.6 §5.6.7.4 PDO

@@ -210,7 +210,7 @@ fn entry_type(name: &str, bits: u32) -> Option<DataType> {
         "UINT" | "WORD" => DataType::U16,
         "UDINT" | "DWORD" => DataType::U32,
         "ULINT" => DataType::U64,
-        _ if bits > 0 && bits % 8 == 0 => DataType::Bytes((bits / 8) as usize),
+        _ if bits > 0 && bits.is_multiple_of(8) => DataType::Bytes((bits / 8) as usize),
         _ => return None,
     })
 }
