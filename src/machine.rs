@@ -421,7 +421,7 @@ impl Machine {
             .zip(&cfg.axes)
             .filter_map(|(c, a)| c.meas.fixed_stop.and_then(|f| f.startup_warning(&a.name)))
             .collect();
-        let channel = Channel::new(ch_cfg, axes).map_err(MachineError::Config)?;
+        let channel = Channel::new(ch_cfg.clone(), axes).map_err(MachineError::Config)?;
         let zero_offsets = cfg
             .zero_offsets
             .iter()
@@ -485,6 +485,33 @@ impl Machine {
         if let Some(Ok(Some(w))) = check {
             startup.push(CncMessage::warning(ids::CAN_BUS_LOAD, w));
         }
+        // An axis whose device offers less than its drive definition maps (EtherCAT: no touch
+        // probe) runs with the definition the link fitted: the channel is built again with
+        // adapters and images that follow it.
+        let changed = (0..defs.len()).any(|i| {
+            link.drive_definition(i)
+                .is_some_and(|d| !std::sync::Arc::ptr_eq(&d, &defs[i]))
+        });
+        let channel = if changed {
+            let mut axes = Vec::new();
+            for (i, a) in cfg.axes.iter().enumerate() {
+                let def = link.drive_definition(i).unwrap_or_else(|| defs[i].clone());
+                let adapter = crate::drive::adapter_for(&def, &a.params).map_err(|source| {
+                    MachineError::Drive {
+                        axis: a.name.clone(),
+                        drive: a.drive.clone(),
+                        cause: source,
+                    }
+                })?;
+                let axis = Axis::new(a.name.clone(), adapter, def.scaling, a.referenced)
+                    .with_definition(def);
+                images[i] = ProcessImage::new(axis.output_len(), axis.input_len());
+                axes.push(axis);
+            }
+            Channel::new(ch_cfg, axes).map_err(MachineError::Config)?
+        } else {
+            channel
+        };
         let mut link = link;
         if let Some(path) = &choice.cycle_log {
             let file = std::fs::File::create(path).map_err(|e| {

@@ -291,6 +291,14 @@ pub mod ids {
     /// Project (error, start-up): the cycle time is shorter than the EtherCAT wire needs per
     /// cycle; names the wire time and the shortest cycle the wire carries.
     pub const ETHERCAT_CYCLE_TOO_SHORT: u32 = 900403;
+    /// Project (warning, start-up): the EtherCAT device of an axis lacks the touch-probe
+    /// objects of its drive definition's PDO mapping (0x60B8 / 0x60B9 …); the master maps the
+    /// rest and the axis has no drive latch (issue 19).
+    pub const ETHERCAT_NO_DRIVE_LATCH: u32 = 900404;
+    /// Project (error, start-up): the EtherCAT device of an axis does not offer objects its
+    /// drive definition maps (not in its dictionary, not mappable in that direction, another
+    /// bit length); names the objects, the device and the drive.
+    pub const ETHERCAT_PDO_OBJECTS_MISSING: u32 = 900405;
 }
 
 /// A number from a user or a file, for a message: as Rust writes it for ordinary magnitudes,

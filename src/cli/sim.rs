@@ -20,7 +20,11 @@
 //!   `--drive` a 402 device gets the built-in `cia402-generic` (= `drives/cia402-generic.toml`,
 //!   whose layout is the default mapping of `esi/fieldprobe-cia402-servo.xml`). The drive's PDO
 //!   layout must hold the entries of the ESI's default mapping, else the command fails with
-//!   exit 2;
+//!   exit 2 — except for a 402 device without `--drive` whose default mapping is not the
+//!   built-in drive's (a vendor's ESI): it is played as that vendor's device
+//!   ([`emulated_vendor_drive`](fieldprobe::sim::esc::vendor::emulated_vendor_drive): the
+//!   ESI's dictionary, default PDOs and remapping rules, the `cia402-generic` model wired by
+//!   object index, no touch probe unless the ESI declares 0x60B8 / 0x60B9);
 //! * a device whose ESI type name contains `EL1252` is a timestamp terminal
 //!   ([`emulated_el1252`](fieldprobe::sim::esc::device::emulated_el1252): 2 channels, continuous
 //!   latching, DC clock of the emulator); every `--probe-at` surface is also wired to its
@@ -67,10 +71,12 @@ use fieldprobe::esi::{self, Device, EsiFile};
 use fieldprobe::limits::MAX_SEGMENT_DEVICES;
 use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
-    device::{emulated_servo, DEFAULT_CYCLE},
+    device::{emulated_servo, ServoError, DEFAULT_CYCLE},
     raw,
     segment::{Segment, Stepping},
-    terminal, Esc,
+    terminal,
+    vendor::emulated_vendor_drive,
+    Esc,
 };
 use fieldprobe::sim::plant::{FixedStop, Plant, ProbeSurface};
 use fieldprobe::sim::world::World;
@@ -210,12 +216,28 @@ fn build_device(
         .devices
         .first()
         .with_context(|| format!("--device {shown}: the ESI file describes no device"))?;
+    let given = drive.is_some();
     let drive = drive.or(is_cia402(device).then_some(DEFAULT_DRIVE));
     if let Some(drive) = drive {
         let def = catalogue::load(drive)
             .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
-        let esc = emulated_servo(file, device, &def)
-            .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
+        let esc = match emulated_servo(file, device, &def) {
+            // A vendor's CiA 402 device: its own dictionary and default PDOs, the drive's
+            // model wired by object index.
+            Err(ServoError::PdoMismatch { .. }) if !given => {
+                let esc = emulated_vendor_drive(file, device, &def, DEFAULT_CYCLE)
+                    .map_err(|e| anyhow::anyhow!("device {position} ({shown}): {e}"))?;
+                eprintln!(
+                    "fieldprobe sim ethercat: device {position}: {} (vendor CiA 402 drive: \
+                     object dictionary and default PDO mapping from the ESI, drive model {})",
+                    device.type_name, def.name
+                );
+                return Ok((esc, Hosted::Servo(def.scaling)));
+            }
+            r => {
+                r.map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?
+            }
+        };
         eprintln!(
             "fieldprobe sim ethercat: device {position}: {} (CiA 402 servo, drive {})",
             device.type_name, def.name

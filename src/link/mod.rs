@@ -213,6 +213,17 @@ pub trait Link: Send {
         0
     }
 
+    /// The drive definition device `device` runs with, when the link changed it at start-up
+    /// (EtherCAT: the PDO mapping fitted to what the device offers, e.g. without the touch
+    /// probe objects a device lacks); `None`: the one the link was opened with.
+    fn drive_definition(
+        &self,
+        device: usize,
+    ) -> Option<std::sync::Arc<crate::drive::catalogue::DriveDefinition>> {
+        let _ = device;
+        None
+    }
+
     /// What the link reports once it is up (EtherCAT: the segment, the SubDevices the machine
     /// does not name, the wire time of a cycle; info messages). None by default.
     fn startup_report(&self) -> Vec<crate::messages::CncMessage> {

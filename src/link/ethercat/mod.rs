@@ -62,6 +62,7 @@ pub mod datagrams;
 pub mod dictionary;
 #[cfg(feature = "sim")]
 mod emulated;
+pub mod pdo_fit;
 pub mod terminals;
 mod wire;
 
@@ -200,6 +201,8 @@ struct AxisDevice {
     def: Arc<DriveDefinition>,
     mailbox: Mailbox,
     name: String,
+    /// Start-up warning of the PDO mapping ([`pdo_fit`]: touch probe left out).
+    warning: Option<CncMessage>,
 }
 
 /// One terminal of the machine on the bus, with its process images (copied to and from
@@ -304,7 +307,10 @@ impl EthercatLink {
             }
             for ax in axes.iter_mut() {
                 if let Mailbox::Coe(c) = &mut ax.mailbox {
-                    write_pdo_mapping(md, c, &ax.def, &ax.name).await?;
+                    let fitted = pdo_fit::fit_mapping(md, c, &ax.def, &ax.name).await?;
+                    write_pdo_mapping(md, c, &fitted.def, &ax.name).await?;
+                    ax.def = fitted.def;
+                    ax.warning = fitted.warning;
                 }
             }
             let cycle = Duration::from_nanos(spec.cycle.0);
@@ -620,6 +626,7 @@ impl EthercatLink {
                 ),
             ));
         }
+        out.extend(self.axes.iter().filter_map(|a| a.warning.clone()));
         out.push(CncMessage::info(
             ids::ETHERCAT_WIRE_TIME,
             format!(
@@ -1185,7 +1192,24 @@ async fn assign_devices(
         })
         .collect();
     let ids: Vec<(u32, u32)> = subs.iter().map(|(_, v, p, _)| (*v, *p)).collect();
-    let found = terminals::match_ring(&wants, &ids).map_err(|(j, next)| {
+    let mut kept: Vec<Option<CoeClient>> = Vec::new();
+    let found = match terminals::match_ring(&wants, &ids) {
+        Ok(found) => Ok(found),
+        // A vendor's CiA 402 drive has its own identity: take it for a CiA 402 axis.
+        Err(e) => match embedded(SERVO_ESI, "embedded ESI")
+            .ok()
+            .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)))
+        {
+            Some(servo) => {
+                let stations: Vec<u16> = subs.iter().map(|s| s.0).collect();
+                let (ids, clients) = pdo_fit::cia402_as_servo(md, &stations, &ids, servo).await;
+                kept = clients;
+                terminals::match_ring(&wants, &ids).map_err(|_| e)
+            }
+            None => Err(e),
+        },
+    };
+    let found = found.map_err(|(j, next)| {
         let what = match order.get(j) {
             Some(terminals::Declared::Axis(k)) => format!(
                 "axis {k} (drive '{}')",
@@ -1246,13 +1270,17 @@ async fn assign_devices(
         } else if def.profile == Profile::Sercos {
             Mailbox::Soe(SoeClient::new(*station, out, inp))
         } else {
-            Mailbox::Coe(CoeClient::new(*station, out, inp))
+            match kept.get_mut(i).and_then(Option::take) {
+                Some(c) => Mailbox::Coe(c),
+                None => Mailbox::Coe(CoeClient::new(*station, out, inp)),
+            }
         };
         axes.push(AxisDevice {
             sub: i,
             def: def.clone(),
             mailbox,
             name: format!("{axis}:{name}"),
+            warning: None,
         });
     }
     let terminals: Vec<TerminalDevice> = spec
@@ -1487,6 +1515,10 @@ impl Link for EthercatLink {
 
     fn startup_report(&self) -> Vec<CncMessage> {
         self.startup_messages()
+    }
+
+    fn drive_definition(&self, device: usize) -> Option<Arc<DriveDefinition>> {
+        self.axes.get(device).map(|a| a.def.clone())
     }
 
     fn terminal_inputs(&self, index: usize) -> Option<&[u8]> {

@@ -353,6 +353,8 @@ pub struct CoeServer {
     delayed: VecDeque<(u32, Vec<u8>)>,
     last_model_error: u16,
     descriptions: OdDescriptions,
+    /// PDO configuration rules (emulated vendor devices), checked before every download.
+    pdo_rules: Option<super::pdo_rules::PdoRules>,
     /// Fault knobs.
     pub faults: CoeFaults,
     /// Number of SDO requests handled.
@@ -384,6 +386,7 @@ impl CoeServer {
             model,
             entries,
             descriptions,
+            pdo_rules: None,
             mbx_size: mailbox_size.max(16),
             counter: MailboxCounter::default(),
             last_request_counter: 0,
@@ -406,6 +409,17 @@ impl CoeServer {
     /// Replace the descriptions (e.g. with [`OdDescriptions::from_esi`]).
     pub fn set_descriptions(&mut self, d: OdDescriptions) {
         self.descriptions = d;
+    }
+
+    /// Check every download against these PDO configuration rules
+    /// ([`super::pdo_rules`]).
+    pub fn set_pdo_rules(&mut self, rules: super::pdo_rules::PdoRules) {
+        self.pdo_rules = Some(rules);
+    }
+
+    /// The PDO configuration rules, if the server has them.
+    pub fn pdo_rules_mut(&mut self) -> Option<&mut super::pdo_rules::PdoRules> {
+        self.pdo_rules.as_mut()
     }
 
     /// The drive model.
@@ -649,6 +663,10 @@ impl CoeServer {
     }
 
     fn write_entry(&mut self, i: usize, data: &[u8]) -> Result<(), u32> {
+        if let Some(r) = &self.pdo_rules {
+            let e = &self.entries[i];
+            r.check(self, e.index, e.sub, data)?;
+        }
         let e = &self.entries[i];
         if e.access == Access::Ro {
             return Err(abort::READ_ONLY);

@@ -68,7 +68,7 @@ pub const MAX_MAILBOX_SIZE: u16 = 1486;
 
 /// Why a device needing a mailbox has none usable: a mailbox sync manager with a missing or
 /// impossible size (named), or no mailbox sync managers at all.
-fn mailbox_error(device: &Device) -> ServoError {
+pub(super) fn mailbox_error(device: &Device) -> ServoError {
     use crate::esi::SmKind;
     let bad = device
         .sync_managers
@@ -144,6 +144,9 @@ pub enum ServoError {
     /// The cycle time is zero.
     #[error("cycle time must be > 0")]
     ZeroCycle,
+    /// A vendor device cannot be played as a CiA 402 drive (see [`super::vendor`]).
+    #[error("{0}")]
+    Vendor(String),
 }
 
 /// The mailbox server of an emulated drive: CoE for CiA 402 (and every object-dictionary
@@ -177,12 +180,14 @@ impl MailboxServer {
 }
 
 /// One mapped entry: bytes `len` at `bus` in the bus image are bytes at `model` in the
-/// model's image.
+/// model's image — or, for an object outside the model's layout (`object`), the value of that
+/// object in the CoE dictionary (written by an RxPDO, read for a TxPDO).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Span {
     bus: usize,
     model: usize,
     len: usize,
+    object: Option<(u16, u8)>,
 }
 
 /// The application of an emulated drive: the mailbox server (owning the drive model) plus the
@@ -204,9 +209,41 @@ pub struct ServoApp {
     exchanges: u64,
     cycle_ns: u64,
     synchronized: bool,
+    /// Mapped objects outside the model's layout are served from the CoE dictionary (vendor
+    /// devices, [`super::vendor`]); otherwise such a mapping is refused.
+    od_spans: bool,
 }
 
 impl ServoApp {
+    /// The application of a vendor device ([`super::vendor`]): `coe` owns the model, whose
+    /// images have the layouts `model_rx` / `model_tx`; the bus images follow the CoE PDO
+    /// objects, mapped objects outside the model's layouts come from the dictionary.
+    pub(super) fn vendor(
+        coe: CoeServer,
+        model_rx: crate::drive::pdo::PdoLayout,
+        model_tx: crate::drive::pdo::PdoLayout,
+        cycle_ns: u64,
+    ) -> Result<Self, AlStatusCode> {
+        let (rx_len, tx_len) = (model_rx.len(), model_tx.len());
+        let mut app = ServoApp {
+            server: MailboxServer::Coe(coe),
+            model_rx,
+            model_tx,
+            outputs: vec![0; rx_len],
+            inputs: vec![0; tx_len],
+            bus_rx_len: 0,
+            bus_tx_len: 0,
+            rx_plan: Vec::new(),
+            tx_plan: Vec::new(),
+            exchanges: 0,
+            cycle_ns,
+            synchronized: false,
+            od_spans: true,
+        };
+        app.remap()?;
+        Ok(app)
+    }
+
     /// The CoE server, if the drive speaks CoE.
     pub fn coe(&self) -> Option<&CoeServer> {
         match &self.server {
@@ -240,9 +277,9 @@ impl ServoApp {
         let MailboxServer::Coe(coe) = &self.server else {
             return Ok(());
         };
-        let (rx_len, rx_plan) = plan_from_objects(coe, 0x1C12, &self.model_rx)
+        let (rx_len, rx_plan) = plan_from_objects(coe, 0x1C12, &self.model_rx, self.od_spans)
             .ok_or(AlStatusCode::INVALID_OUTPUT_MAPPING)?;
-        let (tx_len, tx_plan) = plan_from_objects(coe, 0x1C13, &self.model_tx)
+        let (tx_len, tx_plan) = plan_from_objects(coe, 0x1C13, &self.model_tx, self.od_spans)
             .ok_or(AlStatusCode::INVALID_INPUT_MAPPING)?;
         self.bus_rx_len = rx_len;
         self.bus_tx_len = tx_len;
@@ -261,11 +298,13 @@ impl ServoApp {
 
 /// Bus image length and copy plan of the PDOs assigned in `assign` (0x1C12 / 0x1C13) as the
 /// CoE objects say now; `None` if an assigned PDO or a mapped object is missing or not in the
-/// model's `layout` (with the same size), or an entry is not whole bytes.
+/// model's `layout` (with the same size) — with `od`, an object outside the layout is served
+/// from the dictionary if it has that size there — or an entry is not whole bytes.
 fn plan_from_objects(
     coe: &CoeServer,
     assign: u16,
     layout: &crate::drive::pdo::PdoLayout,
+    od: bool,
 ) -> Option<(usize, Vec<Span>)> {
     let value = |index: u16, sub: u8| -> Option<i64> {
         let e = coe
@@ -292,15 +331,34 @@ fn plan_from_objects(
             }
             let len = bits / 8;
             if index != 0 {
-                let e = layout.find(index, sub)?;
-                if e.ty.size() != len {
-                    return None;
+                match layout.find(index, sub) {
+                    Some(e) if e.ty.size() == len => plan.push(Span {
+                        bus,
+                        model: e.offset,
+                        len,
+                        object: None,
+                    }),
+                    None if od => {
+                        let e = coe
+                            .entries()
+                            .iter()
+                            .find(|e| e.index == index && e.sub == sub)?;
+                        let size = match e.ty {
+                            DataType::Bytes(n) => n,
+                            ty => ty.size()?,
+                        };
+                        if size != len {
+                            return None;
+                        }
+                        plan.push(Span {
+                            bus,
+                            model: 0,
+                            len,
+                            object: Some((index, sub)),
+                        });
+                    }
+                    _ => return None,
                 }
-                plan.push(Span {
-                    bus,
-                    model: e.offset,
-                    len,
-                });
             }
             bus += len;
         }
@@ -327,6 +385,15 @@ impl EscApplication for ServoApp {
 
     fn outputs_written(&mut self, _sm: u8, data: &[u8]) {
         for s in &self.rx_plan {
+            if let Some((index, sub)) = s.object {
+                if let (MailboxServer::Coe(c), Some(src)) =
+                    (&mut self.server, data.get(s.bus..s.bus + s.len))
+                {
+                    // A value the object refuses is dropped, as a drive ignores it.
+                    let _ = c.write(index, sub, src);
+                }
+                continue;
+            }
             if let (Some(dst), Some(src)) = (
                 self.outputs.get_mut(s.model..s.model + s.len),
                 data.get(s.bus..s.bus + s.len),
@@ -366,6 +433,17 @@ impl EscApplication for ServoApp {
             self.model_step(now);
         }
         for s in &self.tx_plan {
+            if let Some((index, sub)) = s.object {
+                if let (MailboxServer::Coe(c), Some(dst)) =
+                    (&self.server, buf.get_mut(s.bus..s.bus + s.len))
+                {
+                    if let Ok(v) = c.read(index, sub) {
+                        let n = v.len().min(dst.len());
+                        dst[..n].copy_from_slice(&v[..n]);
+                    }
+                }
+                continue;
+            }
             if let (Some(dst), Some(src)) = (
                 buf.get_mut(s.bus..s.bus + s.len),
                 self.inputs.get(s.model..s.model + s.len),
@@ -383,7 +461,8 @@ impl EscApplication for ServoApp {
             };
         };
         let len = |assign, layout| {
-            plan_from_objects(coe, assign, layout).map_or(0, |(n, _)| u16::try_from(n).unwrap_or(0))
+            plan_from_objects(coe, assign, layout, self.od_spans)
+                .map_or(0, |(n, _)| u16::try_from(n).unwrap_or(0))
         };
         ProcessDataSizes {
             outputs: len(0x1C12, &self.model_rx),
@@ -394,6 +473,9 @@ impl EscApplication for ServoApp {
     fn state_change(&mut self, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
         if from == AlState::PreOp && to >= AlState::SafeOp {
             self.remap()?;
+        }
+        if let Some(r) = self.coe_mut().and_then(|c| c.pdo_rules_mut()) {
+            r.set_editable(to == AlState::PreOp);
         }
         Ok(())
     }
@@ -421,7 +503,7 @@ impl EscApplication for ServoApp {
 }
 
 /// PDOs of `pdos` the ESI assigns to sync manager `sm` by default.
-fn assigned(pdos: &[Pdo], sm: u8) -> Vec<&Pdo> {
+pub(super) fn assigned(pdos: &[Pdo], sm: u8) -> Vec<&Pdo> {
     pdos.iter().filter(|p| p.sm == Some(sm)).collect()
 }
 
@@ -601,6 +683,7 @@ pub fn emulated_drive(
             bus: 0,
             model: 0,
             len,
+            object: None,
         }]
     };
     let mut app = ServoApp {
@@ -616,6 +699,7 @@ pub fn emulated_drive(
         exchanges: 0,
         cycle_ns,
         synchronized: false,
+        od_spans: false,
     };
     app.remap().map_err(|_| ServoError::PdoMismatch {
         direction: "rx/tx",
@@ -760,10 +844,12 @@ pub fn emulated_el1252(
             bus: 0,
             model: 0,
             len: tx_len,
+            object: None,
         }],
         exchanges: 0,
         cycle_ns: DEFAULT_CYCLE.as_nanos() as u64,
         synchronized: false,
+        od_spans: false,
     };
     Ok(Esc::new(cfg, Box::new(app)))
 }

@@ -41,12 +41,14 @@ mod clock;
 pub mod coe;
 pub mod dc;
 pub mod device;
+pub mod pdo_rules;
 pub mod raw;
 pub mod sdo_info;
 pub mod segment;
 pub mod soe;
 pub mod terminal;
 pub mod types;
+pub mod vendor;
 
 use std::collections::VecDeque;
 
