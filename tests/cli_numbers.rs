@@ -636,8 +636,8 @@ fn round_trips_over_canopen_to_sim_canopen_with_64_bit_and_real_objects() {
     });
     let link_arg = format!("canopen-{bus}");
     let link = ["--link", link_arg.as_str(), "--node", "5"];
-    // A node answers SDO once it has booted (its boot-up message follows "listening"): wait
-    // for the first answer, at most 10 tries of 0.5 s.
+    // The nodes have booted when "listening" is printed; the retries (at most 10 of 0.5 s)
+    // only ride out a loaded machine.
     let booted = (0..10).any(|_| run(&sdo("read", &link, &["0x1000"])).0 == Some(0));
     assert!(booted, "node 5 never answered SDO 0x1000");
     for v in [i64::MIN, -1, i64::MAX] {

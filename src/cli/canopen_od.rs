@@ -1,20 +1,28 @@
 //! `sdos --node` and `pdos --node`: the CANopen side of [`super::sdos`] / [`super::pdos`].
 //!
 //! CiA 301 has no service that lists a node's dictionary, so `sdos --node` lists the objects
-//! of the node's EDS (`--eds`), checks each by an SDO upload (sub-index 0, or the first
-//! sub-index the EDS lists), and adds an SDO scan of the objects fieldprobe knows (the CiA 301
+//! of the node's EDS (`--eds`), checks each by an SDO upload (the first readable sub-index the
+//! EDS lists), and adds an SDO scan of the objects fieldprobe knows (the CiA 301
 //! communication area objects of [`SCAN_COMMUNICATION`], the PDO parameters, and the CiA 402
 //! objects of [`fieldprobe::drive::pdo::OBJECTS`]) that the EDS does not list. Lines:
 //! ```text
 //! SDO 0x6040, "Controlword" (EDS, on the node)
 //!   0x6040:00, rw, uint16, 16 bit, "Controlword"
+//! SDO 0x1001, "Error register" (EDS, on the node; upload refused: abort 0x060a0023 …)
 //! SDO 0x6502, "Supported drive modes" (EDS, not on the node: abort 0x06020000 …)
 //! SDO 0x60d5, "touch probe 1 positive edge counter" (scan, not in the EDS)
 //! ```
+//! Only abort 0x06020000 ("object does not exist", CiA 301 SDO abort codes) says an EDS object is
+//! missing. Any other abort comes from an object that is there but did not give its value
+//! (python-canopen's `LocalNode` answers 0x060A0023 for an entry without a value, other
+//! devices 0x08000024 "no data available" or 0x08000022 "device state"); a write-only object
+//! (0x06010001) is listed as on the node. The scan, which has no EDS to go by, lists only
+//! objects whose upload succeeded or that are write-only.
 
 use super::bus::{refused, Bus};
 use super::EXIT_OK;
 use fieldprobe::bus::canopen::eds::{self, AccessType, Eds};
+use fieldprobe::bus::canopen::sdo::abort::NO_OBJECT;
 use fieldprobe::bus::ethercat::sdo_info::data_type_name;
 use fieldprobe::link::canopen::pdo_map::transmission_type_text;
 use fieldprobe::link::LinkError;
@@ -73,7 +81,11 @@ fn communication_name(index: u16) -> String {
 
 /// What an upload of one object said.
 enum Presence {
+    /// The upload succeeded, or the object is write-only (abort 0x06010001).
     Present,
+    /// The object exists but refused the upload with this abort code.
+    Refused(u32),
+    /// Abort 0x06020000: no such object.
     Absent(u32),
 }
 
@@ -89,7 +101,11 @@ fn probe(
         Err(LinkError::Abort {
             code: 0x0601_0001, ..
         }) => Ok(Presence::Present),
-        Err(LinkError::Abort { code, .. }) => Ok(Presence::Absent(code)),
+        Err(LinkError::Abort {
+            code: code @ NO_OBJECT,
+            ..
+        }) => Ok(Presence::Absent(code)),
+        Err(LinkError::Abort { code, .. }) => Ok(Presence::Refused(code)),
         Err(e) => Err(e),
     }
 }
@@ -97,6 +113,10 @@ fn probe(
 fn presence_text(p: &Presence) -> String {
     match p {
         Presence::Present => "EDS, on the node".into(),
+        Presence::Refused(c) => format!(
+            "EDS, on the node; upload refused: abort {c:#010x} {}",
+            fieldprobe::bus::abort::abort_text(*c)
+        ),
         Presence::Absent(c) => format!(
             "EDS, not on the node: abort {c:#010x} {}",
             fieldprobe::bus::abort::abort_text(*c)
@@ -171,7 +191,7 @@ fn list(
             .copied();
         let sub = first.map_or(0, |o| o.sub);
         let p = probe(s, node, index, sub)?;
-        if matches!(p, Presence::Absent(_)) {
+        if !matches!(p, Presence::Present) {
             continue;
         }
         let name = first.map_or_else(|| communication_name(index), |o| o.name.to_string());

@@ -428,8 +428,9 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
 /// `--probe-at ID=MM` puts a probe surface at MM (axis units of the drive's scaling, converted
 /// with `increments_per_unit` and `offset`) wired to touch probe input 1 of node ID.
 ///
-/// Prints `listening` on stderr when the bus is open. Exit 0; 2 on bad input (the message
-/// names the option and the allowed values) or when the bus cannot be opened.
+/// Prints `listening` on stderr when the bus is open and every node has sent its boot-up
+/// message (pre-operational: it answers SDO from then on). Exit 0; 2 on bad input (the
+/// message names the option and the allowed values) or when the bus cannot be opened.
 #[derive(Debug, clap::Args)]
 pub struct CanopenArgs {
     /// CAN bus: `udp` (python-can udp_multicast on 239.74.163.2:43113), `udp:GROUP:PORT`, or
@@ -684,9 +685,20 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
     }
     let stop = StopSignals::new();
     let mut bus = open_can_bus(&a.bus, bus_spec)?;
-    eprintln!("fieldprobe sim canopen: listening on {}", bus.describe());
     let t0 = Instant::now();
     let (mut received, mut sent) = (0u64, 0u64);
+    // Boot the nodes before saying `listening`: each sends its boot-up message and is
+    // pre-operational, so a master that starts on that line is answered at once (a node in
+    // boot-up (NMT initialisation) ignores SDO requests, and a request that came before the
+    // first poll would wait for the master's SDO timeout).
+    let mut boot = Vec::new();
+    segment.run_with(&[], Nanos(0), &mut |f| boot.push(f));
+    for f in &boot {
+        bus.send(f)
+            .map_err(|e| anyhow::anyhow!("bus {}: send {f:?}: {e}", bus.describe()))?;
+        sent += 1;
+    }
+    eprintln!("fieldprobe sim canopen: listening on {}", bus.describe());
     let mut frames = Vec::with_capacity(CAN_BATCH);
     while deadline.is_none_or(|d| Instant::now() < d)
         && !stop.as_ref().is_some_and(|s| s.received())
