@@ -20,7 +20,9 @@
 //! 4. SOEM through pysoem (`tests/pysoem/vendor.py`): identities, the remapping rules with
 //!    their abort codes on a PDO that may change, the default mappings back (the AKD's are
 //!    fixed: assigned only), OP at the expected working counter, CiA 402 enable through the
-//!    process images of all three.
+//!    process images of all three;
+//! 5. error 900405: the Ingenia ESI without 0x6060 in ring position 0, the default machine's
+//!    drive maps 0x6060: the start-up is refused naming the object.
 //!
 //! SKIP without user namespaces / veth or without the test data (FIELDPROBE_REQUIRE_TEST_DATA=1
 //! makes missing data a failure). Every wait is bounded.
@@ -262,7 +264,73 @@ fn inner(python: &Path) {
         r["error"], r["steps"]
     );
     println!("vendor.py steps: {}", r["steps"]);
+
+    // 5. A required object the device lacks: an Ingenia ESI copy without 0x6060 (its dictionary
+    //    object and its entry in the default RxPDO). The emulator plays it (its model runs
+    //    without modes of operation), our master refuses to start: error 900405 names the
+    //    object, nothing runs.
+    let text = std::fs::read_to_string(&ingenia).unwrap();
+    let cut = without_object(&text, 0x6060);
+    assert!(
+        cut.len() < text.len() && !cut.contains(">#x6060<"),
+        "0x6060 removed"
+    );
+    let no6060 = dir.join("ingenia-without-6060.xml");
+    std::fs::write(&no6060, cut).unwrap();
+    let devices = [
+        no6060.display().to_string(),
+        leadshine.display().to_string(),
+        akd.display().to_string(),
+    ];
+    let devices: Vec<&str> = devices.iter().map(String::as_str).collect();
+    let (emu, _log) = start_emulator(&devices, "60", &[]);
+    let (status, out, err) = fieldprobe(&["run", "examples/nc/hello.nc", "--link", &link]);
+    drop(emu);
+    assert!(
+        status.is_some_and(|s| !s.success()),
+        "{status:?}\n{out}\n{err}"
+    );
+    assert_eq!(out, "", "nothing ran:\n{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("error 900405: "))
+        .unwrap_or_else(|| panic!("error 900405 expected:\n{err}"));
+    assert!(
+        line.contains("device 0:EVS-NET-01")
+            && line.contains("0x6060:00 (not in its object dictionary)")
+            && !line.contains("0x60B8"),
+        "{line}"
+    );
     println!("INNER OK");
+}
+
+/// `xml` without the `<Object>` of `index` and without the PDO `<Entry>`s that map it.
+fn without_object(xml: &str, index: u16) -> String {
+    let tag = format!(">#x{index:04x}<");
+    let mut out = String::new();
+    let mut rest = xml;
+    loop {
+        let next = ["<Object>", "<Entry>"]
+            .iter()
+            .filter_map(|t| rest.find(t).map(|i| (i, *t)))
+            .min();
+        let Some((i, open)) = next else {
+            out.push_str(rest);
+            return out;
+        };
+        let close = open.replace('<', "</");
+        let end = i + rest[i..].find(&close).expect("closing tag") + close.len();
+        let block = &rest[i..end];
+        let own_index = block
+            .split("</Index>")
+            .next()
+            .is_some_and(|h| h.to_ascii_lowercase().ends_with(&tag[..tag.len() - 1]));
+        out.push_str(&rest[..i]);
+        if !own_index {
+            out.push_str(block);
+        }
+        rest = &rest[end..];
+    }
 }
 
 /// Without a network: the two excerpts parse (`fieldprobe esi show`), and `drive from-esi`

@@ -1067,7 +1067,9 @@ pub fn akd_esi(s: &Sii) -> XDevice {
             },
         }],
     }];
-    let mut by_index: BTreeMap<u16, Vec<(u8, String, String, bool, bool)>> = BTreeMap::new();
+    // index → (sub-index, type, name, in an RxPDO, in a TxPDO)
+    type Referenced = (u8, String, String, bool, bool);
+    let mut by_index: BTreeMap<u16, Vec<Referenced>> = BTreeMap::new();
     for ((index, sub), (ty, name, rx, tx)) in refs {
         by_index
             .entry(index)
