@@ -15,51 +15,42 @@ use fieldprobe::sim::esc::sdo_info::OdDescriptions;
 
 #[path = "common/test_data.rs"]
 mod test_data;
+#[path = "common/vendor_esi.rs"]
+mod vendor_esi;
 
 /// Mailbox 64 − 6 mailbox header − 2 CoE header − 4 SDO information header.
 const MAX_DATA: usize = 52;
 
-fn hex(s: &str) -> u32 {
-    u32::from_str_radix(s.trim(), 16).unwrap()
-}
-
-/// (object, entries) from the dump's `Index:` / `Sub:` lines.
-fn read_dump(text: &str) -> Vec<(ObjectDescription, Vec<EntryDescription>)> {
-    let mut out: Vec<(ObjectDescription, Vec<EntryDescription>)> = Vec::new();
-    for line in text.lines() {
-        let l = line.trim_end_matches('\r');
-        let field = |key: &str| -> &str {
-            let at = l.find(key).unwrap() + key.len();
-            l[at..].split_whitespace().next().unwrap()
-        };
-        let name = |l: &str| l.split_once("Name: ").map_or("", |x| x.1).to_string();
-        if l.starts_with(" Index: ") {
-            out.push((
-                ObjectDescription {
-                    index: hex(field("Index: ")) as u16,
-                    data_type: hex(field("Datatype: ")) as u16,
-                    max_sub: 0,
-                    object_code: ObjectCode::from(hex(field("Objectcode: ")) as u8),
-                    name: name(l),
-                },
-                Vec::new(),
-            ));
-        } else if l.starts_with("  Sub: ") {
-            let (o, entries) = out.last_mut().unwrap();
-            let sub = hex(field("Sub: ")) as u8;
-            o.max_sub = o.max_sub.max(sub);
-            entries.push(EntryDescription {
+/// (object, entries) from the dump, read by the shared reader of `tests/common/vendor_esi.rs`
+/// (`Index:` / `Sub:` lines).
+fn read_dump(bytes: &[u8]) -> Vec<(ObjectDescription, Vec<EntryDescription>)> {
+    vendor_esi::read_sdo_dump(bytes)
+        .objects
+        .into_iter()
+        .map(|o| {
+            let entries: Vec<EntryDescription> = o
+                .entries
+                .iter()
+                .map(|e| EntryDescription {
+                    index: o.index,
+                    sub: e.sub,
+                    value_info: 0x07,
+                    data_type: e.data_type,
+                    bit_len: e.bit_len,
+                    access: e.access,
+                    name: e.name.clone(),
+                })
+                .collect();
+            let description = ObjectDescription {
                 index: o.index,
-                sub,
-                value_info: 0x07,
-                data_type: hex(field("Datatype: ")) as u16,
-                bit_len: hex(field("Bitlength: ")) as u16,
-                access: hex(field("Obj.access: ")) as u16,
-                name: name(l),
-            });
-        }
-    }
-    out
+                data_type: o.data_type,
+                max_sub: o.entries.iter().map(|e| e.sub).max().unwrap_or(0),
+                object_code: ObjectCode::from(o.object_code),
+                name: o.name,
+            };
+            (description, entries)
+        })
+        .collect()
 }
 
 fn ask(
@@ -89,13 +80,8 @@ fn leadshine_dictionary_round_trips_through_sdo_information() {
     ) else {
         return;
     };
-    // Latin-1, as names travel on the wire (some of the dump's names are raw bytes).
-    let text: String = std::fs::read(p)
-        .unwrap()
-        .iter()
-        .map(|&b| char::from(b))
-        .collect();
-    let dump = read_dump(&text);
+    // Names as Latin-1, as they travel on the wire (some of the dump's names are raw bytes).
+    let dump = read_dump(&std::fs::read(p).unwrap());
     assert_eq!(dump.len(), 639, "the dump says: 639 entries");
     let mut server = OdDescriptions::default();
     for (o, es) in &dump {

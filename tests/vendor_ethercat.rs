@@ -28,9 +28,11 @@ use serde_json::{json, Value};
 mod esi_xml;
 #[path = "common/test_data.rs"]
 mod test_data;
+#[path = "common/vendor_spec.rs"]
+mod vendor_spec;
 #[path = "common/veth.rs"]
 mod veth;
-use esi_xml::esi_number;
+use vendor_spec::device_spec;
 use veth::netns::{manifest_path, run_bounded};
 use veth::{start_emulator, VethPair, MASTER_IF};
 
@@ -69,82 +71,6 @@ fn vendor_devices_over_veth() {
         )
         .into_os_string()
     });
-}
-
-fn kid<'a, 'i>(n: roxmltree::Node<'a, 'i>, tag: &str) -> Option<roxmltree::Node<'a, 'i>> {
-    n.children().find(|c| c.has_tag_name(tag))
-}
-
-/// A device as its ESI says, read with roxmltree: identity, name, default mapping (RxPdo /
-/// TxPdo with `Sm`, entries in order as (index, sub, bits)) and one object the dictionary
-/// does not mark PDO-mappable (a VAR of 16 or 32 bits at 0x6000 or above).
-fn device_spec(path: &Path) -> Value {
-    let text = std::fs::read_to_string(path).expect("read ESI");
-    let doc = roxmltree::Document::parse(&text).expect("parse ESI");
-    let root = doc.root_element();
-    let vendor = esi_number(
-        kid(kid(root, "Vendor").unwrap(), "Id")
-            .and_then(|n| n.text())
-            .unwrap(),
-    );
-    let device = root
-        .descendants()
-        .find(|n| n.has_tag_name("Device"))
-        .expect("a Device");
-    let ty = kid(device, "Type").unwrap();
-    let names: Vec<_> = device
-        .children()
-        .filter(|c| c.has_tag_name("Name"))
-        .collect();
-    let name = names
-        .iter()
-        .find(|c| c.attribute("LcId") == Some("1033"))
-        .or(names.first())
-        .and_then(|c| c.text())
-        .unwrap_or("")
-        .to_string();
-    let pdos = |tag: &str| -> Vec<[u32; 3]> {
-        device
-            .children()
-            .filter(|c| c.has_tag_name(tag) && c.attribute("Sm").is_some())
-            .flat_map(|p| p.children().filter(|e| e.has_tag_name("Entry")))
-            .map(|e| {
-                let f = |t: &str| kid(e, t).and_then(|n| n.text()).map_or(0, esi_number);
-                [f("Index"), f("SubIndex"), f("BitLen")]
-            })
-            .collect()
-    };
-    let pdo_index = |tag: &str| -> u32 {
-        device
-            .children()
-            .find(|c| c.has_tag_name(tag) && c.attribute("Sm").is_some())
-            .and_then(|p| kid(p, "Index"))
-            .and_then(|n| n.text())
-            .map_or(0, esi_number)
-    };
-    let not_mappable = device
-        .descendants()
-        .filter(|n| n.has_tag_name("Object"))
-        .find_map(|o| {
-            let index = esi_number(kid(o, "Index")?.text()?);
-            let bits = esi_number(kid(o, "BitSize")?.text()?);
-            let base = ["UINT", "UDINT", "INT", "DINT"].contains(&kid(o, "Type")?.text()?);
-            let mappable = kid(o, "Flags").and_then(|f| kid(f, "PdoMapping")).is_some();
-            (index >= 0x6000 && base && !mappable && (bits == 16 || bits == 32))
-                .then_some([index, 0, bits])
-        })
-        .expect("an object that is not PDO-mappable");
-    json!({
-        "vendor": vendor,
-        "product": esi_number(ty.attribute("ProductCode").unwrap()),
-        "revision": esi_number(ty.attribute("RevisionNo").unwrap_or("0")),
-        "name": name,
-        "rx": pdos("RxPdo"),
-        "tx": pdos("TxPdo"),
-        "not_mappable": not_mappable,
-        "rx_pdo": pdo_index("RxPdo"),
-        "tx_pdo": pdo_index("TxPdo"),
-    })
 }
 
 fn fieldprobe(args: &[&str]) -> (Option<std::process::ExitStatus>, String, String) {

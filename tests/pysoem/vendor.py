@@ -6,11 +6,13 @@
 Run by tests/vendor_ethercat.rs inside a private network namespace. SPEC_JSON is computed by the
 Rust test from the vendor ESI files with its own XML reader (not fieldprobe's):
 
-    {"devices": [{"vendor": int, "product": int, "revision": int, "name": str,
+    {"devices": [{"vendor": int, "product": int, "revision": int, "name": str, "type": str,
                   "rx": [[index, sub, bits], ...], "tx": [[index, sub, bits], ...],
                   "not_mappable": [index, sub, bits]}, ...]}     # ring order
 
-rx / tx: the ESI's default PDO mapping (RxPdo / TxPdo with Sm 2 / 3), in order.
+rx / tx: the ESI's default PDO mapping (RxPdo / TxPdo with Sm 2 / 3), in order; optional keys
+rx_pdo / tx_pdo (the default PDOs), rx_fixed / tx_fixed (they are Fixed: only assigned back,
+not remapped) and rx_edit (a PDO that is not fixed, where the remapping rules are tried).
 
 Steps per device in PRE-OP: identity and name (config_init); the PDO remapping rules with SDO
 downloads: 0x1C12:00 = 0 and 0x1600:00 = 0 accepted, 0x1600:01 = a non-mappable object refused
@@ -18,7 +20,7 @@ with 0x06040041, an entry written while 0x1600:00 != 0 refused with 0x06010003, 
 mapping written back. Then config_map (image sizes = the default mapping's bits), SAFE-OP -> OP
 with process data at the expected working counter, CiA 402 enable through the process image
 (controlword 6 -> 7 -> 15 at the offset of 0x6040, statusword & 0x6F 0x21 -> 0x23 -> 0x27 at the
-offset of 0x6041, target 0x607A = actual 0x6064), and in OP a write to 0x1C12:00 refused with
+offset of 0x6041, target 0x607A = actual 0x6064 where both are mapped), and in OP a write to 0x1C12:00 refused with
 0x08000022.
 
 Prints `VENDOR_RESULT {json}`; exits 0 when every check passed.
@@ -96,8 +98,26 @@ def write_mapping(s, assign, pdo, entries):
         check(code is None, f"{i:#06x}:{sub:02x} = {b.hex()} refused with {code}")
 
 
+def assign(s, a, pdos):
+    """PDO assignment `a` = `pdos` (sub-index 0 = 0, entries, count)."""
+    for i, sub, b in [(a, 0, bytes([0]))] + \
+            [(a, k + 1, struct.pack("<H", p)) for k, p in enumerate(pdos)] + \
+            [(a, 0, bytes([len(pdos)]))]:
+        code = abort_code(lambda: s.sdo_write(i, sub, b))
+        check(code is None, f"{i:#06x}:{sub:02x} = {b.hex()} refused with {code}")
+
+
+def restore(s, a, pdo, entries, fixed):
+    """Back to the ESI's default: a fixed PDO is only assigned, another one also mapped."""
+    if fixed:
+        assign(s, a, [pdo])
+    else:
+        write_mapping(s, a, pdo, entries)
+
+
 def remap_rules(s, d):
-    rx = d["rx_pdo"]
+    # The rules are tried on a PDO whose mapping may change (the default one may be fixed).
+    rx = d.get("rx_edit") or d["rx_pdo"]
     w = lambda i, sub, b: (lambda: s.sdo_write(i, sub, b))
     check(abort_code(w(0x1C12, 0, bytes([0]))) is None, "0x1C12:00 = 0 refused in PRE-OP")
     check(abort_code(w(rx, 0, bytes([0]))) is None, f"{rx:#06x}:00 = 0 refused in PRE-OP")
@@ -111,9 +131,9 @@ def remap_rules(s, d):
     code = abort_code(w(rx, 1, struct.pack("<I", mapping_value(d["rx"][0]))))
     check(code == 0x06010003, f"{rx:#06x}:01 with sub-index 0 != 0: abort {code}, expected 0x06010003")
     # Back to the ESI's default mapping (a master before us may have changed it).
-    write_mapping(s, 0x1C12, rx, d["rx"])
-    write_mapping(s, 0x1C13, d["tx_pdo"], d["tx"])
-    step("remap_rules", not_mappable=d["not_mappable"])
+    restore(s, 0x1C12, d["rx_pdo"], d["rx"], d.get("rx_fixed", False))
+    restore(s, 0x1C13, d["tx_pdo"], d["tx"], d.get("tx_fixed", False))
+    step("remap_rules", device=d["name"], edited=rx, not_mappable=d["not_mappable"])
 
 
 def run(iface, spec):
@@ -126,7 +146,9 @@ def run(iface, spec):
         for pos, (s, d) in enumerate(zip(master.slaves, devices)):
             check((s.man, s.id, s.rev) == (d["vendor"], d["product"], d["revision"]),
                   f"device {pos}: identity {(s.man, s.id, s.rev)}, ESI {d}")
-            check(s.name == d["name"][:40], f"device {pos}: name {s.name!r}, ESI {d['name']!r}")
+            # SOEM's name is the SII General order string (ESI `Type` text).
+            want = d.get("type") or d["name"]
+            check(s.name == want[:40], f"device {pos}: name {s.name!r}, ESI {want!r}")
             remap_rules(s, d)
         step("identity")
         master.config_map()
@@ -149,7 +171,8 @@ def run(iface, spec):
 
         ins = exchange()
         for o, i, d in zip(outs, ins, devices):
-            put(o, d["rx"], 0x607A, get(i, d["tx"], 0x6064))
+            if offset(d["tx"], 0x6064) is not None:
+                put(o, d["rx"], 0x607A, get(i, d["tx"], 0x6064))
             put(o, d["rx"], 0x6060, 8)
         master.state = pysoem.OP_STATE
         master.write_state()

@@ -170,3 +170,204 @@ impl PdoRules {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The rules on a small dictionary: 0x6040 (16 bits) and 0x607A (32 bits) RxPDO-mappable,
+    //! 0x6041 (16 bits) TxPDO-mappable, 0x2000 (32 bits) not mappable; mapping objects 0x1600
+    //! and 0x1A00 (4 entries each), assignments 0x1C12 / 0x1C13 (2 entries each). Each test
+    //! states the abort code CiA 301 / ETG.1000.6 demand for the case.
+
+    use super::*;
+    use crate::bus::ethercat::sdo_info::{access as a, EntryDescription};
+    use crate::drive::catalogue;
+    use crate::drive::model::ds402::Ds402Model;
+    use crate::sim::esc::coe::{ds402_objects, Access, DataType, ObjectEntry};
+    use crate::sim::esc::sdo_info::OdDescriptions;
+
+    fn rw(index: u16, sub: u8, ty: DataType, v: i64) -> ObjectEntry {
+        ObjectEntry {
+            access: Access::Rw,
+            ..ObjectEntry::constant(index, sub, ty, v)
+        }
+    }
+
+    fn server() -> CoeServer {
+        let def = catalogue::builtin("cia402-generic").unwrap();
+        let mut od = CoeServer::new(
+            Box::new(Ds402Model::new(&def)),
+            ds402_objects("pdo rules test"),
+            128,
+        );
+        for pdo in [0x1600u16, 0x1A00] {
+            od.insert(rw(pdo, 0, DataType::U8, 0));
+            for k in 1..=4 {
+                od.insert(rw(pdo, k, DataType::U32, 0));
+            }
+        }
+        for assign in [0x1C12u16, 0x1C13] {
+            od.insert(rw(assign, 0, DataType::U8, 0));
+            for k in 1..=2 {
+                od.insert(rw(assign, k, DataType::U16, 0));
+            }
+        }
+        od.insert(rw(0x2000, 0, DataType::U32, 0));
+        let mut d = OdDescriptions::default();
+        for (index, bits, acc) in [
+            (0x6040u16, 16u16, a::READ | a::WRITE | a::RXPDO),
+            (0x607A, 32, a::READ | a::WRITE | a::RXPDO),
+            (0x6041, 16, a::READ | a::TXPDO),
+            (0x2000, 32, a::READ | a::WRITE),
+        ] {
+            d.insert_entry(EntryDescription {
+                index,
+                sub: 0,
+                value_info: 0x07,
+                data_type: if bits == 16 { 0x0006 } else { 0x0007 },
+                bit_len: bits,
+                access: acc,
+                name: String::new(),
+            });
+        }
+        od.set_descriptions(d);
+        od
+    }
+
+    fn rules(max_outputs: usize, max_inputs: usize) -> PdoRules {
+        let mut r = PdoRules::new(max_outputs, max_inputs);
+        r.set_editable(true);
+        r
+    }
+
+    /// Map `entries` into `pdo` directly (the server's own write, no rules).
+    fn map(od: &mut CoeServer, pdo: u16, entries: &[u32]) {
+        od.write(pdo, 0, &[0]).unwrap();
+        for (k, v) in entries.iter().enumerate() {
+            od.write(pdo, k as u8 + 1, &v.to_le_bytes()).unwrap();
+        }
+    }
+
+    #[test]
+    fn length_exceeded_is_0x06040042() {
+        let mut od = server();
+        // 0x6040 (16) + 0x607A (32) = 48 bits = 6 bytes.
+        map(&mut od, 0x1600, &[0x6040_0010, 0x607A_0020]);
+        let r = rules(5, 8);
+        assert_eq!(r.check(&od, 0x1600, 0, &[2]), Err(0x0604_0042));
+        assert_eq!(r.check(&od, 0x1600, 0, &[1]), Ok(()), "16 bits fit 5 bytes");
+        assert_eq!(
+            rules(6, 8).check(&od, 0x1600, 0, &[2]),
+            Ok(()),
+            "exactly 6 bytes"
+        );
+        // The assignment adds up its PDOs: 0x1600 with 2 entries (6 bytes) in 5 bytes.
+        od.write(0x1600, 0, &[2]).unwrap();
+        od.write(0x1C12, 1, &0x1600u16.to_le_bytes()).unwrap();
+        assert_eq!(r.check(&od, 0x1C12, 0, &[1]), Err(PDO_TOO_LONG));
+        assert_eq!(rules(6, 0).check(&od, 0x1C12, 0, &[1]), Ok(()));
+        // Sub-index 0 beyond the entries the object has: 0x06090031.
+        assert_eq!(rules(64, 64).check(&od, 0x1600, 0, &[5]), Err(0x0609_0031));
+    }
+
+    #[test]
+    fn bad_assignment_is_0x06090030() {
+        let od = server();
+        let r = rules(64, 64);
+        let pdo = |i: u16| i.to_le_bytes();
+        assert_eq!(
+            r.check(&od, 0x1C12, 1, &pdo(0x1A00)),
+            Err(0x0609_0030),
+            "TxPDO on SM2"
+        );
+        assert_eq!(
+            r.check(&od, 0x1C13, 1, &pdo(0x1600)),
+            Err(0x0609_0030),
+            "RxPDO on SM3"
+        );
+        assert_eq!(
+            r.check(&od, 0x1C12, 1, &pdo(0x1601)),
+            Err(0x0609_0030),
+            "no such PDO"
+        );
+        assert_eq!(
+            r.check(&od, 0x1C12, 1, &pdo(0x6040)),
+            Err(0x0609_0030),
+            "not a PDO"
+        );
+        assert_eq!(r.check(&od, 0x1C12, 1, &pdo(0x1600)), Ok(()));
+        assert_eq!(r.check(&od, 0x1C13, 1, &pdo(0x1A00)), Ok(()));
+        assert_eq!(r.check(&od, 0x1C12, 2, &pdo(0)), Ok(()), "0 = no PDO");
+    }
+
+    #[test]
+    fn wrong_bit_length_or_direction_is_0x06040041() {
+        let od = server();
+        let r = rules(64, 64);
+        let e = |v: u32| v.to_le_bytes();
+        assert_eq!(
+            r.check(&od, 0x1600, 1, &e(0x6040_0020)),
+            Err(0x0604_0041),
+            "32 of 16 bits"
+        );
+        assert_eq!(
+            r.check(&od, 0x1600, 1, &e(0x607A_0010)),
+            Err(0x0604_0041),
+            "16 of 32 bits"
+        );
+        assert_eq!(r.check(&od, 0x1600, 1, &e(0x6040_0010)), Ok(()));
+        assert_eq!(
+            r.check(&od, 0x1600, 1, &e(0x6041_0010)),
+            Err(NOT_MAPPABLE),
+            "TxPDO object"
+        );
+        assert_eq!(r.check(&od, 0x1A00, 1, &e(0x6041_0010)), Ok(()));
+        assert_eq!(
+            r.check(&od, 0x1A00, 1, &e(0x6040_0010)),
+            Err(NOT_MAPPABLE),
+            "RxPDO object"
+        );
+        assert_eq!(
+            r.check(&od, 0x1600, 1, &e(0x2000_0020)),
+            Err(NOT_MAPPABLE),
+            "not mappable"
+        );
+        assert_eq!(
+            r.check(&od, 0x1600, 1, &e(0x5FFF_0010)),
+            Err(0x0602_0000),
+            "no object"
+        );
+        assert_eq!(r.check(&od, 0x1600, 1, &e(0x0000_0008)), Ok(()), "a gap");
+    }
+
+    #[test]
+    fn state_and_sub_index_zero() {
+        let mut od = server();
+        let e = 0x6040_0010u32.to_le_bytes();
+        let mut r = rules(64, 64);
+        r.set_editable(false);
+        assert_eq!(
+            r.check(&od, 0x1600, 0, &[0]),
+            Err(0x0800_0022),
+            "not in PRE-OP"
+        );
+        assert_eq!(r.check(&od, 0x1C12, 0, &[0]), Err(0x0800_0022));
+        assert_eq!(
+            r.check(&od, 0x6040, 0, &[1, 0]),
+            Ok(()),
+            "other objects pass"
+        );
+        r.set_editable(true);
+        map(&mut od, 0x1600, &[0x6040_0010]);
+        od.write(0x1600, 0, &[1]).unwrap();
+        assert_eq!(
+            r.check(&od, 0x1600, 1, &e),
+            Err(0x0601_0003),
+            "sub-index 0 is 1"
+        );
+        od.write(0x1C12, 0, &[1]).unwrap();
+        assert_eq!(
+            r.check(&od, 0x1C12, 1, &0x1600u16.to_le_bytes()),
+            Err(SI0_NOT_ZERO)
+        );
+    }
+}
