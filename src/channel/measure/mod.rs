@@ -417,7 +417,7 @@ impl Channel {
     /// Axis `i`'s PLC interface is fed from inputs that cross the bus with the drives' actual
     /// values (`true`): a timestamp input terminal on the same segment latches at the same SYNC0
     /// as the drive samples its position, so what the interface shows in a cycle belongs to
-    /// the instant of the actual value read in that cycle, and [`Self::plc_view`] pairs them
+    /// the instant of the actual value read in that cycle, and the evaluation pairs them
     /// without the delay a PLC that sees its inputs at once needs.
     pub fn set_plc_inputs_from_bus(&mut self, i: usize, on: bool) {
         if let Some(f) = self.plc_from_bus.get_mut(i) {

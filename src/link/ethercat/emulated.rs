@@ -41,7 +41,7 @@ const HOP_DELAY_NS: u64 = 500;
 /// drive definition) and its terminals (each played as
 /// [`emulated_terminal`](crate::sim::esc::terminal::emulated_terminal) plays it) — then the
 /// extra devices, with an empty plant, synchronised at SYNC0. A CiA 402 drive definition without
-/// touch probe gets the servo without it ([`without_touch_probe`]).
+/// touch probe gets the servo without it (its ESI device without 0x60B8 … 0x60BD).
 pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
     let other = |m: String| LinkError::Other(m);
     let coupler_esi = embedded(COUPLER_ESI, "esi/fieldprobe-ek1100.xml")?;
