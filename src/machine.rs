@@ -237,6 +237,26 @@ pub struct Machine {
     trace: Option<Trace>,
     /// The machine's terminals by name, in `[[terminal]]` order (EtherCAT links).
     terminals: Vec<String>,
+    /// Axes whose probe is wired to a timestamp input terminal (`[[terminal]] probe_axis`).
+    terminal_probes: Vec<TerminalProbe>,
+}
+
+/// An axis's probe on an input of a timestamp input terminal (`[[terminal]] probe_axis`,
+/// `probe_channel`; FCT-C4 §7.5): each cycle the terminal's process inputs are decoded
+/// ([`crate::drive::el1252::Decoder`], continuous latching, the terminal's default) and the
+/// channel's level and latest latched DC timestamp go to the axis's PLC interface
+/// ([`crate::drive::el1252::feed_plc`]) — the PLC program of §7.5 linking "Input" and
+/// "LatchPos2".
+#[derive(Debug, Clone)]
+struct TerminalProbe {
+    /// Axis index.
+    axis: usize,
+    /// Terminal index (`[[terminal]]` order).
+    terminal: usize,
+    /// Input channel, 1-based.
+    channel: u8,
+    /// Decoder of the terminal's inputs (channels: what its image holds).
+    decoder: crate::drive::el1252::Decoder,
 }
 
 impl std::fmt::Debug for Machine {
@@ -524,6 +544,7 @@ impl Machine {
         for (i, a) in cfg.axes.iter().enumerate() {
             channel.set_dead_time_cycles(i, a.dead_time_cycles.unwrap_or(link.dead_time_cycles()));
         }
+        let terminal_probes = terminal_probes(cfg, link.as_ref(), &mut channel)?;
         Ok(Machine {
             channel,
             link,
@@ -537,6 +558,7 @@ impl Machine {
             startup,
             trace: None,
             terminals: cfg.terminals.iter().map(|t| t.name.clone()).collect(),
+            terminal_probes,
         })
     }
 
@@ -635,6 +657,16 @@ impl Machine {
             .collect();
         let mut surface = ProbeSurface::new(i, inc, wired);
         surface.active_high = cfg.axes[i].meas.edge == ProbeEdge::Positive;
+        // The probe is also wired to every timestamp input that carries an axis's probe.
+        for tp in &self.terminal_probes {
+            let device = self.link.terminal_device(tp.terminal).ok_or_else(|| {
+                MachineError::Config(format!(
+                    "terminal {}: the link does not emulate it, so a simulated probe cannot switch its input",
+                    self.terminals[tp.terminal]
+                ))
+            })?;
+            surface.wired.push((device, tp.channel));
+        }
         let signals: Vec<(SignalSource, ProbeEdge)> = cfg
             .axes
             .iter()
@@ -643,7 +675,8 @@ impl Machine {
         let probe = self.plant_mut()?.add_probe_surface(surface);
         let cycle = self.cycle;
         for (j, (signal, edge)) in signals.into_iter().enumerate() {
-            if self.plcs[j].is_some() {
+            // An axis whose probe is on a terminal has its PLC inputs from the terminal.
+            if self.plcs[j].is_some() || self.terminal_probes.iter().any(|t| t.axis == j) {
                 continue;
             }
             // Every axis gets a PLC on the first probe; its mode follows the source the axis
@@ -739,6 +772,7 @@ impl Machine {
         self.now = self.now.saturating_add(self.cycle);
         match self.link.exchange(self.now, &mut self.images) {
             Ok(()) => {
+                self.feed_terminal_probes();
                 for i in 0..self.plcs.len() {
                     if let (Some(plc), Some(src)) =
                         (self.plcs[i].as_mut(), self.channel.armed_signal(i))
@@ -790,6 +824,28 @@ impl Machine {
             };
             self.channel
                 .acyclic_done(req.id, result.map_err(|e| e.to_string()));
+        }
+    }
+
+    /// The PLC glue of the axes whose probe is on a timestamp input terminal
+    /// ([`TerminalProbe`]), after each exchange. The terminal's image length was checked when
+    /// the machine was built, so decoding cannot fail.
+    fn feed_terminal_probes(&mut self) {
+        for tp in &mut self.terminal_probes {
+            let Some(image) = self.link.terminal_inputs(tp.terminal) else {
+                continue;
+            };
+            let Ok((levels, edges)) = tp.decoder.decode(image) else {
+                continue;
+            };
+            let level = levels
+                .get(usize::from(tp.channel) - 1)
+                .copied()
+                .unwrap_or(false);
+            let edge = self.channel.config().axes[tp.axis].meas.edge;
+            if let Some(plc) = self.channel.plc_mut(tp.axis) {
+                crate::drive::el1252::feed_plc(plc, tp.channel, level, &edges, edge);
+            }
         }
     }
 
@@ -1327,6 +1383,53 @@ fn check_probing_input(
         def.profile.name(),
         def.name
     )))
+}
+
+/// The axes whose probe a `[[terminal]]` wires to a timestamp input (`probe_axis`,
+/// `probe_channel`): the terminal must be an EL1252-kind timestamp input whose process inputs
+/// hold the channel; the channel then reads the axis's PLC interface with the actual values
+/// latched at the same SYNC0 ([`Channel::set_plc_inputs_from_bus`]).
+fn terminal_probes(
+    cfg: &MachineConfig,
+    link: &dyn Link,
+    channel: &mut Channel,
+) -> Result<Vec<TerminalProbe>, MachineError> {
+    use crate::drive::el1252::{Decoder, LatchMode, CHANNEL_LEN};
+    let mut out = Vec::new();
+    for (k, t) in cfg.terminals.iter().enumerate() {
+        let Some(w) = &t.probe else { continue };
+        let at = format!(
+            "{}:{}: [[terminal]] {} probe_axis = \"{}\"",
+            cfg.source, w.line, t.name, w.axis
+        );
+        if !is_timestamp_terminal(cfg, t) {
+            return Err(MachineError::Config(format!(
+                "{at}: esi \"{}\" is no timestamp input (EL1252 kind, e.g. fieldprobe-el1252); a probe for PLC_TIMESTAMP is wired to one (seed 004 §7.5)",
+                t.esi
+            )));
+        }
+        let axis = cfg
+            .axes
+            .iter()
+            .position(|a| a.name == w.axis)
+            .ok_or_else(|| MachineError::Config(format!("{at}: no such axis")))?;
+        let channels = link.terminal_inputs(k).map_or(0, |i| i.len() / CHANNEL_LEN);
+        if channels < usize::from(w.channel) {
+            return Err(MachineError::Config(format!(
+                "{at}: probe_channel = {}: the terminal's process inputs hold {channels} timestamp channel{} of {CHANNEL_LEN} bytes",
+                w.channel,
+                if channels == 1 { "" } else { "s" }
+            )));
+        }
+        channel.set_plc_inputs_from_bus(axis, true);
+        out.push(TerminalProbe {
+            axis,
+            terminal: k,
+            channel: w.channel,
+            decoder: Decoder::new(channels, LatchMode::Continuous),
+        });
+    }
+    Ok(out)
 }
 
 /// The machine's `[[terminal]]` tables with their ESI files loaded (relative paths from the

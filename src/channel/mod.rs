@@ -300,6 +300,9 @@ pub struct Channel {
     /// What the PLC interface showed in the last cycles, newest first (see
     /// [`Channel::plc_view`]).
     plc_seen: Vec<std::collections::VecDeque<(Nanos, crate::core::measure::plc::AxisPlc)>>,
+    /// Per axis: the PLC interface is fed from bus inputs latched with the actual values
+    /// ([`Channel::set_plc_inputs_from_bus`]).
+    plc_from_bus: Vec<bool>,
     /// External-latch handshake clients per axis.
     ext_latch: Vec<Option<crate::core::measure::plc::ExtLatchClient>>,
     /// Time of the current cycle.
@@ -357,6 +360,7 @@ impl Channel {
             prepared: vec![false; n],
             plc: vec![Default::default(); n],
             plc_seen: vec![Default::default(); n],
+            plc_from_bus: vec![false; n],
             ext_latch: vec![None; n],
             now: Nanos::ZERO,
             latch_log: None,

@@ -203,6 +203,14 @@ pub trait Link: Send {
         None
     }
 
+    /// The world device number ([`crate::sim::world`]) of the machine's terminal `index` when
+    /// the link hosts its model (`ethercat-emu`: an EL1252-kind timestamp input), so that a
+    /// probe surface can be wired to its inputs; `None` otherwise.
+    fn terminal_device(&self, index: usize) -> Option<usize> {
+        let _ = index;
+        None
+    }
+
     /// Fault knob: lose the `n`-th exchange (0-based). Links that cannot inject ignore it.
     fn lose_exchange_at(&mut self, n: u64) {
         let _ = n;

@@ -30,6 +30,10 @@
 //! esi = "fieldprobe-el5101"            # required: a built-in ESI (esi/*.xml) or an ESI file
 //!                                      # relative to this file
 //! count = 4                            # optional, 1 ..= 1024: ENC1 … ENC4 in a row
+//! probe_axis = "Z"                     # optional, a timestamp input (EL1252 kind) only: the
+//!                                      # probe of this axis is wired to the terminal; the
+//!                                      # axis's PLC and PLC_TIMESTAMP read it (seed 004 §7.5)
+//! probe_channel = 1                    # optional, 1 ..= 2 (default 1): the terminal input
 //! [can]
 //! bitrate = 500000                     # project key: CAN bit rate, bit/s ("500k", "1M"): one of
 //!                                      # the CiA 301 rates (default 1M); the CANopen links
@@ -121,7 +125,27 @@ pub struct TerminalConfig {
     /// Axes declared above it in the file: in the ring it stands after their drives (the file
     /// lists the SubDevices in ring order).
     pub after_axes: usize,
+    /// `probe_axis` / `probe_channel`: the axis whose probe is wired to input channel
+    /// (1 or 2) of this timestamp input terminal (seed 004 §7.5, FCT-C4 PLC_TIMESTAMP).
+    pub probe: Option<TerminalProbeWiring>,
 }
+
+/// An axis's probe wired to a timestamp input terminal (`[[terminal]] probe_axis`,
+/// `probe_channel`): the terminal's input level and latched DC timestamps of that channel feed
+/// the axis's PLC interface (`probing_signal`, `timestamp`), as the PLC program of FCT-C4 §7.5
+/// links "Input" and "LatchPos2".
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TerminalProbeWiring {
+    /// The axis name (`Z`).
+    pub axis: String,
+    /// The terminal's input channel, 1 or 2.
+    pub channel: u8,
+    /// Line of the `probe_axis` key.
+    pub line: usize,
+}
+
+/// Highest `probe_channel` (an EL1252 has two inputs).
+pub const MAX_PROBE_CHANNEL: u8 = 2;
 
 /// Most terminals a machine file may declare (counts expanded), the emulated segment's cap.
 pub const MAX_TERMINALS: usize = crate::limits::MAX_SEGMENT_DEVICES;
@@ -249,6 +273,34 @@ impl MachineConfig {
                 message: "no [[axis]] table; a machine needs at least one axis (name = \"X\")"
                     .to_string(),
             });
+        }
+        // A probe wired to a terminal names an axis of the machine, at most one terminal each.
+        for (k, t) in cfg.terminals.iter().enumerate() {
+            let Some(w) = &t.probe else { continue };
+            if !cfg.axes.iter().any(|a| a.name == w.axis) {
+                let names: Vec<&str> = cfg.axes.iter().map(|a| a.name.as_str()).collect();
+                return Err(ParamError::Config {
+                    origin: Origin::new(file, w.line),
+                    message: format!(
+                        "[[terminal]] {}: probe_axis = \"{}\" is not an axis of the machine; the axes are {}",
+                        t.name,
+                        w.axis,
+                        names.join(", ")
+                    ),
+                });
+            }
+            if let Some(first) = cfg.terminals[..k]
+                .iter()
+                .find(|o| o.probe.as_ref().is_some_and(|p| p.axis == w.axis))
+            {
+                return Err(ParamError::Config {
+                    origin: Origin::new(file, w.line),
+                    message: format!(
+                        "[[terminal]] {}: the probe of axis {} is already wired to terminal {} (line {}); an axis has one probe input",
+                        t.name, w.axis, first.name, first.line
+                    ),
+                });
+            }
         }
         Ok(cfg)
     }
@@ -476,6 +528,8 @@ impl MachineConfig {
             .line(table.span().map(|s| s.start))
             .unwrap_or(fallback_line);
         let (mut name, mut esi, mut count) = (None, None, 1usize);
+        let (mut probe_axis, mut probe_channel): (Option<(String, usize)>, Option<u8>) =
+            (None, None);
         for (key, item) in table.iter() {
             let origin = ctx.at(ctx.key_line(table, key, item, header));
             let text = item.as_str();
@@ -504,11 +558,31 @@ impl MachineConfig {
                         project_int(&raw, "count", 1, MAX_TERMINALS as u32, "terminals", &origin)?
                             as usize;
                 }
+                "probe_axis" => {
+                    let a = text.filter(|a| !a.trim().is_empty()).ok_or_else(|| {
+                        ParamError::Config {
+                            origin: origin.clone(),
+                            message: "[[terminal]] probe_axis: expected the name of an axis whose probe is wired to this timestamp input, e.g. probe_axis = \"Z\"".to_string(),
+                        }
+                    })?;
+                    probe_axis = Some((a.to_string(), origin.line));
+                }
+                "probe_channel" => {
+                    let raw = item.as_integer().map_or(String::new(), |i| i.to_string());
+                    probe_channel = Some(project_int(
+                        &raw,
+                        "probe_channel",
+                        1,
+                        u32::from(MAX_PROBE_CHANNEL),
+                        "terminal input channel",
+                        &origin,
+                    )? as u8);
+                }
                 other => {
                     return Err(ParamError::Config {
                         origin,
                         message: format!(
-                            "unknown key '{other}' in [[terminal]]; allowed: name, esi, count"
+                            "unknown key '{other}' in [[terminal]]; allowed: name, esi, count, probe_axis, probe_channel"
                         ),
                     })
                 }
@@ -522,6 +596,27 @@ impl MachineConfig {
         };
         let name = name.ok_or_else(|| missing("a name"))?;
         let esi = esi.ok_or_else(|| missing("an esi"))?;
+        if probe_channel.is_some() && probe_axis.is_none() {
+            return Err(ParamError::Config {
+                origin: ctx.at(header),
+                message: format!(
+                    "[[terminal]] {name}: probe_channel without probe_axis; name the axis whose probe is wired to the channel, e.g. probe_axis = \"Z\""
+                ),
+            });
+        }
+        if probe_axis.is_some() && count != 1 {
+            return Err(ParamError::Config {
+                origin: ctx.at(header),
+                message: format!(
+                    "[[terminal]] {name}: probe_axis wires one terminal; write a [[terminal]] of its own (without count) for the timestamp input that carries the probe"
+                ),
+            });
+        }
+        let probe = probe_axis.map(|(axis, line)| TerminalProbeWiring {
+            axis,
+            channel: probe_channel.unwrap_or(1),
+            line,
+        });
         if self.terminals.len() + count > MAX_TERMINALS {
             return Err(ParamError::Config {
                 origin: ctx.at(header),
@@ -550,6 +645,7 @@ impl MachineConfig {
                 esi: esi.clone(),
                 line: header,
                 after_axes: 0,
+                probe: probe.clone(),
             });
         }
         Ok(())

@@ -404,9 +404,24 @@ impl Channel {
     ) -> (Nanos, &crate::core::measure::plc::AxisPlc) {
         let delay = self.axes[i].dead_time_cycles().saturating_sub(1) as usize;
         let seen = &self.plc_seen[i];
+        let bus = self.plc_from_bus.get(i).copied().unwrap_or(false);
         match seen.get(delay.min(seen.len().saturating_sub(1))) {
+            // Inputs latched at the same SYNC0 as the actual value: the current interface
+            // belongs to the sample's instant.
+            Some((t, _)) if bus => (*t, &self.plc[i]),
             Some((t, plc)) => (*t, plc),
             None => (self.now, &self.plc[i]),
+        }
+    }
+
+    /// Axis `i`'s PLC interface is fed from inputs that cross the bus with the drives' actual
+    /// values (`true`): a timestamp input terminal on the same segment latches at the same SYNC0
+    /// as the drive samples its position, so what the interface shows in a cycle belongs to
+    /// the instant of the actual value read in that cycle, and the evaluation pairs them
+    /// without the delay a PLC that sees its inputs at once needs.
+    pub fn set_plc_inputs_from_bus(&mut self, i: usize, on: bool) {
+        if let Some(f) = self.plc_from_bus.get_mut(i) {
+            *f = on;
         }
     }
 

@@ -15,6 +15,8 @@ pub struct El1252Device {
     channels: Vec<Channel>,
     /// Single-event: an edge of this kind is kept until read.
     kept: Vec<(bool, bool)>,
+    /// Added to every timestamp (ns; [`Self::set_stamp_offset_ns`]).
+    stamp_offset_ns: i64,
 }
 
 impl El1252Device {
@@ -26,7 +28,15 @@ impl El1252Device {
             mode,
             channels: vec![Channel::default(); n],
             kept: vec![(false, false); n],
+            stamp_offset_ns: 0,
         }
+    }
+
+    /// Fault knob: stamp every edge `offset_ns` later than it happened (negative: earlier), as
+    /// a terminal with a wrong dead time would — so a test can tell that a measured value
+    /// follows this terminal's timestamps. 0 by default (the EL1252 stamps within 1 µs).
+    pub fn set_stamp_offset_ns(&mut self, offset_ns: i64) {
+        self.stamp_offset_ns = offset_ns;
     }
 
     /// Bytes of the process image.
@@ -42,7 +52,8 @@ impl El1252Device {
         let (Some(c), Some(k)) = (self.channels.get_mut(i), self.kept.get_mut(i)) else {
             return;
         };
-        let t = u64::try_from(self.clock.dc_time(at)).unwrap_or(0);
+        let t =
+            u64::try_from(self.clock.dc_time(at).saturating_add(self.stamp_offset_ns)).unwrap_or(0);
         if rising {
             c.status |= ST_LEVEL;
         } else {

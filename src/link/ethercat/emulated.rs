@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use super::terminals::{self, TerminalSpec};
 use super::{embedded, esi_for, EthercatLink, EthercatSpec, COUPLER_ESI, MAX_SUBDEVICES};
+use crate::drive::catalogue::Profile;
 use crate::esi;
 use crate::link::LinkError;
 use crate::sim::esc::device::emulated_drive;
@@ -14,6 +15,24 @@ use crate::sim::esc::{Esc, EscConfig, NullApp};
 use crate::sim::plant::Plant;
 use crate::sim::world::World;
 
+/// The CiA 402 touch-probe objects: 0x60B8 function, 0x60B9 status, 0x60BA – 0x60BD values.
+const TOUCH_PROBE: std::ops::RangeInclusive<u16> = 0x60B8..=0x60BD;
+
+/// The servo ESI device as it is without the touch-probe option: the same identity, its
+/// default PDOs and ESI dictionary without the touch-probe objects — what the emulator plays
+/// for a CiA 402 drive definition without touch probe (many real drives have none; issue 19),
+/// so that its PDO mapping matches the definition's.
+fn without_touch_probe(device: &esi::Device) -> esi::Device {
+    let mut d = device.clone();
+    for p in d.rx_pdos.iter_mut().chain(d.tx_pdos.iter_mut()) {
+        p.entries.retain(|e| !TOUCH_PROBE.contains(&e.index));
+    }
+    if let Some(dict) = d.profile.as_mut().and_then(|p| p.dictionary.as_mut()) {
+        dict.objects.retain(|o| !TOUCH_PROBE.contains(&o.index));
+    }
+    d
+}
+
 /// Forwarding delay between neighbouring emulated devices.
 const HOP_DELAY_NS: u64 = 500;
 
@@ -21,7 +40,8 @@ const HOP_DELAY_NS: u64 = 500;
 /// ([`terminals::ring_order`]) — one drive per axis (the ESI of its family, the model of its
 /// drive definition) and its terminals (each played as
 /// [`emulated_terminal`](crate::sim::esc::terminal::emulated_terminal) plays it) — then the
-/// extra devices, with an empty plant, synchronised at SYNC0.
+/// extra devices, with an empty plant, synchronised at SYNC0. A CiA 402 drive definition without
+/// touch probe gets the servo without it (its ESI device without 0x60B8 … 0x60BD).
 pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
     let other = |m: String| LinkError::Other(m);
     let coupler_esi = embedded(COUPLER_ESI, "esi/fieldprobe-ek1100.xml")?;
@@ -68,6 +88,13 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
             .devices
             .first()
             .ok_or_else(|| other("ESI has no device".into()))?;
+        let bare;
+        let device = if def.profile == Profile::Cia402 && !def.has_drive_latch() {
+            bare = without_touch_probe(device);
+            &bare
+        } else {
+            device
+        };
         let esc = emulated_drive(file, device, def, cycle)
             .map_err(|e| other(format!("axis {axis}, drive '{}': {e}", def.name)))?;
         escs.push(esc);

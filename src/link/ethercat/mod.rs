@@ -1505,6 +1505,12 @@ impl Link for EthercatLink {
         self.wire.segment_mut()?.model_mut(device)
     }
 
+    #[cfg(feature = "sim")]
+    fn terminal_device(&self, index: usize) -> Option<usize> {
+        let sub = self.terminals.get(index)?.sub;
+        self.wire.segment()?.world_device_at(sub)
+    }
+
     fn lose_exchange_at(&mut self, n: u64) {
         EthercatLink::lose_exchange_at(self, n);
     }

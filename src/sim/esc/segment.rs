@@ -278,6 +278,18 @@ impl Segment {
             .nth(device)
     }
 
+    /// World device number of the device at ring position `pos` (`None`: it hosts no model).
+    pub fn world_device_at(&self, pos: usize) -> Option<usize> {
+        let escs = &self.chain.escs;
+        escs.get(pos)?.app().model()?;
+        Some(
+            escs[..pos]
+                .iter()
+                .filter(|e| e.app().model().is_some())
+                .count(),
+        )
+    }
+
     /// Number of devices.
     pub fn len(&self) -> usize {
         self.chain.escs.len()
