@@ -326,8 +326,12 @@ fn technosoft_nodes_keep_the_touch_probe_and_no_warning() {
     let parsed = eds::parse(&text, "ipos.eds").unwrap();
     let def = generic();
     let node = EmulatedNode::from_eds(1, &def, &parsed).unwrap();
-    let link = CanopenLink::with_nodes(vec![node], &[def.clone()], Nanos::from_micros(4000))
-        .unwrap_or_else(|e| panic!("{e}"));
+    let link = CanopenLink::with_nodes(
+        vec![node],
+        std::slice::from_ref(&def),
+        Nanos::from_micros(4000),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     assert!(link.startup_report().is_empty());
     assert!(Arc::ptr_eq(&link.drive_definition(0).unwrap(), &def));
 }
