@@ -299,6 +299,17 @@ pub mod ids {
     /// drive definition maps (not in its dictionary, not mappable in that direction, another
     /// bit length); names the objects, the device and the drive.
     pub const ETHERCAT_PDO_OBJECTS_MISSING: u32 = 900405;
+
+    /// Project (warning, start-up): the CANopen node of an axis lacks the touch-probe objects
+    /// of its drive definition's PDO mapping (0x60B8 / 0x60B9 …, asked by SDO upload or
+    /// refused in the mapping); the master maps the rest and the axis has no drive latch
+    /// (issue 19; the CANopen counterpart of 900404).
+    pub const CANOPEN_NO_DRIVE_LATCH: u32 = 900504;
+    /// Project (error, start-up): the CANopen node of an axis does not offer objects its
+    /// drive definition maps (not in its dictionary, another length, refused in the PDO
+    /// mapping); names the node, the drive and the objects (the CANopen counterpart of
+    /// 900405).
+    pub const CANOPEN_PDO_OBJECTS_MISSING: u32 = 900505;
 }
 
 /// A number from a user or a file, for a message: as Rust writes it for ordinary magnitudes,

@@ -77,10 +77,11 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
     let mut machine = Machine::with_link(&cfg, &choice)?;
     // The bus as it came up (EtherCAT segment, SubDevices not named, wire time per cycle): on
     // stderr for a real bus and for a machine that names terminals; the emulator's default
-    // segment of axes only is logged (FIELDPROBE_LOG=info), not printed.
+    // segment of axes only is logged (FIELDPROBE_LOG=info), not printed. A warning (a device
+    // without touch probe, 900404 / 900504) is printed on every link.
     let print_report = choice.leaves_process() || !cfg.terminals.is_empty();
     for m in machine.startup_report() {
-        if print_report {
+        if print_report || m.severity != fieldprobe::messages::Severity::Info {
             eprintln!("{m}");
         } else {
             tracing::info!(target: "fieldprobe::link::ethercat", "{m}");

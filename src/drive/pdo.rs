@@ -413,6 +413,13 @@ impl PdoEntry {
     }
 }
 
+/// Is `index` one of the optional touch-probe objects (CiA 402 0x60B8–0x60BD touch probe
+/// function, status and edge positions, 0x60D0 touch probe source, 0x60D5–0x60D8 edge
+/// counters)? Many CiA 402 drives have none of them (issue 19).
+pub fn is_touch_probe(index: u16) -> bool {
+    matches!(index, 0x60B8..=0x60BD | 0x60D0 | 0x60D5..=0x60D8)
+}
+
 /// The byte layout of one direction of a drive's process data.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct PdoLayout {
@@ -441,6 +448,19 @@ impl PdoLayout {
             entries,
             len: offset,
         })
+    }
+
+    /// The layout without the entries `drop` names, the rest in their order (offsets packed
+    /// again).
+    pub fn without(&self, mut drop: impl FnMut(u16, u8) -> bool) -> PdoLayout {
+        let kept: Vec<_> = self
+            .entries
+            .iter()
+            .filter(|e| !drop(e.index, e.sub))
+            .map(|e| (e.index, e.sub, e.ty))
+            .collect();
+        // The entries were distinct already.
+        PdoLayout::from_objects(&kept).unwrap_or_default()
     }
 
     /// Build a layout from entry references such as `"0x6040:00"` (see [`parse_entry`]).

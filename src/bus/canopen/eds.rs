@@ -1000,6 +1000,21 @@ impl Entry {
         self.data_type.encode(&self.value(node_id)?).ok()
     }
 
+    /// Into which PDOs the entry may be mapped, (RPDO, TPDO): none without `PDOMapping=1`;
+    /// with it, by `AccessType` (CiA 306 §4.6.3): `rww` / `wo` into an RPDO (process output),
+    /// `ro` / `const` / `rwr` into a TPDO (process input), `rw` into either.
+    pub fn pdo_directions(&self) -> (bool, bool) {
+        if !self.pdo_mapping {
+            return (false, false);
+        }
+        use AccessType as A;
+        match self.access {
+            A::WriteOnly | A::ReadWriteOutput => (true, false),
+            A::ReadOnly | A::Const | A::ReadWriteInput => (false, true),
+            A::ReadWrite => (true, true),
+        }
+    }
+
     /// PDO mapping entry `index << 16 | sub << 8 | bit length` (CiA 301 PDO mapping parameter), if mappable.
     pub fn mapping_entry(&self) -> Option<u32> {
         if !self.pdo_mapping {

@@ -3,7 +3,7 @@
 //! `rwr` / `rw` into a TPDO), defaults and limits from `DefaultValue`, `LowLimit`, `HighLimit`.
 
 use super::{VendorDevice, VendorObject, OBJECTS_READ};
-use crate::bus::canopen::eds::{AccessType, Eds};
+use crate::bus::canopen::eds::Eds;
 use crate::drive::pdo::DataType;
 
 impl VendorDevice {
@@ -18,19 +18,7 @@ impl VendorDevice {
             let ty = DataType::from_cia301_code(e.data_type.code());
             let bits = e.data_type.bit_len().map_or(0, u32::from);
             let access = e.access;
-            let rx = e.pdo_mapping
-                && matches!(
-                    access,
-                    AccessType::WriteOnly | AccessType::ReadWrite | AccessType::ReadWriteOutput
-                );
-            let tx = e.pdo_mapping
-                && matches!(
-                    access,
-                    AccessType::ReadOnly
-                        | AccessType::Const
-                        | AccessType::ReadWrite
-                        | AccessType::ReadWriteInput
-                );
+            let (rx, tx) = e.pdo_directions();
             objects.push(VendorObject {
                 index,
                 sub,

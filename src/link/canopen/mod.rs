@@ -53,6 +53,7 @@
 //! SDO upload / download with our sans-IO client ([`SdoClient`]); sizes as for EtherCAT (drive
 //! file, CiA 402 table, else 4 bytes). Aborts keep the CiA 301 code.
 
+pub mod fit;
 pub mod load;
 pub mod paced;
 pub mod pdo_map;
@@ -113,6 +114,8 @@ struct AxisNode {
     sdo: SdoClient,
     last_heartbeat: Option<Nanos>,
     state: Option<NmtState>,
+    /// Start-up warning of the PDO mapping ([`fit`]: touch probe left out).
+    warning: Option<crate::messages::CncMessage>,
 }
 
 /// The CANopen link (see the module documentation).
@@ -667,6 +670,7 @@ impl CanopenLink {
                     sdo: SdoClient::new(node),
                     last_heartbeat: None,
                     state: None,
+                    warning: None,
                 })
             })
             .collect::<Result<Vec<_>, LinkError>>()?;
@@ -700,6 +704,11 @@ impl CanopenLink {
             rx_buf: Vec::new(),
             tpdo_seen: Vec::new(),
         };
+        if link.bus.emulated.is_none() {
+            link.pacing = Some(Pacing::new(cycle, window));
+        }
+        link.boot()?;
+        // The TPDOs as mapped (the start-up may have fitted a definition, [`fit`]).
         for (i, a) in link.axes.iter().enumerate() {
             for (k, p) in a.tx.iter().enumerate() {
                 match p.trigger {
@@ -710,10 +719,12 @@ impl CanopenLink {
                 }
             }
         }
-        if link.bus.emulated.is_none() {
-            link.pacing = Some(Pacing::new(cycle, window));
-        }
-        link.boot()?;
+        let nodes: Vec<load::NodeFrames> = link
+            .axes
+            .iter()
+            .map(|a| load::node_frames(&a.rx, &a.tx))
+            .collect();
+        link.load = BusLoad::new(&nodes, bitrate, cycle, HEARTBEAT_MS);
         link.epoch = link.bus.wire_clock().unwrap_or(Nanos::ZERO);
         Ok(link)
     }
@@ -859,24 +870,8 @@ impl CanopenLink {
             if device_type & 0xFFFF != 402 {
                 tracing::warn!(target: "fieldprobe::link::canopen", node, "device type {device_type:#010x} is not a CiA 402 drive");
             }
-            let mut writes = Vec::new();
-            for dir in [Direction::Rx, Direction::Tx] {
-                let pdos = match dir {
-                    Direction::Rx => self.axes[i].rx.clone(),
-                    Direction::Tx => self.axes[i].tx.clone(),
-                };
-                for p in &pdos {
-                    writes.extend(p.remap_writes());
-                }
-                for k in pdos.len()..MAX_PDOS {
-                    let cob = u32::from(dir.default_cob(k as u8, node)) | 0x8000_0000;
-                    writes.push((dir.comm_index(k as u8), 1, cob.to_le_bytes().to_vec()));
-                }
-            }
-            writes.push((0x1017, 0, HEARTBEAT_MS.to_le_bytes().to_vec()));
-            for (index, sub, data) in writes {
-                self.sdo_transfer(i, index, sub, Some(&data))?;
-            }
+            self.fit_and_map(i)?;
+            self.sdo_transfer(i, 0x1017, 0, Some(&HEARTBEAT_MS.to_le_bytes()))?;
             self.write_sync_timing(i)?;
         }
         self.send(&NmtCommand::Start.frame(0))?;
@@ -888,6 +883,108 @@ impl CanopenLink {
             a.last_heartbeat = Some(hb_start);
         }
         Ok(())
+    }
+
+    /// Start-up, axis `i`: ask its node for every object of the drive definition's PDO
+    /// mapping, fit the definition to what the node offers and write the mapping ([`fit`]);
+    /// an object the node refuses in the mapping is left out (touch probe) or refuses the
+    /// start-up (anything else), and the mapping is written again from the start.
+    fn fit_and_map(&mut self, i: usize) -> Result<(), LinkError> {
+        let node = self.axes[i].node;
+        let configured = self.axes[i].def.clone();
+        let mut lacking = Vec::new();
+        for e in configured
+            .rxpdo
+            .entries()
+            .iter()
+            .chain(configured.txpdo.entries())
+        {
+            if lacking
+                .iter()
+                .any(|l: &fit::Lacking| (l.index, l.sub) == (e.index, e.sub))
+            {
+                continue;
+            }
+            let answer = match self.sdo_transfer(i, e.index, e.sub, None) {
+                Ok(data) => fit::Offer::from_upload(Ok(&data), e.ty),
+                Err(LinkError::Abort { code, .. }) => fit::Offer::from_upload(Err(code), e.ty),
+                Err(other) => return Err(other),
+            };
+            if let fit::Offer::Lacking(why) = answer {
+                lacking.push(fit::Lacking {
+                    index: e.index,
+                    sub: e.sub,
+                    why,
+                });
+            }
+        }
+        loop {
+            let (def, warning) = fit::fit(&configured, node, &lacking)?;
+            let (rx, tx) = plan_node(&def, node)?;
+            let a = &mut self.axes[i];
+            a.rx_sent = vec![None; rx.len()];
+            a.tx_held = vec![None; tx.len()];
+            a.rx = rx;
+            a.tx = tx;
+            a.def = def;
+            a.warning = warning;
+            match self.write_mapping(i)? {
+                None => return Ok(()),
+                Some(refused) => {
+                    if lacking
+                        .iter()
+                        .any(|l| (l.index, l.sub) == (refused.index, refused.sub))
+                    {
+                        // Refused although not mapped: cannot happen with a consistent node.
+                        return Err(other(format!(
+                            "node {node}: start-up: the node refuses {:#06X}:{:02X} in its PDO                              mapping ({}), which the master left out",
+                            refused.index, refused.sub, refused.why
+                        )));
+                    }
+                    lacking.push(refused);
+                }
+            }
+        }
+    }
+
+    /// Write axis `i`'s planned PDOs by the CiA 301 remap procedure and disable the unused
+    /// ones; `Some(object)` when the node refused a mapping entry as not mappable / absent
+    /// ([`fit::is_mapping_refusal`]).
+    fn write_mapping(&mut self, i: usize) -> Result<Option<fit::Lacking>, LinkError> {
+        let node = self.axes[i].node;
+        let mut writes = Vec::new();
+        for dir in [Direction::Rx, Direction::Tx] {
+            let pdos = match dir {
+                Direction::Rx => self.axes[i].rx.clone(),
+                Direction::Tx => self.axes[i].tx.clone(),
+            };
+            for p in &pdos {
+                writes.extend(p.remap_writes());
+            }
+            for k in pdos.len()..MAX_PDOS {
+                let cob = u32::from(dir.default_cob(k as u8, node)) | 0x8000_0000;
+                writes.push((dir.comm_index(k as u8), 1, cob.to_le_bytes().to_vec()));
+            }
+        }
+        for (index, sub, data) in writes {
+            match self.sdo_transfer(i, index, sub, Some(&data)) {
+                Ok(_) => {}
+                Err(e @ LinkError::Abort { code, .. })
+                    if sub >= 1
+                        && ((0x1600..=0x17FF).contains(&index)
+                            || (0x1A00..=0x1BFF).contains(&index)) =>
+                {
+                    let value = decode_le(&data, false) as u32;
+                    let rx = index < 0x1800;
+                    return match fit::is_mapping_refusal(code, value, rx) {
+                        Some(l) => Ok(Some(l)),
+                        None => Err(e),
+                    };
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(None)
     }
 
     /// Start-up: 0x1006 communication cycle period and 0x1007 synchronous window length
@@ -1377,6 +1474,14 @@ impl Link for CanopenLink {
 
     fn lose_exchange_at(&mut self, n: u64) {
         CanopenLink::lose_exchange_at(self, n);
+    }
+
+    fn drive_definition(&self, device: usize) -> Option<Arc<DriveDefinition>> {
+        self.axes.get(device).map(|a| a.def.clone())
+    }
+
+    fn startup_report(&self) -> Vec<crate::messages::CncMessage> {
+        self.axes.iter().filter_map(|a| a.warning.clone()).collect()
     }
 
     fn exchanges(&self) -> u64 {

@@ -93,12 +93,15 @@ use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
 use crate::bus::canopen::pdo::{pack_layout, Direction, Mapped, Pdo, MAX_PDOS};
 use crate::bus::canopen::sdo::{ObjectAccess, SdoServer, SDO_RX_BASE};
 use crate::drive::catalogue::DriveDefinition;
-use crate::drive::pdo::PdoLayout;
+use crate::drive::pdo::{is_touch_probe, PdoLayout};
 use crate::sim::esc::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
 use crate::sim::world::{Port, PortBuffer, World};
 use crate::units::Nanos;
 
 pub mod pdo;
+pub mod rules;
+
+use self::rules::NodeRules;
 
 /// Vendor ID the emulated nodes report in 0x1018:1 (the EtherCAT emulator's, made up).
 pub const VENDOR_ID: u32 = 0x0000_0FB0;
@@ -128,9 +131,12 @@ struct Od<'a> {
     /// Objects stored as byte strings that have one fixed length (EDS types the CoE table has
     /// no numeric type for: INTEGER24, REAL32, TIME_OF_DAY …).
     fixed_len: &'a BTreeMap<(u16, u8), usize>,
-    /// The drive model's RPDO layout and image.
+    /// The drive model's RPDO layout and image, and its TPDO layout.
     rx_layout: &'a PdoLayout,
     outputs: &'a mut [u8],
+    tx_layout: &'a PdoLayout,
+    /// Value ranges and the PDO configuration procedure ([`rules`]).
+    rules: &'a NodeRules,
     /// A download succeeded (the node refreshes its TPDO image).
     wrote: bool,
     /// The controlword 0x6040 was written (the drive acts on it at once).
@@ -153,6 +159,13 @@ impl ObjectAccess for Od<'_> {
                 return Err(0x0607_0010);
             }
         }
+        self.rules.check(
+            self.od,
+            (self.rx_layout, self.tx_layout),
+            self.fixed_len,
+            (index, sub),
+            data,
+        )?;
         self.od.write(index, sub, data)?;
         self.wrote = true;
         self.wrote_controlword |= (index, sub) == (0x6040, 0);
@@ -186,6 +199,10 @@ pub struct EmulatedNode {
     syncs: u64,
     sdo_muted: bool,
     fixed_len: BTreeMap<(u16, u8), usize>,
+    /// Value ranges and the PDO configuration procedure of SDO downloads ([`rules`]).
+    rules: NodeRules,
+    /// The drive model has a touch probe (its RPDO layout maps 0x60B8).
+    touch_probe: bool,
     /// The SYNC watch: when the last SYNC came (operational, armed by the first SYNC).
     last_sync: Option<Nanos>,
     /// The watch fired and no SYNC came since.
@@ -343,6 +360,34 @@ fn eds_object(e: &eds::Entry, node: u8) -> Result<(ObjectEntry, Option<usize>), 
     ))
 }
 
+/// The drive definition a node built from `eds` runs its model with: `def` without the
+/// touch-probe objects ([`is_touch_probe`]) the EDS cannot map in that direction — all of them
+/// when 0x60B8 (RPDO) or 0x60B9 (TPDO) is missing, as the latch needs both. Other objects stay
+/// as `def` has them (an EDS without a CiA 402 object still gets the model's value in the
+/// drive file's process data; no master can map what the EDS lacks).
+pub fn eds_model_definition(eds: &Eds, def: &DriveDefinition) -> DriveDefinition {
+    let maps = |index: u16, sub: u8, rx: bool| {
+        eds.get(index, sub).is_some_and(|e| {
+            let (r, t) = e.pdo_directions();
+            if rx {
+                r
+            } else {
+                t
+            }
+        })
+    };
+    let latch = maps(0x60B8, 0, true) && maps(0x60B9, 0, false);
+    let drop = |rx: bool| {
+        move |index: u16, sub: u8| is_touch_probe(index) && !(latch && maps(index, sub, rx))
+    };
+    let mut out = def.clone();
+    out.rxpdo = def.rxpdo.without(drop(true));
+    out.txpdo = def.txpdo.without(drop(false));
+    let rx = out.rxpdo.clone();
+    out.rxpdo_defaults.retain(|d| rx.contains(d.index, d.sub));
+    out
+}
+
 impl EmulatedNode {
     /// Node `id` (1 … 127) with the drive model of `def` (CiA 402), in boot-up: it sends its
     /// boot-up message and enters pre-operational at the first [`Self::poll`].
@@ -363,7 +408,7 @@ impl EmulatedNode {
             u32_entry(0x1006, 0, 0),
             u32_entry(0x1007, 0, 0),
         ]);
-        Self::build(id, def, entries, BTreeMap::new())
+        Self::build(id, def, entries, BTreeMap::new(), NodeRules::default())
     }
 
     /// Node `id` with the drive model of `def` and the object dictionary of an EDS / DCF
@@ -382,6 +427,17 @@ impl EmulatedNode {
     ///   VISIBLE_STRING, OCTET_STRING, UNICODE_STRING, DOMAIN and the complex / manufacturer
     ///   types are byte strings holding up to max(default length, [`EDS_STRING_CAPACITY`])
     ///   bytes.
+    /// * Value ranges: a download of a numeric object outside the EDS's `LowLimit` /
+    ///   `HighLimit` is refused (0x0609_0032 / 0x0609_0031, [`rules`]).
+    /// * PDO mapping: only objects with `PDOMapping=1` whose `AccessType` allows the
+    ///   direction go into a PDO; the CiA 301 remap procedure and its abort codes are those of
+    ///   [`rules`] (a non-mappable object 0x0604_0041, an object the EDS lacks 0x0602_0000, an
+    ///   entry written while sub-index 0 ≠ 0 or the PDO exists 0x0609_0030, more than 64 bits
+    ///   0x0604_0042).
+    /// * The drive model is `def`'s with its touch probe only where the EDS has one
+    ///   ([`eds_model_definition`]): without 0x60B8 mappable into an RPDO and 0x60B9 into a
+    ///   TPDO the node has no touch probe, and the touch-probe objects leave the model's
+    ///   process data.
     /// * Objects the drive model implements (the model-backed entries of [`ds402_objects`]:
     ///   0x6040, 0x6041, 0x6060/61, 0x6064, 0x6065/66/67, 0x606C, 0x6072, 0x6077, 0x607A,
     ///   0x60B8..=0x60BD, 0x60D0, 0x60E0/E1, 0x60F4, 0x6502, 0x603F) stay backed by the model
@@ -408,6 +464,7 @@ impl EmulatedNode {
     ///   writable object of the communication area 0x1000 … 0x1FFF to them.
     pub fn from_eds(id: u8, def: &DriveDefinition, eds: &Eds) -> Result<Self, String> {
         check_node_id(id)?;
+        let def = &eds_model_definition(eds, def);
         let builtin = ds402_objects(&format!("fieldprobe CiA 402 node ({})", def.name));
         let model_backed: BTreeMap<(u16, u8), &ObjectEntry> = builtin
             .iter()
@@ -482,7 +539,7 @@ impl EmulatedNode {
             ),
             ObjectEntry::constant(0x1018, 4, DataType::U32, i64::from(serial)),
         ]);
-        Self::build(id, def, entries, fixed_len)
+        Self::build(id, def, entries, fixed_len, NodeRules::from_eds(eds, id))
     }
 
     /// The node around an object table; without PDO parameters in the table, it adds the
@@ -496,6 +553,7 @@ impl EmulatedNode {
         def: &DriveDefinition,
         mut entries: Vec<ObjectEntry>,
         fixed_len: BTreeMap<(u16, u8), usize>,
+        rules: NodeRules,
     ) -> Result<Self, String> {
         let mut model = crate::drive::model::for_definition(def).map_err(|e| e.to_string())?;
         if !entries.iter().any(|e| (0x1400..0x1C00).contains(&e.index)) {
@@ -538,6 +596,8 @@ impl EmulatedNode {
             syncs: 0,
             sdo_muted: false,
             fixed_len,
+            rules,
+            touch_probe: def.rxpdo.contains(0x60B8, 0),
             last_sync: None,
             sync_lost: false,
             sync_timeouts: 0,
@@ -623,6 +683,12 @@ impl EmulatedNode {
     /// CiA 301 abort code); for tests and diagnostics.
     pub fn read_object(&self, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
         self.od.read(index, sub)
+    }
+
+    /// Does the drive have a touch probe (0x60B8 in its model's RPDO data; from an EDS only
+    /// where the EDS has the touch-probe objects, [`eds_model_definition`])?
+    pub fn has_touch_probe(&self) -> bool {
+        self.touch_probe
     }
 
     /// Node id.
@@ -944,6 +1010,8 @@ impl EmulatedNode {
                 fixed_len: &self.fixed_len,
                 rx_layout: &self.model_rx,
                 outputs: &mut self.outputs,
+                tx_layout: &self.model_tx,
+                rules: &self.rules,
                 wrote: false,
                 wrote_controlword: false,
             };

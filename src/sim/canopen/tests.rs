@@ -495,6 +495,9 @@ fn technosoft_eds_pdo_defaults_are_the_boot_defaults_and_reset_communication_res
     // Changed by SDO, back to the EDS values after NMT reset communication.
     b.write(0x1400, 2, &[1]).unwrap();
     b.write(0x1800, 3, &7u16.to_le_bytes()).unwrap();
+    // TPDO1's mapping changes only while the PDO does not exist (CiA 301 procedure).
+    assert_eq!(b.write(0x1A00, 0, &[0]), Err(0x0609_0030));
+    b.write(0x1800, 1, &0x8000_0185u32.to_le_bytes()).unwrap();
     b.write(0x1A00, 0, &[0]).unwrap();
     b.write(0x1017, 0, &50u16.to_le_bytes()).unwrap();
     b.nmt(NmtCommand::ResetCommunication);
@@ -502,6 +505,8 @@ fn technosoft_eds_pdo_defaults_are_the_boot_defaults_and_reset_communication_res
     assert_eq!(b.read(0x1400, 2), Ok(rpdo1_type));
     assert_eq!(b.read(0x1800, 3), Ok(tpdo1_inhibit));
     assert_eq!(b.read(0x1A00, 0), Ok(ini_uint(&text, "1A00sub0")));
+    // [1800sub1] $NODEID+0x180 for node 5.
+    assert_eq!(b.read(0x1800, 1), Ok(0x185));
     assert_eq!(b.read(0x1017, 0), Ok(heartbeat));
 }
 
