@@ -29,7 +29,9 @@
 //!   most 3 × 500 ns = 1.5 µs from the drives: v · 1.5 µs = 0.00005 mm.
 //!
 //! Bound: 0.000225 + 0.00005 + 0.00000003 ≈ 0.000275 mm. A relation off by one cycle (the
-//! samples stamped a SYNC0 early or late) moves the value by v·T = 0.033 mm, 120 times that.
+//! samples stamped a SYNC0 early or late) moves the value by v·T = 0.033 mm, 120 times that
+//! (seen: error 900043, the timestamp outside its signal's window); the frame's own time taken
+//! for the samples' (half a period late) by 0.0175 mm (seen: fails the bound).
 //! DRIVE on the same axis is refused before motion (error 900046).
 //!
 //! SKIP without user namespaces / veth or without the test data or seeds
