@@ -329,9 +329,18 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
         let (pos, ch) = spec
             .split_once(':')
             .with_context(|| format!("--probe-input {spec}: expected POS:CH (e.g. 3:1)"))?;
-        let pos: usize = pos.trim().parse().ok().with_context(|| {
-            format!("--probe-input {spec}: POS must be a ring position (0 ..= 65535)")
-        })?;
+        let pos = number::int_in(
+            pos.trim(),
+            0,
+            i128::from(u16::MAX),
+            "POS:CH with a ring position",
+        )
+        .map_err(|expected| number::NumberError {
+            what: "--probe-input".to_string(),
+            text: spec.to_string(),
+            expected,
+        })?
+        .value as usize;
         let ch: u8 = ch
             .trim()
             .parse()
