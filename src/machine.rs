@@ -773,6 +773,7 @@ impl Machine {
         match self.link.exchange(self.now, &mut self.images) {
             Ok(()) => {
                 self.feed_terminal_probes();
+                self.channel.set_sample_dc_time(self.link.sample_dc_time());
                 for i in 0..self.plcs.len() {
                     if let (Some(plc), Some(src)) =
                         (self.plcs[i].as_mut(), self.channel.armed_signal(i))

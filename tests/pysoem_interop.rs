@@ -233,16 +233,17 @@ fn inner(python: &Path) {
     let enable = result_step(&result, "cia402_enable");
     let probe = result_step(&result, "touch_probe");
     let latched = probe["tp1_pos"].as_i64().expect("tp1_pos");
-    // The timestamp terminal stamped the same edge in DC time: after the emulator's DC epoch
-    // (DcClock::default) and within the run (< 150 s of emulated cycles).
-    let epoch = i128::from(
-        fieldprobe::core::measure::timestamp::DcClock::default()
-            .dc_time(fieldprobe::units::Nanos::ZERO),
+    // The timestamp terminal stamped the same edge on the segment's DC system time (SOEM's,
+    // set through the offsets 0x0920 it wrote): between the reference clock's system times
+    // SOEM read with the frames before and after the crossing (its FRMW of 0x0910).
+    let stamp = probe["ts_rising"].as_u64().expect("ts_rising");
+    let (dc_before, dc_after) = (
+        probe["dc_before"].as_u64().expect("dc_before"),
+        probe["dc_after"].as_u64().expect("dc_after"),
     );
-    let stamp = i128::from(probe["ts_rising"].as_u64().expect("ts_rising"));
     assert!(
-        stamp > epoch && stamp < epoch + 150_000_000_000,
-        "EL1252 rising-edge time {stamp}, DC epoch {epoch}"
+        dc_before < stamp && stamp < dc_after,
+        "EL1252 rising-edge time {stamp}, reference clock {dc_before} before and {dc_after} after the crossing"
     );
     assert!(
         (latched - probe_inc).abs() <= 1,

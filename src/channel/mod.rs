@@ -303,6 +303,8 @@ pub struct Channel {
     /// Per axis: the PLC interface is fed from bus inputs latched with the actual values
     /// ([`Channel::set_plc_inputs_from_bus`]).
     plc_from_bus: Vec<bool>,
+    /// DC system time of the samples read this cycle ([`Channel::set_sample_dc_time`]).
+    sample_dc: Option<i64>,
     /// External-latch handshake clients per axis.
     ext_latch: Vec<Option<crate::core::measure::plc::ExtLatchClient>>,
     /// Time of the current cycle.
@@ -361,6 +363,7 @@ impl Channel {
             plc: vec![Default::default(); n],
             plc_seen: vec![Default::default(); n],
             plc_from_bus: vec![false; n],
+            sample_dc: None,
             ext_latch: vec![None; n],
             now: Nanos::ZERO,
             latch_log: None,

@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--drive POS=DRIVE]...
-//!                         [--probe-at POS=MM]... [--lockstep] [--seconds N]
+//!                         [--probe-at POS=MM]... [--probe-input POS:CH]... [--lockstep]
+//!                         [--seconds N]
 //!                         [--rt-priority N] [--cpu N] [--mlock]
 //! ```
 //! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; the
@@ -27,8 +28,10 @@
 //!   object index, no touch probe unless the ESI declares 0x60B8 / 0x60B9);
 //! * a device whose ESI type name contains `EL1252` is a timestamp terminal
 //!   ([`emulated_el1252`](fieldprobe::sim::esc::device::emulated_el1252): 2 channels, continuous
-//!   latching, DC clock of the emulator); every `--probe-at` surface is also wired to its
-//!   channel 1, so its inputs carry the DC time of each probe edge;
+//!   latching); every `--probe-at` surface is also wired to its channel 1 (or, with
+//!   `--probe-input POS:CH`, only to channel CH of the terminal at ring position POS), so its
+//!   inputs carry the DC system time of each probe edge: the terminal's own system time (the
+//!   emulator's clock + the offset 0x0920 the master wrote), on which the servos' SYNC0 runs;
 //! * any other device with process data echoes its inverted outputs into its inputs;
 //! * a device without process data has no application.
 //!
@@ -52,7 +55,9 @@
 //! servo's drive scaling, converted to increments with `increments_per_unit` and `offset`) on
 //! the servo at ring position POS, wired to that servo's touch probe input 1: the input pulses
 //! when the actual position crosses the surface (either direction), so a touch probe armed in
-//! 0x60B8 latches the surface position in 0x60BA/0x60BB.
+//! 0x60B8 latches the surface position in 0x60BA/0x60BB. The surface also switches channel 1
+//! of every timestamp terminal; `--probe-input POS:CH` (repeatable) wires it to input CH (1 or
+//! 2) of the timestamp terminal at ring position POS instead (exit 2 if POS is not one).
 //!
 //! `--rt-priority N` / `--cpu N` / `--mlock` run the serve threads with SCHED_FIFO, on one CPU,
 //! with memory locked (as `run` does for the master): a real device answers in hardware, an
@@ -125,6 +130,11 @@ struct EthercatArgs {
     /// crosses it). Repeatable.
     #[arg(long = "probe-at", value_name = "POS=MM")]
     probes: Vec<String>,
+    /// The `--probe-at` surfaces switch input CH (1 or 2) of the timestamp terminal at ring
+    /// position POS, instead of channel 1 of every timestamp terminal. Repeatable (one probe
+    /// on several inputs).
+    #[arg(long = "probe-input", value_name = "POS:CH")]
+    probe_inputs: Vec<String>,
     /// Step the drive models after every frame that writes process data (model time + 1 ms
     /// each), as before the emulator had its own clock: no SYNC0 and no sync-manager watchdog
     /// on the clock. For tests whose master does not keep a cycle.
@@ -201,7 +211,8 @@ enum Hosted {
     Nothing,
     /// A CiA 402 servo with this drive scaling.
     Servo(Scaling),
-    /// An EL1252-kind timestamp terminal (2 channels, continuous latching, default DC clock).
+    /// An EL1252-kind timestamp terminal (2 channels, continuous latching, stamping with its
+    /// ESC's DC system time).
     Timestamp,
 }
 
@@ -312,6 +323,44 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
             super::seconds_option("--seconds", &s)?,
         )?),
     };
+    // `--probe-input POS:CH`: (world device of the terminal, channel).
+    let mut inputs: Vec<(usize, u8)> = Vec::new();
+    for spec in &a.probe_inputs {
+        let (pos, ch) = spec
+            .split_once(':')
+            .with_context(|| format!("--probe-input {spec}: expected POS:CH (e.g. 3:1)"))?;
+        let pos = number::int_in(
+            pos.trim(),
+            0,
+            i128::from(u16::MAX),
+            "POS:CH with a ring position",
+        )
+        .map_err(|expected| number::NumberError {
+            what: "--probe-input".to_string(),
+            text: spec.to_string(),
+            expected,
+        })?
+        .value as usize;
+        let ch: u8 = ch
+            .trim()
+            .parse()
+            .ok()
+            .filter(|c| (1..=2).contains(c))
+            .with_context(|| format!("--probe-input {spec}: CH must be 1 or 2"))?;
+        let device = hosted
+            .iter()
+            .position(|(p, what)| *p == pos && matches!(what, Hosted::Timestamp))
+            .with_context(|| {
+                format!(
+                    "--probe-input {spec}: device {pos} is not a timestamp terminal (EL1252 kind)"
+                )
+            })?;
+        inputs.push((device, ch));
+    }
+    anyhow::ensure!(
+        inputs.is_empty() || !a.probes.is_empty(),
+        "--probe-input needs a --probe-at surface to switch the input"
+    );
     let mut plant = Plant::new();
     for spec in &a.probes {
         let (pos, mm) = split_position("--probe-at", spec)?;
@@ -327,20 +376,33 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
         let inc = scaling
             .to_increments(mm)
             .with_context(|| format!("--probe-at {spec}: {mm} mm does not fit INTEGER32"))?;
-        // Wired to the servo's touch probe input 1 and to channel 1 of every timestamp terminal.
+        // Wired to the servo's touch probe input 1 and to channel 1 of every timestamp terminal
+        // (or to the terminal inputs `--probe-input` names).
         let mut wired = vec![(device, 1)];
-        wired.extend(
-            hosted
-                .iter()
-                .enumerate()
-                .filter(|(_, (_, w))| matches!(w, Hosted::Timestamp))
-                .map(|(d, _)| (d, 1)),
-        );
+        if inputs.is_empty() {
+            wired.extend(
+                hosted
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, (_, w))| matches!(w, Hosted::Timestamp))
+                    .map(|(d, _)| (d, 1)),
+            );
+        } else {
+            wired.extend(inputs.iter().copied());
+        }
         plant.add_probe_surface(ProbeSurface::new(device, f64::from(inc), wired.clone()));
+        let terminals = wired[1..]
+            .iter()
+            .map(|(d, ch)| format!("channel {ch} of the timestamp terminal at {}", hosted[*d].0))
+            .collect::<Vec<_>>();
         eprintln!(
             "fieldprobe sim ethercat: probe surface at {mm} mm = {inc} increments of device {pos}, \
              wired to its touch probe input 1{}",
-            if wired.len() > 1 { " and channel 1 of the timestamp terminal(s)" } else { "" }
+            if terminals.is_empty() {
+                String::new()
+            } else {
+                format!(" and {}", terminals.join(", "))
+            }
         );
     }
     let mut segment = Segment::new(escs, HOP_DELAY_NS);

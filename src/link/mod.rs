@@ -221,6 +221,16 @@ pub trait Link: Send {
         0
     }
 
+    /// The distributed-clock system time (ns since 2000-01-01) at which the devices sampled
+    /// the inputs the last exchange read — their SYNC0 — on the time base an EL1252-kind
+    /// timestamp input on the same segment stamps its edges with. An EtherCAT link with DC
+    /// gives it each cycle (on an interface: from the reference clock's system time that
+    /// cycle's frame read); `None` (default): the link has no DC time, the CNC stamps its
+    /// actual values with its own cycle times.
+    fn sample_dc_time(&self) -> Option<i64> {
+        None
+    }
+
     /// The drive definition device `device` runs with, when the link changed it at start-up
     /// (EtherCAT: the PDO mapping fitted to what the device offers, e.g. without the touch
     /// probe objects a device lacks); `None`: the one the link was opened with.

@@ -267,6 +267,8 @@ def probe_latch(cyc, p):
     if ts is not None:
         before = timestamps(cyc, ts)
         check(before == (0, 0), f"timestamp terminal: channel 1 latch {before} before crossing")
+        # The reference clock's DC system time SOEM read with the last frame (FRMW 0x0910).
+        dc_before = cyc.master.dc_time
     latched = None
     for target in ramp(start, end, step_inc):
         cyc.out["target"] = target
@@ -288,7 +290,8 @@ def probe_latch(cyc, p):
         check(rising > 0, "timestamp terminal: no rising-edge time on channel 1")
         ch2 = bytes(cyc.master.slaves[ts].input)[17:34]
         check(ch2 == bytes(17), f"timestamp terminal: channel 2 {ch2.hex()} (not wired)")
-        info = {"ts_rising": rising, "ts_falling": falling}
+        info = {"ts_rising": rising, "ts_falling": falling,
+                "dc_before": dc_before, "dc_after": cyc.master.dc_time}
     step("touch_probe", status=hex(i["tps"]), tp1_pos=i["tp1_pos"],
          surface_inc=p["position_inc"], cycles=cyc.cycles, **info)
 

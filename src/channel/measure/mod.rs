@@ -425,6 +425,26 @@ impl Channel {
         }
     }
 
+    /// Per cycle, after the exchange: the DC system time at which the devices sampled the
+    /// inputs just read ([`crate::link::Link::sample_dc_time`]). An axis whose PLC interface is
+    /// fed from the bus ([`Channel::set_plc_inputs_from_bus`]) then stamps its actual values
+    /// with it for PLC_TIMESTAMP, so the terminal's DC timestamps and the positions share one
+    /// time base; `None`: the cycle's own time on [`DcClock::default`].
+    pub fn set_sample_dc_time(&mut self, dc: Option<i64>) {
+        self.sample_dc = dc;
+    }
+
+    /// The DC time base of axis `i`'s sample at cycle time `t` (see
+    /// [`set_sample_dc_time`](Self::set_sample_dc_time)): `t` is DC time `sample_dc`.
+    pub(in crate::channel) fn sample_dc_clock(&self, i: usize, t: Nanos) -> Option<DcClock> {
+        let dc = self.sample_dc?;
+        if !self.plc_from_bus.get(i).copied().unwrap_or(false) {
+            return None;
+        }
+        let t = i64::try_from(t.0).ok()?;
+        Some(DcClock::new(dc.checked_sub(t)?))
+    }
+
     /// Per cycle, before the sources are evaluated: remember what the PLC interface showed.
     pub(super) fn record_plc_view(&mut self, now: Nanos) {
         for (i, seen) in self.plc_seen.iter_mut().enumerate() {

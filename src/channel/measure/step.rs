@@ -135,6 +135,9 @@ impl Channel {
                     } else if let Some(e) = run.axes[k].eval.as_mut() {
                         let actual = self.axes[axis].actual();
                         let (t, plc) = self.plc_view(axis);
+                        if let Some(clock) = self.sample_dc_clock(axis, t) {
+                            e.set_dc_clock(clock);
+                        }
                         match e.update(t, actual, plc) {
                             Ok(ev) => ev.map(|ev| ev.position),
                             Err(err) => {

@@ -966,6 +966,14 @@ impl TimestampEvaluator {
         &self.config
     }
 
+    /// The relation of the run's time to DC time from now on: a link that reads the DC system
+    /// time of each cycle's samples (`Link::sample_dc_time`) sets it per cycle, so that
+    /// [`update`](SignalEvaluator::update) at the sample's cycle time pushes the sample at its
+    /// DC time, on the time base the timestamps come from.
+    pub fn set_dc_clock(&mut self, clock: DcClock) {
+        self.config.clock = clock;
+    }
+
     /// One CNC cycle with an explicit DC time of the cycle and optional actual velocity.
     /// Samples that are not later than the newest one or not finite are skipped.
     pub fn update_dc(
@@ -1114,6 +1122,14 @@ impl SourceEvaluator {
             }
             _ => return None,
         })
+    }
+
+    /// `PLC_TIMESTAMP`: see [`TimestampEvaluator::set_dc_clock`]; the other sources have no
+    /// DC time.
+    pub fn set_dc_clock(&mut self, clock: DcClock) {
+        if let SourceEvaluator::Timestamp(t) = self {
+            t.set_dc_clock(clock);
+        }
     }
 
     fn inner(&mut self) -> &mut dyn SignalEvaluator {

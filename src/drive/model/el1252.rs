@@ -39,6 +39,14 @@ impl El1252Device {
         self.stamp_offset_ns = offset_ns;
     }
 
+    /// Stamp from now on with the DC time base on which model time `now` is DC system time
+    /// `system_time` (ns since 2000; see [`DriveModel::set_dc_time`](super::DriveModel::set_dc_time)).
+    pub fn set_dc_clock_at(&mut self, now: Nanos, system_time: u64) {
+        let sys = i64::try_from(system_time).unwrap_or(i64::MAX);
+        let now = i64::try_from(now.0).unwrap_or(i64::MAX);
+        self.clock = DcClock::new(sys.saturating_sub(now));
+    }
+
     /// Bytes of the process image.
     pub fn image_len(&self) -> usize {
         self.channels.len() * crate::drive::el1252::CHANNEL_LEN
@@ -113,6 +121,12 @@ impl super::DriveModel for El1252Device {
         self.edge(input, rising, at);
     }
 
+    /// The hosting ESC's system time at the step's end: the edges of the step are stamped on
+    /// that time base (the terminal's DC clock), not on the model's virtual time.
+    fn set_dc_time(&mut self, now: Nanos, system_time: u64) {
+        self.set_dc_clock_at(now, system_time);
+    }
+
     fn finish_step(&mut self, tx: &mut [u8]) {
         // The image always fits `tx_len` bytes; a shorter buffer keeps its old content.
         let _ = self.write_image(tx);
@@ -160,5 +174,27 @@ impl super::DriveModel for El1252Device {
 
     fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::drive::el1252::decode_image;
+
+    #[test]
+    fn edges_are_stamped_on_the_hosting_devices_system_time() {
+        let mut d = El1252Device::new(2, LatchMode::Continuous, DcClock::default());
+        // Model time 5 ms is system time 40 s + 7 ns on the hosting ESC (its SYNC0).
+        let sys: u64 = 40_000_000_007;
+        d.set_dc_clock_at(Nanos(5_000_000), sys);
+        // An edge 300 ns before the step's end, one 1 µs after the previous SYNC0.
+        d.edge(1, true, Nanos(5_000_000 - 300));
+        d.edge(2, true, Nanos(4_001_000));
+        let mut image = vec![0; d.image_len()];
+        d.write_image(&mut image).unwrap();
+        let ch = decode_image(&image, 2).unwrap();
+        assert_eq!(ch[0].latch_pos, sys - 300);
+        assert_eq!(ch[1].latch_pos, sys - 999_000);
     }
 }

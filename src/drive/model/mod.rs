@@ -43,6 +43,12 @@ pub trait DriveModel: Send + fmt::Debug {
     fn input_edge(&mut self, input: u8, rising: bool, at: Nanos);
     /// Write the input image of this cycle.
     fn finish_step(&mut self, tx: &mut [u8]);
+    /// Before a step ending at model time `now`: the DC system time (ns since 2000) of the
+    /// EtherCAT device hosting the model at that instant (its SYNC0), for a model that stamps
+    /// events with DC time (the EL1252 terminal: an edge at `at` is stamped
+    /// `system_time − (now − at)`). Not called on a segment without a clock of its own
+    /// (in-process, virtual time). Default: ignored.
+    fn set_dc_time(&mut self, _now: Nanos, _system_time: u64) {}
     /// `begin_step` and `finish_step` without edges.
     fn step(&mut self, now: Nanos, dt_s: f64, rx: &[u8], tx: &mut [u8]) {
         self.begin_step(now, dt_s, rx);

@@ -244,6 +244,9 @@ pub struct EthercatLink {
     /// Configured addresses of the DC devices (0x092C is read round-robin).
     dc_devices: Vec<u16>,
     dc_next: usize,
+    /// DC system time (ns since 2000) of the SYNC0 at which the devices sampled the inputs the
+    /// last exchange read ([`Link::sample_dc_time`]); `None` without DC or after a lost one.
+    sample_dc: Option<i64>,
     /// The shortest sync-manager watchdog time of the devices (0x0400 / 0x0420), ns: a master
     /// that sends no frame for this long has stalled.
     watchdog_ns: u64,
@@ -423,6 +426,7 @@ impl EthercatLink {
             clock: (!emulated).then(|| CycleClock::new(spec.cycle)),
             dc_devices,
             dc_next: 0,
+            sample_dc: None,
             watchdog_ns: DEFAULT_WATCHDOG_NS,
         };
         link.watchdog_ns = link.read_watchdog();
@@ -680,7 +684,7 @@ impl EthercatLink {
             None
         };
         if let Some(clock) = self.clock.as_mut() {
-            if let Ok(Some(wait)) = &result {
+            if let Ok(Some((wait, _))) = &result {
                 clock.track(sent.saturating_add(wait.as_nanos() as u64));
             }
             clock.stats_mut().record(CycleRecord {
@@ -692,7 +696,8 @@ impl EthercatLink {
                 dc_diff,
             });
         }
-        result?;
+        let dc = result?;
+        self.sample_dc = dc.and_then(|(_, system_time)| sample_time(system_time, self.cycle.0));
         // Periods without a frame: counted (overruns); the drives held their set-points and the
         // channel did not advance either. Only a gap as long as the devices' sync-manager
         // watchdog is a stalled master: by then they have dropped to SAFE-OP.
@@ -712,12 +717,17 @@ impl EthercatLink {
     }
 
     /// One LRW; returns the working counter and, with DC, the time from now to the next cycle
-    /// start at its shift from SYNC0 (ethercrab's `CycleInfo::next_cycle_wait`).
-    fn tx_rx(&mut self) -> Result<(u16, Option<Duration>), ethercrab::error::Error> {
+    /// start at its shift from SYNC0 (ethercrab's `CycleInfo::next_cycle_wait`) and the
+    /// reference clock's DC system time the frame read (its FRMW of 0x0910).
+    fn tx_rx(&mut self) -> Result<(u16, Option<(Duration, u64)>), ethercrab::error::Error> {
         let md = self.md;
         match &self.group {
-            Group::Dc(g) => drive(&mut self.wire, g.tx_rx_dc(md))
-                .map(|r| (r.working_counter, Some(r.extra.next_cycle_wait))),
+            Group::Dc(g) => drive(&mut self.wire, g.tx_rx_dc(md)).map(|r| {
+                (
+                    r.working_counter,
+                    Some((r.extra.next_cycle_wait, r.extra.dc_system_time)),
+                )
+            }),
             Group::NoDc(g) => drive(&mut self.wire, g.tx_rx(md)).map(|r| (r.working_counter, None)),
         }
     }
@@ -827,8 +837,9 @@ impl EthercatLink {
     }
 
     /// One cycle's frames; every process-data datagram is checked on its own (module
-    /// documentation). Returns ethercrab's wait to the next cycle start with DC.
-    fn cycle_frame(&mut self, now: Nanos) -> Result<Option<Duration>, LinkError> {
+    /// documentation). Returns, with DC, ethercrab's wait to the next cycle start and the
+    /// reference clock's system time the frame read.
+    fn cycle_frame(&mut self, now: Nanos) -> Result<Option<(Duration, u64)>, LinkError> {
         self.wire.log.start();
         let result = self.tx_rx();
         self.wire.log.stop();
@@ -866,6 +877,19 @@ impl EthercatLink {
             )),
         }
     }
+}
+
+/// The SYNC0 before a frame that read the reference clock's system time `system_time`: SYNC0
+/// runs at the multiples of the cycle `cycle_ns` in DC system time (ethercrab's
+/// `configure_dc_sync` puts the start time on that grid; `CycleInfo::cycle_start_offset` is
+/// `system_time % cycle` the same way), and the paced master's frame lands half a period after
+/// it — so the inputs the frame reads are what the devices sampled at that SYNC0. `None` for a
+/// zero cycle or a time beyond `i64`.
+pub fn sample_time(system_time: u64, cycle_ns: u64) -> Option<i64> {
+    if cycle_ns == 0 {
+        return None;
+    }
+    i64::try_from(system_time - system_time % cycle_ns).ok()
 }
 
 fn plural(n: usize) -> &'static str {
@@ -1414,12 +1438,23 @@ impl Link for EthercatLink {
         // follows (a network interface's emulator steps by itself). The actual values thus
         // arrive one exchange after they were sampled (dead time: docs/ethercat.md).
         self.copy_outputs(images)?;
+        self.sample_dc = None;
         if self.clock.is_some() {
             return self.paced_exchange(now, images);
         }
         #[cfg(feature = "sim")]
         self.wire.at_cycle(now);
         self.cycle_frame(now)?;
+        // In-process the inputs were sampled at the segment's SYNC0 of the previous exchange,
+        // at machine time now − cycle, on the DC time base the emulated EL1252 stamps with in
+        // virtual time (`DcClock::default()`; the ESC registers follow the wall clock there).
+        #[cfg(feature = "sim")]
+        if self.wire.segment().is_some() && now.0 >= self.cycle.0 {
+            self.sample_dc = Some(
+                crate::core::measure::timestamp::DcClock::default()
+                    .dc_time(Nanos(now.0 - self.cycle.0)),
+            );
+        }
         #[cfg(feature = "sim")]
         if let Some(seg) = self.wire.segment_mut() {
             seg.sync0(now);
@@ -1519,6 +1554,10 @@ impl Link for EthercatLink {
         self.exchanges
     }
 
+    fn sample_dc_time(&self) -> Option<i64> {
+        self.sample_dc
+    }
+
     fn startup_report(&self) -> Vec<CncMessage> {
         self.startup_messages()
     }
@@ -1564,5 +1603,30 @@ impl Link for EthercatLink {
                 "--cycle-log: ethercat-emu runs on virtual time; the cycle log is for links that leave the process (ethercat:IF, canopen-udp, socketcan:IF)".into(),
             )),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sample_time;
+
+    #[test]
+    fn the_sample_is_the_sync0_before_the_frame() {
+        // SYNC0 on the multiples of 1 ms; the frame half a period after it.
+        assert_eq!(
+            sample_time(40_796_201_500_000, 1_000_000),
+            Some(40_796_201_000_000)
+        );
+        // A frame at a SYNC0 reads what that SYNC0 sampled.
+        assert_eq!(
+            sample_time(40_796_201_000_000, 1_000_000),
+            Some(40_796_201_000_000)
+        );
+        assert_eq!(
+            sample_time(40_796_201_999_999, 1_000_000),
+            Some(40_796_201_000_000)
+        );
+        assert_eq!(sample_time(123, 0), None);
+        assert_eq!(sample_time(u64::MAX, 1_000_000), None);
     }
 }

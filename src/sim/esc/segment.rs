@@ -228,14 +228,26 @@ impl Segment {
     /// Without a world, nothing happens.
     pub fn sync0(&mut self, now: Nanos) {
         let cycle = self.cycle;
-        self.step_world(now, cycle);
+        self.step_world(now, cycle, None);
     }
 
-    /// One world step at model time `now` over the cycle `[now − cycle, now]`.
-    fn step_world(&mut self, now: Nanos, cycle: Nanos) {
+    /// One world step at model time `now` over the cycle `[now − cycle, now]`. `clock`: the
+    /// instant of the step on the caller's clock (own clock, [`Stepping::OwnClock`]); each
+    /// hosted model is then told its device's DC system time at that instant
+    /// ([`DriveModel::set_dc_time`]: the EL1252 stamps its edges on it). `None` (in-process,
+    /// virtual time): not told.
+    fn step_world(&mut self, now: Nanos, cycle: Nanos, clock: Option<u64>) {
         let Some(world) = self.world.as_mut() else {
             return;
         };
+        if let Some(t) = clock {
+            for esc in &mut self.chain.escs {
+                let system_time = esc.system_time(t);
+                if let Some(m) = esc.app_mut().model_mut() {
+                    m.set_dc_time(now, system_time);
+                }
+            }
+        }
         let ports = self
             .chain
             .escs
@@ -371,7 +383,9 @@ impl Segment {
         self.image_end = self.image_end.max(write_end);
         if completes && per_frame {
             let t = self.sync_time.saturating_add(self.cycle);
-            self.sync0(t);
+            let clock = (self.stepping == Stepping::OwnClock).then_some(now_ns);
+            let cycle = self.cycle;
+            self.step_world(t, cycle, clock);
             self.stepped_at(now_ns);
         }
         self.collect_events(now_ns);
@@ -444,7 +458,7 @@ impl Segment {
             );
         }
         let model_now = self.sync_time.saturating_add(cycle);
-        self.step_world(model_now, cycle);
+        self.step_world(model_now, cycle, Some(at));
         self.last_step_at = Some(at);
         self.free_running = true;
     }
@@ -534,7 +548,7 @@ impl Segment {
         };
         self.last_world_sync0 = Some(t);
         let model_now = self.sync_time.saturating_add(Nanos(dt));
-        self.step_world(model_now, Nanos(dt));
+        self.step_world(model_now, Nanos(dt), Some(t));
         self.stepped_at(t);
     }
 
