@@ -79,10 +79,7 @@ fn drive_increments(path: &Path, mm: f64) -> i64 {
 
 /// The venv directory: `$PYSOEM_VENV`, else `target/pysoem-venv` in the crate.
 fn venv_dir() -> PathBuf {
-    match std::env::var_os("PYSOEM_VENV") {
-        Some(v) => PathBuf::from(v),
-        None => manifest_path("target/pysoem-venv"),
-    }
+    veth::pysoem_venv_dir()
 }
 
 /// Build the venv (idempotent); panics with the script's output on failure.

@@ -42,10 +42,7 @@ const SERVO: usize = 1;
 const SOEM_MAXNAME: usize = 40;
 
 fn venv_dir() -> PathBuf {
-    match std::env::var_os("PYSOEM_VENV") {
-        Some(v) => PathBuf::from(v),
-        None => manifest_path("target/pysoem-venv"),
-    }
+    veth::pysoem_venv_dir()
 }
 
 #[test]

@@ -46,10 +46,7 @@ const INGENIA: &str = "esi/ingenia-evs-net-ecat402-drive.xml";
 const COUNT: usize = 3;
 
 fn venv_dir() -> PathBuf {
-    match std::env::var_os("PYSOEM_VENV") {
-        Some(v) => PathBuf::from(v),
-        None => manifest_path("target/pysoem-venv"),
-    }
+    veth::pysoem_venv_dir()
 }
 
 #[test]
@@ -74,13 +71,7 @@ fn vendor_devices_over_veth() {
 }
 
 fn fieldprobe(args: &[&str]) -> (Option<std::process::ExitStatus>, String, String) {
-    run_bounded(
-        Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-            .stdin(Stdio::null())
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .args(args),
-        STEP_TIMEOUT,
-    )
+    veth::fieldprobe_bounded(args, STEP_TIMEOUT)
 }
 
 fn inner(python: &Path) {

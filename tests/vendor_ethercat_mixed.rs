@@ -61,10 +61,7 @@ const SII: &str = "sii/kollmorgen-akd.hex";
 const AXES: [&str; 3] = ["X", "Y", "Z"];
 
 fn venv_dir() -> PathBuf {
-    match std::env::var_os("PYSOEM_VENV") {
-        Some(v) => PathBuf::from(v),
-        None => manifest_path("target/pysoem-venv"),
-    }
+    veth::pysoem_venv_dir()
 }
 
 fn work_dir() -> PathBuf {
@@ -95,13 +92,7 @@ fn three_vendors_over_veth() {
 }
 
 fn fieldprobe(args: &[&str]) -> (Option<std::process::ExitStatus>, String, String) {
-    run_bounded(
-        Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
-            .stdin(Stdio::null())
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .args(args),
-        STEP_TIMEOUT,
-    )
+    veth::fieldprobe_bounded(args, STEP_TIMEOUT)
 }
 
 /// The three devices' specs in ring order, the identities checked against the sources.

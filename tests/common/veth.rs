@@ -154,3 +154,26 @@ pub fn start_emulator(
     }
     (emu, log)
 }
+
+/// The pysoem venv of `scripts/pysoem-venv.sh`: `$PYSOEM_VENV`, else `target/pysoem-venv`.
+pub fn pysoem_venv_dir() -> std::path::PathBuf {
+    match std::env::var_os("PYSOEM_VENV") {
+        Some(v) => std::path::PathBuf::from(v),
+        None => netns::manifest_path("target/pysoem-venv"),
+    }
+}
+
+/// `fieldprobe ARGS…` from the crate root, stdin closed, at most `limit`: (status, stdout,
+/// stderr).
+pub fn fieldprobe_bounded(
+    args: &[&str],
+    limit: Duration,
+) -> (Option<std::process::ExitStatus>, String, String) {
+    netns::run_bounded(
+        Command::new(env!("CARGO_BIN_EXE_fieldprobe"))
+            .stdin(Stdio::null())
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(args),
+        limit,
+    )
+}
