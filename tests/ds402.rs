@@ -436,12 +436,7 @@ fn short_images_are_errors_not_panics() {
 #[test]
 fn default_pdo_layout_bytes() {
     let def = generic();
-    let entry = |index, ty, offset| PdoEntry {
-        index,
-        sub: 0,
-        ty,
-        offset,
-    };
+    let entry = |index, ty, offset| PdoEntry::at(index, 0, ty, offset);
     // 0x6072 is not mapped: torque limits are written acyclically (seed 004 §7.3.2).
     assert_eq!(
         def.rxpdo.entries(),

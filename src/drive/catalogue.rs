@@ -14,8 +14,18 @@
 //! increments_per_unit = 10000             # drive increments per mm (or per degree)
 //! offset = 0.0                            # axis position at increment 0
 //!
+//! [device]                                # optional: the device the file is for, as the
+//! vendor_id = 0x0000029C                  # master finds it on the bus (CoE 0x1018:01 …
+//! product_code = 0x03B11002               # :03, the SII identity); revision optional
+//! revision = 0x00050005
+//!
 //! [rxpdo]                                 # master -> drive, default = CSP mapping
 //! entries = ["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"]
+//! # pdos = ["0x1701"]                     # the PDOs assigned to the outputs (0x1C12), in order;
+//! #                                       # default: 0x1600 (EtherCAT), the master's fit (CANopen)
+//! # fixed = true                          # the device's own fixed mapping of `pdos`: assigned
+//! #                                       # and checked, never written; `entries` is its content,
+//! #                                       # gaps "0x0000:00:bit8" and bit fields "…:bit1" allowed
 //! # defaults = { "0x6072:00" = 3000 }     # values the adapter writes to mapped objects it does
 //! #                                       # not drive (only with 0x6072 in `entries`)
 //!
@@ -40,6 +50,10 @@
 //! TORQUE_LIMIT = { object = "0x6072:00", type = "u16", unit = "0.1 %", scale = 10.0 }
 //! MON_WINDOW = { object = "0x6065:00", type = "u32", unit = "increments" }
 //!
+//! [roles]                                 # CiA 402 objects played by other objects
+//! # controlword = "0x7010:01"             # (Beckhoff MDP 742: 0x7010:01, …); a word made of
+//! # touch_probe_function = { object = "0x7001:01", bits = 16 }   # single bits: first + width
+//!
 //! [idn]                                   # SERCOS IDNs on a CoE drive
 //! "S-0-0092" = { object = "0x6072:00", type = "u16" }
 //! "S-0-0159" = { object = "0x6065:00", type = "u32", zero = 4294967295 }
@@ -48,7 +62,7 @@
 //! Every error names the file, the 1-based line (from the TOML spans), the key and what is
 //! allowed; unknown keys are errors, so a typo never silently falls back to a default.
 
-use super::pdo::{self, DataType, PdoLayout};
+use super::pdo::{self, DataType, PdoLayout, Role};
 use super::DriveError;
 use crate::units::Scaling;
 use std::ops::Range;
@@ -348,6 +362,51 @@ pub struct DriveDefinition {
     pub probe: ProbeConfig,
     /// `[idn]`, in file order.
     pub idns: Vec<IdnMapping>,
+    /// `[device]`: the device this definition is for, if the file names it.
+    pub identity: Option<DeviceIdentity>,
+    /// `[roles]`: CiA 402 objects played by other objects of the device.
+    pub roles: Vec<Role>,
+    /// `[rxpdo] pdos` / `fixed`.
+    pub rx_assign: PdoAssign,
+    /// `[txpdo] pdos` / `fixed`.
+    pub tx_assign: PdoAssign,
+}
+
+/// `[device]`: the identity of the device a definition is for — what a master compares with
+/// the SubDevice's SII / CoE 0x1018 (ETG.1000.6; CiA 301 0x1018:01 … :03).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct DeviceIdentity {
+    /// Vendor id (0x1018:01).
+    pub vendor_id: u32,
+    /// Product code (0x1018:02).
+    pub product_code: u32,
+    /// Revision number (0x1018:03), if the definition is for one revision.
+    pub revision: Option<u32>,
+}
+
+impl std::fmt::Display for DeviceIdentity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "vendor {:#010x} product {:#010x}",
+            self.vendor_id, self.product_code
+        )?;
+        if let Some(r) = self.revision {
+            write!(f, " revision {r:#010x}")?;
+        }
+        Ok(())
+    }
+}
+
+/// `[rxpdo]` / `[txpdo]` `pdos` and `fixed`: which PDOs carry the entries.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct PdoAssign {
+    /// The PDOs (mapping objects 0x1600… / 0x1A00…) in assignment order; empty: the link's
+    /// default (EtherCAT: 0x1600 / 0x1A00; CANopen: the PDOs the master fits the entries into).
+    pub pdos: Vec<u16>,
+    /// The PDOs are the device's fixed mappings: the master assigns them and reads their
+    /// mapping back (it must equal the entries), never writes it (ETG.2000 `RxPdo Fixed`).
+    pub fixed: bool,
 }
 
 impl DriveDefinition {
@@ -360,6 +419,16 @@ impl DriveDefinition {
     pub fn has_drive_latch(&self) -> bool {
         self.profile != Profile::Cia402
             || (self.rxpdo.contains(0x60B8, 0) && self.txpdo.contains(0x60B9, 0))
+    }
+
+    /// The device's object that plays CiA 402 object `index:sub` (`[roles]`), else the object
+    /// itself: where the master reads or writes it by SDO (e.g. the mode of operation 0x6060 of
+    /// a Beckhoff MDP 742 terminal is 0x7010:03).
+    pub fn object_of(&self, index: u16, sub: u8) -> (u16, u8) {
+        self.roles
+            .iter()
+            .find(|r| r.index == index && r.sub == sub && r.bits.is_none())
+            .map_or((index, sub), |r| (r.object, r.object_sub))
     }
 
     /// The drive function with this key.
@@ -491,6 +560,8 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
             "probe",
             "functions",
             "idn",
+            "device",
+            "roles",
             // The family's own section, parsed by its module from `DriveDefinition::source`.
             "sercos",
             "profidrive",
@@ -555,8 +626,11 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
         offset,
     };
 
-    let (rxpdo, rxpdo_defaults) = cx.pdo(root, "rxpdo", pdo::DEFAULT_RXPDO, true)?;
-    let (txpdo, _) = cx.pdo(root, "txpdo", pdo::DEFAULT_TXPDO, false)?;
+    let identity = cx.identity(root)?;
+    let roles = cx.roles(root)?;
+    let (rxpdo, rxpdo_defaults, rx_assign) =
+        cx.pdo(root, "rxpdo", pdo::DEFAULT_RXPDO, true, &roles)?;
+    let (txpdo, _, tx_assign) = cx.pdo(root, "txpdo", pdo::DEFAULT_TXPDO, false, &roles)?;
     let needed_pdo: &[(&PdoLayout, &str, [u16; 2])] = if profile == Profile::Cia402 {
         &[
             (&rxpdo, "rxpdo", [0x6040, 0x607A]),
@@ -596,6 +670,10 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
         functions,
         probe,
         idns,
+        identity,
+        roles,
+        rx_assign,
+        tx_assign,
     })
 }
 
@@ -756,16 +834,22 @@ impl Cx<'_> {
         key: &str,
         default: &[&str],
         with_defaults: bool,
-    ) -> Result<(PdoLayout, Vec<OutputDefault>), DriveError> {
+        roles: &[Role],
+    ) -> Result<(PdoLayout, Vec<OutputDefault>, PdoAssign), DriveError> {
         let what = format!("[{key}]");
+        let with_roles = |layout: PdoLayout, span: Option<Range<usize>>| {
+            layout
+                .with_roles(roles)
+                .map_err(|e| self.err(span, format!("[roles]: {e}")))
+        };
         let Some(t) = self.table(root, key, None)? else {
             let layout = PdoLayout::parse(default).map_err(|e| self.err(None, e.to_string()))?;
-            return Ok((layout, Vec::new()));
+            return Ok((with_roles(layout, None)?, Vec::new(), PdoAssign::default()));
         };
         let allowed: &[&str] = if with_defaults {
-            &["entries", "defaults"]
+            &["entries", "defaults", "pdos", "fixed"]
         } else {
-            &["entries"]
+            &["entries", "pdos", "fixed"]
         };
         self.check_keys(t.1, &what, allowed)?;
         let layout = match t.1.get("entries") {
@@ -777,14 +861,18 @@ impl Cx<'_> {
                         format!("{what} entries: expected an array of strings like \"0x6040:00\""),
                     )
                 })?;
-                let mut objects = Vec::new();
+                let mut objects: Vec<pdo::EntrySpec> = Vec::new();
                 for v in arr.iter() {
                     let s = v.as_str().ok_or_else(|| {
-                        self.err(v.span(), format!("{what} entries: expected a string like \"0x6040:00\" or \"0x2000:01:u32\""))
+                        self.err(v.span(), format!("{what} entries: expected a string like \"0x6040:00\", \"0x2000:01:u32\", \"0x7001:01:bit1\" or a gap \"0x0000:00:bit8\""))
                     })?;
-                    let o = pdo::parse_entry(s)
+                    let o = pdo::parse_entry_spec(s)
                         .map_err(|e| self.err(v.span(), format!("{what} entries: {e}")))?;
-                    if objects.iter().any(|&(i, s, _)| (i, s) == (o.0, o.1)) {
+                    if !o.is_gap()
+                        && objects
+                            .iter()
+                            .any(|e| !e.is_gap() && (e.index, e.sub) == (o.index, o.sub))
+                    {
                         return Err(self.err(
                             v.span(),
                             format!("{what} entries: object {s} is mapped twice"),
@@ -792,10 +880,58 @@ impl Cx<'_> {
                     }
                     objects.push(o);
                 }
-                PdoLayout::from_objects(&objects)
+                PdoLayout::from_specs(&objects)
                     .map_err(|e| self.err(item.span(), format!("{what} entries: {e}")))?
             }
         };
+        let layout = with_roles(layout, self.value_span(t.1, "entries"))?;
+        let mut assign = PdoAssign::default();
+        if let Some(item) = t.1.get("pdos") {
+            let span = self.value_span(t.1, "pdos");
+            let range = if key == "rxpdo" {
+                0x1600..=0x17FF
+            } else {
+                0x1A00..=0x1BFF
+            };
+            let bad = || {
+                self.err(
+                    span.clone(),
+                    format!(
+                        "{what} pdos: expected an array of PDO indices {:#06X} … {:#06X}, e.g. \
+                         [\"{:#06X}\"]",
+                        range.start(),
+                        range.end(),
+                        range.start()
+                    ),
+                )
+            };
+            let arr = item.as_array().ok_or_else(bad)?;
+            for v in arr.iter() {
+                let n = match v {
+                    Value::Integer(i) => u16::try_from(*i.value()).ok(),
+                    Value::String(s) => crate::drive::pdo::parse_hex_u16(s.value()),
+                    _ => None,
+                }
+                .filter(|n| range.contains(n))
+                .ok_or_else(bad)?;
+                if assign.pdos.contains(&n) {
+                    return Err(self.err(v.span(), format!("{what} pdos: {n:#06X} is given twice")));
+                }
+                assign.pdos.push(n);
+            }
+            if assign.pdos.is_empty() {
+                return Err(bad());
+            }
+        }
+        if let Some(f) = self.bool(t.1, &what, "fixed")? {
+            if f && assign.pdos.is_empty() {
+                return Err(self.err(
+                    self.value_span(t.1, "fixed"),
+                    format!("{what} fixed = true: name the fixed PDOs in `pdos`"),
+                ));
+            }
+            assign.fixed = f;
+        }
         let mut defaults = Vec::new();
         if let Some(d) = self.table(t.1, "defaults", Some(&what))? {
             for (k, _) in d.1.iter() {
@@ -820,7 +956,105 @@ impl Cx<'_> {
                 defaults.push(OutputDefault { index, sub, value });
             }
         }
-        Ok((layout, defaults))
+        Ok((layout, defaults, assign))
+    }
+
+    /// `[device]`: `vendor_id`, `product_code` (required), `revision` (optional); integers or
+    /// strings with 0x hex.
+    fn identity(&self, root: &dyn TableLike) -> Result<Option<DeviceIdentity>, DriveError> {
+        let Some(t) = self.table(root, "device", None)? else {
+            return Ok(None);
+        };
+        let w = "[device]";
+        self.check_keys(t.1, w, &["vendor_id", "product_code", "revision"])?;
+        let num = |key: &str| -> Result<Option<u32>, DriveError> {
+            let Some(item) = t.1.get(key) else {
+                return Ok(None);
+            };
+            let v = match item.as_value() {
+                Some(Value::Integer(i)) => u32::try_from(*i.value()).ok(),
+                Some(Value::String(s)) => crate::drive::pdo::parse_number_u32(s.value()),
+                _ => None,
+            };
+            v.map(Some).ok_or_else(|| {
+                self.err(
+                    self.value_span(t.1, key),
+                    format!(
+                        "{w} {key}: expected a number 0 … 0xFFFFFFFF (decimal, or 0x hex as a TOML \
+                         integer or string)"
+                    ),
+                )
+            })
+        };
+        let missing = |key: &str| {
+            self.err(
+                t.0.clone(),
+                format!("{w} {key} is missing (the device's 0x1018 identity)"),
+            )
+        };
+        let vendor_id = num("vendor_id")?.ok_or_else(|| missing("vendor_id"))?;
+        let product_code = num("product_code")?.ok_or_else(|| missing("product_code"))?;
+        Ok(Some(DeviceIdentity {
+            vendor_id,
+            product_code,
+            revision: num("revision")?,
+        }))
+    }
+
+    /// `[roles]`: role name ([`pdo::ROLE_NAMES`]) → `"0xIIII:SS"` or
+    /// `{ object = "0xIIII:SS", bits = N }`.
+    fn roles(&self, root: &dyn TableLike) -> Result<Vec<Role>, DriveError> {
+        let mut out: Vec<Role> = Vec::new();
+        let Some(t) = self.table(root, "roles", None)? else {
+            return Ok(out);
+        };
+        let names: Vec<&str> = pdo::ROLE_NAMES.iter().map(|r| r.0).collect();
+        for (key, item) in t.1.iter() {
+            let kspan = self.key_span(t.1, key);
+            let Some(&(_, index, sub, _)) = pdo::ROLE_NAMES.iter().find(|r| r.0 == key) else {
+                return Err(self.err(
+                    kspan,
+                    format!("[roles] {key}: unknown role; allowed: {}", names.join(", ")),
+                ));
+            };
+            let what = format!("[roles] {key}");
+            let (text, bits, span) = match item {
+                Item::Value(Value::String(s)) => (s.value().clone(), None, item.span()),
+                _ => match item.as_table_like() {
+                    Some(f) => {
+                        self.check_keys(f, &what, &["object", "bits"])?;
+                        let o = self.opt_str(f, &what, "object")?.ok_or_else(|| {
+                            self.err(kspan.clone(), format!("{what}: `object` is missing"))
+                        })?;
+                        let bits = self.int(f, &what, "bits", 1, 32)?.map(|b| b as u16);
+                        (o, bits, self.value_span(f, "object"))
+                    }
+                    None => {
+                        return Err(self.err(
+                            item.span(),
+                            format!(
+                                "{what}: expected an object \"0xIIII:SS\" or {{ object = \
+                                 \"0xIIII:SS\", bits = N }}"
+                            ),
+                        ))
+                    }
+                },
+            };
+            let (object, object_sub) = match pdo::parse_entry_spec(&text) {
+                Ok(e) if !e.is_gap() => (e.index, e.sub),
+                Err(pdo::PdoError::UnknownObject { index, sub }) => (index, sub),
+                Ok(_) => return Err(self.err(span, format!("{what}: a gap plays no role"))),
+                Err(e) => return Err(self.err(span, format!("{what}: {e}"))),
+            };
+            out.push(Role {
+                index,
+                sub,
+                object,
+                object_sub,
+                bits,
+            });
+        }
+        Ok(out)
     }
 
     fn model(&self, root: &dyn TableLike) -> Result<ModelConfig, DriveError> {

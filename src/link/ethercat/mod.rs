@@ -1373,7 +1373,7 @@ async fn write_pdo_mapping(
             .await
             .map_err(mbx_err(what(&format!("{pdo:#06x}:00 = 0"))))?;
         for (k, e) in layout.entries().iter().enumerate() {
-            let v = (u32::from(e.index) << 16) | (u32::from(e.sub) << 8) | (8 * e.ty.size() as u32);
+            let v = e.mapping_value();
             c.sdo_download(md, pdo, (k + 1) as u8, &v.to_le_bytes())
                 .await
                 .map_err(mbx_err(what(&format!("{pdo:#06x}:{:02x}", k + 1))))?;
