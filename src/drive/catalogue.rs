@@ -1356,6 +1356,77 @@ mod tests {
         assert_eq!(BUILTINS.len(), BUILTIN_NAMES.len());
     }
 
+    /// An MDP 742 terminal (Beckhoff EJ7211-0010 objects): fixed single-object PDOs, the
+    /// CiA 402 roles at 0x7010 / 0x6010 / 0x6000, the touch probe words made of bits.
+    #[test]
+    fn device_roles_and_fixed_pdos() {
+        let text = r#"
+[drive]
+name = "mdp"
+profile = "cia402"
+[device]
+vendor_id = 2
+product_code = "0x1C2B2852"
+revision = 0x001A000A
+[scaling]
+increments_per_unit = 1000
+[roles]
+controlword = "0x7010:01"
+target_position = "0x7010:05"
+modes_of_operation = "0x7010:03"
+statusword = "0x6010:01"
+position_actual_value = "0x6000:11"
+touch_probe_function = { object = "0x7001:01", bits = 16 }
+[rxpdo]
+pdos = ["0x1600", "0x1606", 0x1607]
+fixed = true
+entries = ["0x7010:01:u16", "0x7010:05:u32", "0x7001:01:bit1", "0x7001:02:bit1",
+  "0x7001:03:bit2", "0x7001:05:bit1", "0x7001:06:bit1", "0x0000:00:bit2", "0x7001:09:bit1",
+  "0x7001:0A:bit1", "0x7001:0B:bit2", "0x7001:0D:bit1", "0x7001:0E:bit1", "0x0000:00:bit2"]
+[txpdo]
+pdos = ["0x1A00", "0x1A01"]
+fixed = true
+entries = ["0x6000:11:u32", "0x6010:01:u16"]
+"#;
+        let def = parse(text, "mdp.toml").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            def.identity,
+            Some(DeviceIdentity {
+                vendor_id: 2,
+                product_code: 0x1C2B_2852,
+                revision: Some(0x001A_000A)
+            })
+        );
+        assert_eq!(def.rx_assign.pdos, [0x1600, 0x1606, 0x1607]);
+        assert!(def.rx_assign.fixed && def.tx_assign.fixed);
+        let cw = def.rxpdo.find(0x6040, 0).unwrap();
+        assert_eq!((cw.offset, cw.ty), (0, DataType::U16));
+        let tp = def.rxpdo.find(0x60B8, 0).unwrap();
+        assert_eq!((tp.offset, tp.bits), (6, 16));
+        assert_eq!(def.txpdo.find(0x6064, 0).unwrap().ty, DataType::I32);
+        assert_eq!(def.txpdo.find(0x6041, 0).unwrap().offset, 4);
+        assert!(def.has_drive_latch() == def.txpdo.contains(0x60B9, 0));
+        // The mode is an SDO object of the terminal; everything else is itself.
+        assert_eq!(def.object_of(0x6060, 0), (0x7010, 3));
+        assert_eq!(def.object_of(0x6065, 0), (0x6065, 0));
+        assert!(crate::drive::ds402::Ds402Adapter::new(&def).is_ok());
+        for (from, to, want) in [
+            ("product_code = \"0x1C2B2852\"\n", "", "[device] product_code is missing"),
+            ("controlword = ", "control_word = ", "[roles] control_word: unknown role"),
+            ("0x1607]", "0x1A07]", "[rxpdo] pdos: expected an array of PDO indices 0x1600"),
+            (
+                "pdos = [\"0x1A00\", \"0x1A01\"]\n",
+                "",
+                "[txpdo] fixed = true: name the fixed PDOs in `pdos`",
+            ),
+            ("0x7010:05\"\n", "0x7010:01\"\n", "object 0x7010:01 gives 16 bits"),
+        ] {
+            assert!(text.contains(from), "{from}");
+            let e = parse(&text.replacen(from, to, 1), "mdp.toml").unwrap_err();
+            assert!(e.to_string().contains(want), "{from:?}: {e}");
+        }
+    }
+
     #[test]
     fn generic_functions_and_defaults() {
         let def = builtin("cia402-generic").unwrap();

@@ -292,7 +292,7 @@ pub enum PdoError {
     },
     /// A role's object does not have the bit length of the CiA 402 object it plays.
     #[error(
-        "role of 0x{index:04X}:{sub:02X} ({ty}): object 0x{object:04X}:{object_sub:02X} gives          {bits} bits in the image, CiA 402 has {}",
+        "role of 0x{index:04X}:{sub:02X} ({ty}): object 0x{object:04X}:{object_sub:02X} gives {bits} bits in the image, CiA 402 has {}",
         .ty.size() * 8
     )]
     RoleSize {
