@@ -1411,15 +1411,31 @@ entries = ["0x6000:11:u32", "0x6010:01:u16"]
         assert_eq!(def.object_of(0x6065, 0), (0x6065, 0));
         assert!(crate::drive::ds402::Ds402Adapter::new(&def).is_ok());
         for (from, to, want) in [
-            ("product_code = \"0x1C2B2852\"\n", "", "[device] product_code is missing"),
-            ("controlword = ", "control_word = ", "[roles] control_word: unknown role"),
-            ("0x1607]", "0x1A07]", "[rxpdo] pdos: expected an array of PDO indices 0x1600"),
+            (
+                "product_code = \"0x1C2B2852\"\n",
+                "",
+                "[device] product_code is missing",
+            ),
+            (
+                "controlword = ",
+                "control_word = ",
+                "[roles] control_word: unknown role",
+            ),
+            (
+                "0x1607]",
+                "0x1A07]",
+                "[rxpdo] pdos: expected an array of PDO indices 0x1600",
+            ),
             (
                 "pdos = [\"0x1A00\", \"0x1A01\"]\n",
                 "",
                 "[txpdo] fixed = true: name the fixed PDOs in `pdos`",
             ),
-            ("0x7010:05\"\n", "0x7010:01\"\n", "object 0x7010:01 gives 16 bits"),
+            (
+                "0x7010:05\"\n",
+                "0x7010:01\"\n",
+                "object 0x7010:01 gives 16 bits",
+            ),
         ] {
             assert!(text.contains(from), "{from}");
             let e = parse(&text.replacen(from, to, 1), "mdp.toml").unwrap_err();

@@ -38,6 +38,10 @@ pub struct VendorObject {
     pub index: u16,
     /// Sub-index.
     pub sub: u8,
+    /// The CiA 402 object it is, or plays (a modular device profile object such as the
+    /// "Following error window" 0x8010:50 of a Beckhoff servo terminal); `(index, sub)` for the
+    /// CiA 402 object itself.
+    pub plays: (u16, u8),
     /// Name in the file.
     pub name: String,
     /// Data type name as written (`UINT`, `UNSIGNED16`).
@@ -80,14 +84,18 @@ pub struct VendorDevice {
     pub revision: Option<u32>,
     /// Objects of the dictionary this module reads ([`OBJECTS_READ`]), those present.
     pub objects: Vec<VendorObject>,
+    /// Roles and PDOs chosen from the device's own PDO descriptions (an ESI device:
+    /// [`esi_plan::plan`]); `None`: the CiA 402 objects the file marks mappable are mapped into
+    /// the first PDO of each direction.
+    pub plan: Option<plan::Plan>,
+    /// Why no plan could be made (the required roles the device cannot carry).
+    pub plan_error: Option<plan::PlanError>,
 }
 
 impl VendorDevice {
     /// The object `index:sub`, if the file has it.
     pub fn object(&self, index: u16, sub: u8) -> Option<&VendorObject> {
-        self.objects
-            .iter()
-            .find(|o| o.index == index && o.sub == sub)
+        self.objects.iter().find(|o| o.plays == (index, sub))
     }
 }
 
@@ -265,89 +273,21 @@ fn hex_opt(v: Option<u32>) -> String {
 /// in its direction or of the wrong size.
 pub fn generate(dev: &VendorDevice, name: Option<&str>) -> Result<Generated, VendorError> {
     let kind = dev.kind;
-    let mut missing = Vec::new();
-    for w in &AXIS_PDO {
-        if !w.required {
-            continue;
-        }
-        if let Err(why) = pdo_fit(dev.object(w.index, 0), w, kind) {
-            missing.push(format!("0x{:04X}:00 {}: {why}", w.index, cia_name(w.index)));
-        }
-    }
-    if !missing.is_empty() {
+    if let Some(e) = &dev.plan_error {
         return Err(VendorError::MissingObjects {
             file: dev.file.clone(),
             product: dev.product.clone(),
-            missing,
+            missing: e.missing.clone(),
         });
     }
-    let mut notes = Vec::new();
-    let mut left_out = Vec::new();
-    let mut rx = Vec::new();
-    let mut tx = Vec::new();
-    let push = |w: &Wanted, rx_list: &mut Vec<u16>, tx_list: &mut Vec<u16>| {
-        if w.rx {
-            rx_list.push(w.index);
-        } else {
-            tx_list.push(w.index);
-        }
+    let Sections {
+        pdo_text,
+        touch_probe,
+        mut notes,
+    } = match &dev.plan {
+        Some(plan) => planned_sections(dev, plan),
+        None => listed_sections(dev)?,
     };
-    for w in &AXIS_PDO {
-        match pdo_fit(dev.object(w.index, 0), w, kind) {
-            Ok(()) => push(w, &mut rx, &mut tx),
-            Err(why) => left_out.push((w.index, why)),
-        }
-    }
-    // Touch probe: the function word out and the status in, and at least one edge value.
-    let probe_fit: Vec<(u16, Result<(), String>)> = PROBE_PDO
-        .iter()
-        .map(|w| (w.index, pdo_fit(dev.object(w.index, 0), w, kind)))
-        .collect();
-    let core_ok = probe_fit[..2].iter().all(|(_, r)| r.is_ok());
-    let values_ok = probe_fit[2..].iter().any(|(_, r)| r.is_ok());
-    let touch_probe = core_ok && values_ok;
-    if touch_probe {
-        for (w, (_, r)) in PROBE_PDO.iter().zip(&probe_fit) {
-            match r {
-                Ok(()) => push(w, &mut rx, &mut tx),
-                Err(why) => left_out.push((w.index, why.clone())),
-            }
-        }
-    }
-    match pdo_fit(dev.object(TORQUE_ACTUAL.index, 0), &TORQUE_ACTUAL, kind) {
-        Ok(()) => push(&TORQUE_ACTUAL, &mut rx, &mut tx),
-        Err(why) => left_out.push((TORQUE_ACTUAL.index, why)),
-    }
-    for (index, why) in &left_out {
-        notes.push(format!(
-            "0x{index:04X}:00 {} left out: {why}",
-            cia_name(*index)
-        ));
-    }
-    if !touch_probe {
-        let absent = probe_fit
-            .iter()
-            .all(|(_, r)| r.as_ref().is_err_and(|e| e == "not in the file"));
-        let why: Vec<String> = if absent {
-            vec!["none of them in the file".into()]
-        } else {
-            probe_fit
-                .iter()
-                .filter_map(|(i, r)| r.as_ref().err().map(|e| format!("0x{i:04X} {e}")))
-                .collect()
-        };
-        notes.push(format!(
-            "no touch probe (0x60B8 … 0x60BD: {}): no drive latch on this axis; measure with \
-             PLC, PLC_TIMESTAMP (a timestamp input terminal such as an EL1252) or \
-             PLC_EXT_LATCH_CONTROL (seed 004 §7)",
-            if why.is_empty() {
-                "no edge value".to_string()
-            } else {
-                why.join(", ")
-            }
-        ));
-    }
-
     let name = name
         .map(str::to_string)
         .unwrap_or_else(|| drive_name(&dev.vendor, &dev.product));
@@ -457,6 +397,374 @@ pub fn generate(dev: &VendorDevice, name: Option<&str>) -> Result<Generated, Ven
          offset = 0.0                  # axis position at increment 0 (mm)\n"
     );
 
+    t.push_str(&pdo_text);
+
+    if touch_probe {
+        let _ = writeln!(
+            t,
+            "[probe]\n\
+             # TO CHECK in the drive manual: does the drive re-arm a touch probe only after 0x60B8\n\
+             # went to 0 (then true)? 100 cycles is the time the adapter waits for 0x60B9.\n\
+             rearm_requires_zero = false\n\
+             arm_timeout_cycles = 100\n"
+        );
+    }
+
+    // Drive functions.
+    let functions = [
+        ("TORQUE_LIMIT", 0x6072u16, "0.1 %", 10.0),
+        ("TORQUE_LIMIT_POS", 0x60E0, "0.1 %", 10.0),
+        ("TORQUE_LIMIT_NEG", 0x60E1, "0.1 %", 10.0),
+        ("MON_WINDOW", 0x6065, "increments", 1.0),
+        ("MON_TIMEOUT", 0x6066, "ms", 1.0),
+    ];
+    let mut written: Vec<(&str, (u16, u8), DataType)> = Vec::new();
+    let mut fn_lines = String::new();
+    for (key, index, unit, scale) in functions {
+        let Some(o) = dev.object(index, 0) else {
+            let _ = writeln!(
+                fn_lines,
+                "# {key}: 0x{index:04X} {} is not in the file.",
+                cia_name(index)
+            );
+            continue;
+        };
+        let Some(ty) = o.ty else {
+            notes.push(format!(
+                "{key} left out: 0x{index:04X} {} has type {}, which a drive file cannot hold",
+                o.name, o.type_name
+            ));
+            let _ = writeln!(
+                fn_lines,
+                "# {key}: 0x{index:04X} has type {}, not supported.",
+                o.type_name
+            );
+            continue;
+        };
+        if !o.writable {
+            notes.push(format!(
+                "{key} left out: 0x{index:04X} {} is read-only in the file",
+                o.name
+            ));
+            let _ = writeln!(fn_lines, "# {key}: 0x{index:04X} is read-only.");
+            continue;
+        }
+        let (lo, hi) = ty.range();
+        // Torque limits and monitoring values are not negative (CiA 402 §6.9, §11.3).
+        let min = o.low.unwrap_or(0).clamp(lo.max(0), hi);
+        let max = o.high.unwrap_or(hi).clamp(min, hi);
+        let scale_text = if scale == 1.0 {
+            String::new()
+        } else {
+            format!(", scale = {scale:.1}")
+        };
+        let _ = writeln!(
+            fn_lines,
+            "{key} = {{ object = \"0x{:04X}:{:02X}\", type = \"{}\", unit = \"{unit}\"{scale_text}, min = {min}, max = {max} }}",
+            o.index,
+            o.sub,
+            ty.name()
+        );
+        written.push((key, (o.index, o.sub), ty));
+    }
+    let _ = writeln!(
+        t,
+        "[functions]\n\
+         # drive function table (seed 004 §7.3.2): KEY -> object, type as the file gives it;\n\
+         # values are written as round(value * scale) within [min, max] (wire units). Torque limits\n\
+         # in % of rated torque (wire 0.1 %), the following error window in increments, its time\n\
+         # out in ms."
+    );
+    t.push_str(&fn_lines);
+    let idn: Vec<String> = written
+        .iter()
+        .filter_map(|&(key, (index, sub), ty)| match key {
+            "TORQUE_LIMIT" => Some(format!(
+                "\"S-0-0092\" = {{ object = \"0x{index:04X}:{sub:02X}\", type = \"{}\" }}",
+                ty.name()
+            )),
+            "MON_WINDOW" if ty == DataType::U32 => Some(format!(
+                "\"S-0-0159\" = {{ object = \"0x{index:04X}:{sub:02X}\", type = \"u32\", zero = 4294967295 }}"
+            )),
+            _ => None,
+        })
+        .collect();
+    if !idn.is_empty() {
+        let _ = writeln!(
+            t,
+            "\n[idn]\n# SERCOS IDNs of seed 004 §7.3.1 on this drive's objects (S-0-0092 torque limit,\n\
+             # S-0-0159 monitoring window; SERCOS 0 = off = CiA 402 0xFFFFFFFF)."
+        );
+        for l in idn {
+            let _ = writeln!(t, "{l}");
+        }
+    }
+
+    catalogue::parse(&t, &format!("{name}.toml")).map_err(|e| VendorError::Internal {
+        file: dev.file.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(Generated {
+        toml: t,
+        notes,
+        touch_probe,
+    })
+}
+
+/// The PDO sections of a definition and what goes with them.
+struct Sections {
+    /// `[device]`, `[roles]`, `[rxpdo]`, `[txpdo]` as TOML text.
+    pdo_text: String,
+    /// The device has a touch probe.
+    touch_probe: bool,
+    /// Notes for stderr.
+    notes: Vec<String>,
+}
+
+/// The PDO sections from an ESI device's [`plan::Plan`]: `[device]`, `[roles]`, `[rxpdo]` /
+/// `[txpdo]` with the PDOs chosen, their entries (gaps and bit fields as the PDOs hold them),
+/// and `defaults` for the outputs of a fixed PDO that are not roles.
+fn planned_sections(dev: &VendorDevice, plan: &plan::Plan) -> Sections {
+    let mut t = String::new();
+    let mut notes = plan.notes.clone();
+    let touch_probe = plan.source(0x60B8).is_some() && plan.source(0x60B9).is_some();
+    if let (Some(v), Some(p)) = (dev.vendor_id, dev.product_code) {
+        let _ = writeln!(
+            t,
+            "[device]\n# the device as the master finds it on the bus (SII identity, CoE 0x1018)\n\
+             vendor_id = 0x{v:08X}\nproduct_code = 0x{p:08X}"
+        );
+        if let Some(r) = dev.revision {
+            let _ = writeln!(t, "revision = 0x{r:08X}");
+        }
+        t.push('\n');
+    }
+    let with_role: Vec<&plan::RoleSource> =
+        plan.used.iter().filter(|s| s.role().is_some()).collect();
+    if !with_role.is_empty() {
+        let _ = writeln!(
+            t,
+            "[roles]\n# CiA 402 objects this device carries in objects of its own"
+        );
+        for s in with_role {
+            let Some(r) = s.role() else { continue };
+            let name = pdo::role_name(r.index, r.sub).unwrap_or("?");
+            let object = format!("0x{:04X}:{:02X}", r.object, r.object_sub);
+            let _ = match r.bits {
+                None => writeln!(t, "{name} = \"{object}\"   # {}", s.how),
+                Some(b) => writeln!(
+                    t,
+                    "{name} = {{ object = \"{object}\", bits = {b} }}   # {}",
+                    s.how
+                ),
+            };
+            if s.how.starts_with("position set-point") {
+                notes.push(format!(
+                    "0x607A:00 target position: the device has none in a PDO; its fixed RxPDO \
+                     carries the position set-point in {object} (interpretation: the Beckhoff \
+                     AX2000 / Kollmorgen AKD position interface) — check the drive manual"
+                ));
+            }
+        }
+        t.push('\n');
+    }
+    for (key, d, rx) in [("rxpdo", &plan.rx, true), ("txpdo", &plan.tx, false)] {
+        let _ = writeln!(t, "[{key}]");
+        let _ = writeln!(
+            t,
+            "# {}",
+            if rx {
+                "master -> drive:"
+            } else {
+                "drive -> master:"
+            }
+        );
+        for e in &d.entries {
+            if e.is_gap() {
+                let _ = writeln!(t, "#   gap of {} bits", e.bits);
+                continue;
+            }
+            let role = plan
+                .used
+                .iter()
+                .find(|s| s.has(e.index, e.sub))
+                .map(|s| format!(" = {}", cia_name(s.index)));
+            let name = dev
+                .objects
+                .iter()
+                .find(|o| o.index == e.index && o.sub == e.sub)
+                .map_or(String::new(), |o| format!(" {}", one_line(&o.name)));
+            let _ = writeln!(
+                t,
+                "#   0x{:04X}:{:02X}{name} ({} bits){}",
+                e.index,
+                e.sub,
+                e.bits,
+                role.unwrap_or_default()
+            );
+        }
+        for (index, why) in plan
+            .left_out
+            .iter()
+            .filter(|(i, _)| pdo::ROLE_NAMES.iter().any(|r| r.1 == *i && r.3 == rx))
+        {
+            let _ = writeln!(
+                t,
+                "#   left out: 0x{index:04X}:00 {}: {}",
+                cia_name(*index),
+                one_line(why)
+            );
+        }
+        if !d.pdos.is_empty() {
+            let pdos: Vec<String> = d.pdos.iter().map(|p| format!("\"0x{p:04X}\"")).collect();
+            let _ = writeln!(t, "pdos = [{}]", pdos.join(", "));
+        }
+        if d.fixed {
+            let _ = writeln!(
+                t,
+                "fixed = true   # the device's own mapping: assigned as it is, never written"
+            );
+        }
+        let entries: Vec<String> = d
+            .entries
+            .iter()
+            .map(|e| format!("\"{}\"", pdo::entry_text(e)))
+            .collect();
+        let _ = writeln!(t, "entries = [{}]", entries.join(", "));
+        if !d.defaults.is_empty() {
+            let _ = writeln!(
+                t,
+                "# outputs of the fixed PDO that are no role: values the drive runs with"
+            );
+            let items: Vec<String> = d
+                .defaults
+                .iter()
+                .map(|(i, s, v, _)| format!("\"0x{i:04X}:{s:02X}\" = {v}"))
+                .collect();
+            let _ = writeln!(t, "defaults = {{ {} }}", items.join(", "));
+            for (i, s, v, why) in &d.defaults {
+                notes.push(format!(
+                    "0x{i:04X}:{s:02X} {} is in the fixed PDO: written {v} every cycle ({why})",
+                    cia_name(*i)
+                ));
+            }
+        }
+        t.push('\n');
+    }
+    for &(_, index, _, _) in pdo::ROLE_NAMES {
+        if plan.source(index).is_some() || pdo::is_touch_probe(index) {
+            continue;
+        }
+        if matches!(index, 0x60F4 | 0x6077 | 0x6061) {
+            notes.push(format!(
+                "0x{index:04X}:00 {} left out: not in the device's PDOs",
+                cia_name(index)
+            ));
+        }
+    }
+    if !touch_probe {
+        notes.push(
+            "no touch probe (0x60B8 … 0x60BD, or the modular device profile's TP1 / TP2 bits): no \
+             drive latch on this axis; measure with PLC, PLC_TIMESTAMP (a timestamp input \
+             terminal such as an EL1252) or PLC_EXT_LATCH_CONTROL (seed 004 §7)"
+                .to_string(),
+        );
+    }
+    Sections {
+        pdo_text: t,
+        touch_probe,
+        notes,
+    }
+}
+
+/// The PDO sections from the CiA 402 objects the file marks mappable (EDS, and every ESI
+/// without a [`VendorDevice::plan`]).
+fn listed_sections(dev: &VendorDevice) -> Result<Sections, VendorError> {
+    let kind = dev.kind;
+    let mut t = String::new();
+    let mut missing = Vec::new();
+    for w in &AXIS_PDO {
+        if !w.required {
+            continue;
+        }
+        if let Err(why) = pdo_fit(dev.object(w.index, 0), w, kind) {
+            missing.push(format!("0x{:04X}:00 {}: {why}", w.index, cia_name(w.index)));
+        }
+    }
+    if !missing.is_empty() {
+        return Err(VendorError::MissingObjects {
+            file: dev.file.clone(),
+            product: dev.product.clone(),
+            missing,
+        });
+    }
+    let mut notes = Vec::new();
+    let mut left_out = Vec::new();
+    let mut rx = Vec::new();
+    let mut tx = Vec::new();
+    let push = |w: &Wanted, rx_list: &mut Vec<u16>, tx_list: &mut Vec<u16>| {
+        if w.rx {
+            rx_list.push(w.index);
+        } else {
+            tx_list.push(w.index);
+        }
+    };
+    for w in &AXIS_PDO {
+        match pdo_fit(dev.object(w.index, 0), w, kind) {
+            Ok(()) => push(w, &mut rx, &mut tx),
+            Err(why) => left_out.push((w.index, why)),
+        }
+    }
+    // Touch probe: the function word out and the status in, and at least one edge value.
+    let probe_fit: Vec<(u16, Result<(), String>)> = PROBE_PDO
+        .iter()
+        .map(|w| (w.index, pdo_fit(dev.object(w.index, 0), w, kind)))
+        .collect();
+    let core_ok = probe_fit[..2].iter().all(|(_, r)| r.is_ok());
+    let values_ok = probe_fit[2..].iter().any(|(_, r)| r.is_ok());
+    let touch_probe = core_ok && values_ok;
+    if touch_probe {
+        for (w, (_, r)) in PROBE_PDO.iter().zip(&probe_fit) {
+            match r {
+                Ok(()) => push(w, &mut rx, &mut tx),
+                Err(why) => left_out.push((w.index, why.clone())),
+            }
+        }
+    }
+    match pdo_fit(dev.object(TORQUE_ACTUAL.index, 0), &TORQUE_ACTUAL, kind) {
+        Ok(()) => push(&TORQUE_ACTUAL, &mut rx, &mut tx),
+        Err(why) => left_out.push((TORQUE_ACTUAL.index, why)),
+    }
+    for (index, why) in &left_out {
+        notes.push(format!(
+            "0x{index:04X}:00 {} left out: {why}",
+            cia_name(*index)
+        ));
+    }
+    if !touch_probe {
+        let absent = probe_fit
+            .iter()
+            .all(|(_, r)| r.as_ref().is_err_and(|e| e == "not in the file"));
+        let why: Vec<String> = if absent {
+            vec!["none of them in the file".into()]
+        } else {
+            probe_fit
+                .iter()
+                .filter_map(|(i, r)| r.as_ref().err().map(|e| format!("0x{i:04X} {e}")))
+                .collect()
+        };
+        notes.push(format!(
+            "no touch probe (0x60B8 … 0x60BD: {}): no drive latch on this axis; measure with \
+             PLC, PLC_TIMESTAMP (a timestamp input terminal such as an EL1252) or \
+             PLC_EXT_LATCH_CONTROL (seed 004 §7)",
+            if why.is_empty() {
+                "no edge value".to_string()
+            } else {
+                why.join(", ")
+            }
+        ));
+    }
+
     // PDOs.
     let list = |t: &mut String, out: bool, indices: &[u16]| {
         let _ = writeln!(
@@ -506,113 +814,10 @@ pub fn generate(dev: &VendorDevice, name: Option<&str>) -> Result<Generated, Ven
     let _ = writeln!(t, "[txpdo]");
     list(&mut t, false, &tx);
 
-    if touch_probe {
-        let _ = writeln!(
-            t,
-            "[probe]\n\
-             # TO CHECK in the drive manual: does the drive re-arm a touch probe only after 0x60B8\n\
-             # went to 0 (then true)? 100 cycles is the time the adapter waits for 0x60B9.\n\
-             rearm_requires_zero = false\n\
-             arm_timeout_cycles = 100\n"
-        );
-    }
-
-    // Drive functions.
-    let functions = [
-        ("TORQUE_LIMIT", 0x6072u16, "0.1 %", 10.0),
-        ("TORQUE_LIMIT_POS", 0x60E0, "0.1 %", 10.0),
-        ("TORQUE_LIMIT_NEG", 0x60E1, "0.1 %", 10.0),
-        ("MON_WINDOW", 0x6065, "increments", 1.0),
-        ("MON_TIMEOUT", 0x6066, "ms", 1.0),
-    ];
-    let mut written: Vec<(&str, u16, DataType)> = Vec::new();
-    let mut fn_lines = String::new();
-    for (key, index, unit, scale) in functions {
-        let Some(o) = dev.object(index, 0) else {
-            let _ = writeln!(
-                fn_lines,
-                "# {key}: 0x{index:04X} {} is not in the file.",
-                cia_name(index)
-            );
-            continue;
-        };
-        let Some(ty) = o.ty else {
-            notes.push(format!(
-                "{key} left out: 0x{index:04X} {} has type {}, which a drive file cannot hold",
-                o.name, o.type_name
-            ));
-            let _ = writeln!(
-                fn_lines,
-                "# {key}: 0x{index:04X} has type {}, not supported.",
-                o.type_name
-            );
-            continue;
-        };
-        if !o.writable {
-            notes.push(format!(
-                "{key} left out: 0x{index:04X} {} is read-only in the file",
-                o.name
-            ));
-            let _ = writeln!(fn_lines, "# {key}: 0x{index:04X} is read-only.");
-            continue;
-        }
-        let (lo, hi) = ty.range();
-        // Torque limits and monitoring values are not negative (CiA 402 §6.9, §11.3).
-        let min = o.low.unwrap_or(0).clamp(lo.max(0), hi);
-        let max = o.high.unwrap_or(hi).clamp(min, hi);
-        let scale_text = if scale == 1.0 {
-            String::new()
-        } else {
-            format!(", scale = {scale:.1}")
-        };
-        let _ = writeln!(
-            fn_lines,
-            "{key} = {{ object = \"0x{index:04X}:00\", type = \"{}\", unit = \"{unit}\"{scale_text}, min = {min}, max = {max} }}",
-            ty.name()
-        );
-        written.push((key, index, ty));
-    }
-    let _ = writeln!(
-        t,
-        "[functions]\n\
-         # drive function table (seed 004 §7.3.2): KEY -> object, type as the file gives it;\n\
-         # values are written as round(value * scale) within [min, max] (wire units). Torque limits\n\
-         # in % of rated torque (wire 0.1 %), the following error window in increments, its time\n\
-         # out in ms."
-    );
-    t.push_str(&fn_lines);
-    let idn: Vec<String> = written
-        .iter()
-        .filter_map(|&(key, index, ty)| match key {
-            "TORQUE_LIMIT" => Some(format!(
-                "\"S-0-0092\" = {{ object = \"0x{index:04X}:00\", type = \"{}\" }}",
-                ty.name()
-            )),
-            "MON_WINDOW" if ty == DataType::U32 => Some(format!(
-                "\"S-0-0159\" = {{ object = \"0x{index:04X}:00\", type = \"u32\", zero = 4294967295 }}"
-            )),
-            _ => None,
-        })
-        .collect();
-    if !idn.is_empty() {
-        let _ = writeln!(
-            t,
-            "\n[idn]\n# SERCOS IDNs of seed 004 §7.3.1 on this drive's objects (S-0-0092 torque limit,\n\
-             # S-0-0159 monitoring window; SERCOS 0 = off = CiA 402 0xFFFFFFFF)."
-        );
-        for l in idn {
-            let _ = writeln!(t, "{l}");
-        }
-    }
-
-    catalogue::parse(&t, &format!("{name}.toml")).map_err(|e| VendorError::Internal {
-        file: dev.file.clone(),
-        message: e.to_string(),
-    })?;
-    Ok(Generated {
-        toml: t,
-        notes,
+    Ok(Sections {
+        pdo_text: t,
         touch_probe,
+        notes,
     })
 }
 
@@ -638,6 +843,11 @@ fn toml_escape(s: &str) -> String {
 
 #[cfg(feature = "ethercat")]
 mod esi_source;
+
+#[cfg(feature = "ethercat")]
+pub mod esi_plan;
+
+pub mod plan;
 
 #[cfg(feature = "canopen")]
 mod eds_source;

@@ -22,6 +22,7 @@ impl VendorDevice {
             objects.push(VendorObject {
                 index,
                 sub,
+                plays: (index, sub),
                 name: e.parameter_name.clone(),
                 type_name: format!("{:?}", e.data_type).to_ascii_uppercase(),
                 ty,
@@ -45,6 +46,8 @@ impl VendorDevice {
             product_code: id.product_code,
             revision: id.revision_number,
             objects,
+            plan: None,
+            plan_error: None,
         }
     }
 }

@@ -50,6 +50,7 @@ fn entry(
     VendorObject {
         index,
         sub,
+        plays: (index, sub),
         name: name.to_string(),
         type_name: type_name.to_string(),
         ty,
@@ -85,12 +86,46 @@ fn sub_entry(device: &Device, o: &Object, sub: u8) -> Option<VendorObject> {
     ))
 }
 
+/// Modular device profile names (lower case, without blanks) of the drive-function objects a
+/// device without the CiA 402 object may have (Beckhoff EL72x1 / EJ72x1: "Torque limitation"
+/// 0x7010:0B, "Following error window" / "Following error time out" 0x8010:50 / :51).
+fn mdp_function_names(index: u16) -> &'static [&'static str] {
+    match index {
+        0x6072 => &["torquelimitation", "maxtorque"],
+        0x6065 => &["followingerrorwindow"],
+        0x6066 => &["followingerrortimeout"],
+        _ => &[],
+    }
+}
+
 impl VendorDevice {
-    /// The device `device` of the ESI `file` ([`OBJECTS_READ`] from its dictionary).
+    /// The device `device` of the ESI `file` ([`OBJECTS_READ`] from its dictionary; for a
+    /// modular device profile terminal the objects of the same names), with the roles and PDOs
+    /// [`esi_plan::plan`](super::esi_plan::plan) chooses.
     pub fn from_esi(file: &EsiFile, device: &Device) -> VendorDevice {
         let mut objects = Vec::new();
+        let leaves = super::esi_plan::leaves(device);
         for &(index, sub) in OBJECTS_READ {
             let Some(o) = device.object(index) else {
+                let names = mdp_function_names(index);
+                if let Some(l) = leaves.iter().find(|l| {
+                    sub == 0
+                        && (0x6000..=0x8FFF).contains(&l.index)
+                        && l.sub > 0
+                        && names.contains(&super::esi_plan::normalized(&l.name).as_str())
+                }) {
+                    let mut v = entry(
+                        l.index,
+                        l.sub,
+                        &l.name,
+                        &l.type_name,
+                        l.bits,
+                        &l.flags,
+                        None,
+                    );
+                    v.plays = (index, sub);
+                    objects.push(v);
+                }
                 continue;
             };
             let simple = device
@@ -112,6 +147,7 @@ impl VendorDevice {
             };
             objects.extend(v);
         }
+        let plan = super::esi_plan::plan(device);
         VendorDevice {
             file: file.file.clone(),
             kind: "ESI",
@@ -121,6 +157,8 @@ impl VendorDevice {
             product_code: Some(device.product_code),
             revision: Some(device.revision_no),
             objects,
+            plan: plan.as_ref().ok().cloned(),
+            plan_error: plan.err(),
         }
     }
 }

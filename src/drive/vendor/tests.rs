@@ -4,6 +4,7 @@ fn obj(index: u16, ty: DataType, rx: bool, tx: bool) -> VendorObject {
     VendorObject {
         index,
         sub: 0,
+        plays: (index, 0),
         name: format!("object {index:04X}"),
         type_name: ty.name().to_string(),
         ty: Some(ty),
