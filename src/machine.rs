@@ -545,6 +545,20 @@ impl Machine {
             channel.set_dead_time_cycles(i, a.dead_time_cycles.unwrap_or(link.dead_time_cycles()));
         }
         let terminal_probes = terminal_probes(cfg, link.as_ref(), &mut channel)?;
+        // The in-memory link has no start-up of its own: as a bus master does in PRE-OP, write
+        // the mode of operation (cyclic synchronous position) where no PDO carries it — to
+        // 0x6060 or the object that plays it (`[roles]`).
+        if choice.link == "sim" {
+            for (i, def) in defs.iter().enumerate() {
+                if def.profile == crate::drive::catalogue::Profile::Cia402
+                    && !def.rxpdo.contains(0x6060, 0)
+                {
+                    let (index, sub) = def.object_of(0x6060, 0);
+                    let _ =
+                        link.write_object(i, index, sub, i64::from(crate::drive::ds402::MODE_CSP));
+                }
+            }
+        }
         Ok(Machine {
             channel,
             link,

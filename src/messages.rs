@@ -300,6 +300,22 @@ pub mod ids {
     /// bit length); names the objects, the device and the drive.
     pub const ETHERCAT_PDO_OBJECTS_MISSING: u32 = 900405;
 
+    /// Project (warning, start-up): the EtherCAT device of an axis is not what its drive
+    /// definition or the CiA 402 profile leads one to expect: its revision differs from the
+    /// definition's `[device] revision`, or its device type 0x1000 does not say CiA 402 (many
+    /// vendor devices report another value; the device is taken by its identity and position).
+    pub const ETHERCAT_DEVICE_CHECK: u32 = 900406;
+
+    /// Project (error, start-up): a fixed PDO of an axis's drive definition (`[rxpdo]` /
+    /// `[txpdo]` with `fixed = true`) cannot be assigned, or the device maps it differently
+    /// than the definition's `entries` say; names the device, the PDO and both mappings.
+    pub const ETHERCAT_FIXED_PDO: u32 = 900407;
+
+    /// Project (warning, start-up): the mode of operation (0x6060, or the object that plays it)
+    /// is in no PDO and the device has no such object to write by SDO: the drive runs in the
+    /// mode it is in.
+    pub const ETHERCAT_NO_MODE_OBJECT: u32 = 900408;
+
     /// Project (warning, start-up): the CANopen node of an axis lacks the touch-probe objects
     /// of its drive definition's PDO mapping (0x60B8 / 0x60B9 …, asked by SDO upload or
     /// refused in the mapping); the master maps the rest and the axis has no drive latch

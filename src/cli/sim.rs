@@ -201,6 +201,16 @@ fn is_cia402(device: &Device) -> bool {
     device.profile.as_ref().and_then(|p| p.profile_no) == Some(402)
 }
 
+/// Does the device offer what a CiA 402 axis needs (controlword, target position, statusword,
+/// position actual value), as CiA 402 objects or objects that play them
+/// ([`role_sources`](fieldprobe::drive::vendor::esi_plan::role_sources))?
+fn offers_cia402(device: &Device) -> bool {
+    let sources = fieldprobe::drive::vendor::esi_plan::role_sources(device);
+    [0x6040u16, 0x607A, 0x6041, 0x6064]
+        .iter()
+        .all(|i| sources.iter().any(|s| s.index == *i))
+}
+
 /// The built-in drive a CiA 402 device gets without `--drive`.
 const DEFAULT_DRIVE: &str = "cia402-generic";
 
@@ -228,7 +238,9 @@ fn build_device(
         .first()
         .with_context(|| format!("--device {shown}: the ESI file describes no device"))?;
     let given = drive.is_some();
-    let drive = drive.or(is_cia402(device).then_some(DEFAULT_DRIVE));
+    // A device that declares CiA 402, or offers its roles (a modular device profile servo
+    // terminal), is a drive: never played as a plain terminal.
+    let drive = drive.or((is_cia402(device) || offers_cia402(device)).then_some(DEFAULT_DRIVE));
     if let Some(drive) = drive {
         let def = catalogue::load(drive)
             .map_err(|e| anyhow::anyhow!("device {position} ({shown}): drive {drive}: {e}"))?;
@@ -236,8 +248,12 @@ fn build_device(
             // A vendor's CiA 402 device: its own dictionary and default PDOs, the drive's
             // model wired by object index.
             Err(ServoError::PdoMismatch { .. }) if !given => {
-                let esc = emulated_vendor_drive(file, device, &def, DEFAULT_CYCLE)
+                let vendor = emulated_vendor_drive(file, device, &def, DEFAULT_CYCLE)
                     .map_err(|e| anyhow::anyhow!("device {position} ({shown}): {e}"))?;
+                for n in &vendor.notes {
+                    eprintln!("fieldprobe sim ethercat: device {position}: note: {n}");
+                }
+                let esc = vendor.esc;
                 eprintln!(
                     "fieldprobe sim ethercat: device {position}: {} (vendor CiA 402 drive: \
                      object dictionary and default PDO mapping from the ESI, drive model {})",

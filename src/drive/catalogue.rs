@@ -18,6 +18,7 @@
 //! vendor_id = 0x0000029C                  # master finds it on the bus (CoE 0x1018:01 …
 //! product_code = 0x03B11002               # :03, the SII identity); revision optional
 //! revision = 0x00050005
+//! esi = "vendor.xml"                      # its ESI: the in-process emulator plays it from there
 //!
 //! [rxpdo]                                 # master -> drive, default = CSP mapping
 //! entries = ["0x6040:00", "0x607A:00", "0x6060:00", "0x60B8:00"]
@@ -364,6 +365,10 @@ pub struct DriveDefinition {
     pub idns: Vec<IdnMapping>,
     /// `[device]`: the device this definition is for, if the file names it.
     pub identity: Option<DeviceIdentity>,
+    /// `[device] esi`: the vendor's ESI file of that device (`drive from-esi` writes it), which
+    /// the in-process emulated bus (`ethercat-emu`) plays the device from; relative paths are
+    /// taken from the current directory, then from the drive file's directory.
+    pub esi: Option<String>,
     /// `[roles]`: CiA 402 objects played by other objects of the device.
     pub roles: Vec<Role>,
     /// `[rxpdo] pdos` / `fixed`.
@@ -627,6 +632,10 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
     };
 
     let identity = cx.identity(root)?;
+    let esi = match cx.table(root, "device", None)? {
+        Some(t) => cx.opt_str(t.1, "[device]", "esi")?,
+        None => None,
+    };
     let roles = cx.roles(root)?;
     let (rxpdo, rxpdo_defaults, rx_assign) =
         cx.pdo(root, "rxpdo", pdo::DEFAULT_RXPDO, true, &roles)?;
@@ -671,6 +680,7 @@ pub fn parse(text: &str, file: &str) -> Result<DriveDefinition, DriveError> {
         probe,
         idns,
         identity,
+        esi,
         roles,
         rx_assign,
         tx_assign,
@@ -966,7 +976,7 @@ impl Cx<'_> {
             return Ok(None);
         };
         let w = "[device]";
-        self.check_keys(t.1, w, &["vendor_id", "product_code", "revision"])?;
+        self.check_keys(t.1, w, &["vendor_id", "product_code", "revision", "esi"])?;
         let num = |key: &str| -> Result<Option<u32>, DriveError> {
             let Some(item) = t.1.get(key) else {
                 return Ok(None);

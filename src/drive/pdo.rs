@@ -635,7 +635,7 @@ impl PdoEntry {
 }
 
 /// `bits` bits of `image` from bit `at`, LSB first (the caller checked the length).
-fn read_bits(image: &[u8], at: usize, bits: u16) -> u64 {
+pub fn read_bits(image: &[u8], at: usize, bits: u16) -> u64 {
     let mut v = 0u64;
     for k in 0..usize::from(bits).min(64) {
         let b = at + k;
@@ -646,8 +646,9 @@ fn read_bits(image: &[u8], at: usize, bits: u16) -> u64 {
     v
 }
 
-/// Write the low `bits` bits of `value` into `image` from bit `at`, LSB first.
-fn write_bits(image: &mut [u8], at: usize, bits: u16, value: u64) {
+/// Write the low `bits` bits of `value` into `image` from bit `at`, LSB first (the caller
+/// checked the length).
+pub fn write_bits(image: &mut [u8], at: usize, bits: u16, value: u64) {
     for k in 0..usize::from(bits).min(64) {
         let b = at + k;
         let mask = 1u8 << (b % 8);
@@ -655,6 +656,27 @@ fn write_bits(image: &mut [u8], at: usize, bits: u16, value: u64) {
             image[b / 8] |= mask;
         } else {
             image[b / 8] &= !mask;
+        }
+    }
+}
+
+/// Copy `bits` bits from `src` at bit `from` to `dst` at bit `to` (LSB first); whole bytes at
+/// byte boundaries are copied as bytes. Bits outside either slice are left alone.
+pub fn copy_bits(src: &[u8], from: usize, dst: &mut [u8], to: usize, bits: usize) {
+    if bits == 0 || from + bits > src.len() * 8 || to + bits > dst.len() * 8 {
+        return;
+    }
+    if from.is_multiple_of(8) && to.is_multiple_of(8) && bits.is_multiple_of(8) {
+        dst[to / 8..(to + bits) / 8].copy_from_slice(&src[from / 8..(from + bits) / 8]);
+        return;
+    }
+    for k in 0..bits {
+        let (s, d) = (from + k, to + k);
+        let mask = 1u8 << (d % 8);
+        if src[s / 8] >> (s % 8) & 1 == 1 {
+            dst[d / 8] |= mask;
+        } else {
+            dst[d / 8] &= !mask;
         }
     }
 }
@@ -852,6 +874,14 @@ impl PdoLayout {
     /// The CiA 402 objects played by other entries ([`Self::with_roles`]).
     pub fn roles(&self) -> &[PdoEntry] {
         &self.roles
+    }
+
+    /// Does a role ([`Self::roles`]) cover bits of entry `e`? Such an entry is read and written
+    /// through the role (the CiA 402 object), not under its own index.
+    pub fn in_role(&self, e: &PdoEntry) -> bool {
+        self.roles
+            .iter()
+            .any(|r| r.bit < e.bit + usize::from(e.bits) && e.bit < r.bit + usize::from(r.bits))
     }
 
     /// Bytes of the image.

@@ -537,6 +537,12 @@ fn planned_sections(dev: &VendorDevice, plan: &plan::Plan) -> Sections {
         if let Some(r) = dev.revision {
             let _ = writeln!(t, "revision = 0x{r:08X}");
         }
+        let _ = writeln!(
+            t,
+            "# the vendor's ESI, which `--link ethercat-emu` plays the device from (relative to the\n\
+             # current directory, else to this file's)\nesi = \"{}\"",
+            toml_escape(&dev.file)
+        );
         t.push('\n');
     }
     let with_role: Vec<&plan::RoleSource> =

@@ -224,7 +224,10 @@ pub fn role_sources(device: &Device) -> Vec<RoleSource> {
         let bits = (ty.size() * 8) as u16;
         // 1. The CiA 402 object.
         let leaf = leaves.iter().find(|l| l.index == index && l.sub == 0);
-        let pdo_bits = in_pdo(pdos, index, 0);
+        // A configurable PDO's default entries are rewritten by the master: only the
+        // dictionary and the fixed PDOs say what the device has.
+        let fixed: Vec<Pdo> = pdos.iter().filter(|p| p.fixed).cloned().collect();
+        let pdo_bits = in_pdo(if flagless { pdos } else { &fixed }, index, 0);
         let own_bits = leaf.map(|l| l.bits).or(pdo_bits.map(u32::from));
         if own_bits == Some(u32::from(bits)) {
             out.push(RoleSource {
@@ -598,7 +601,8 @@ fn direction(
                 .filter(|_| e.sub == 0)
                 .and_then(Object::default_u64)
                 .and_then(|v| i64::try_from(v).ok())
-                .filter(|v| e.ty.contains(*v));
+                // A limit of 0 stops the drive: such a default is no value to run with.
+                .filter(|v| *v > 0 && e.ty.contains(*v));
             let (value, why) = match dict_default {
                 Some(v) => (v, "the ESI default".to_string()),
                 None => (
@@ -677,8 +681,8 @@ fn missing_text(sources: &[RoleSource], missing: &[u16], rx: bool) -> Vec<String
                     if rx { "an RxPDO" } else { "a TxPDO" }
                 )
             } else {
-                "not in the file (no CiA 402 object, no modular device profile object of that \
-                 name)"
+                "not in the file (no CiA 402 object in its dictionary or its fixed PDOs, no \
+                 modular device profile object of that name)"
                     .to_string()
             };
             format!("0x{index:04X}:00 {name}: {why}")

@@ -76,6 +76,10 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
             continue;
         };
         let axis = k;
+        if let (Some(esi), Some(id)) = (&def.esi, def.identity) {
+            escs.push(vendor_drive(axis, def, esi, id, cycle)?);
+            continue;
+        }
         let text = esi_for(def).ok_or_else(|| {
             other(format!(
                 "axis {axis}: drive '{}' is a {} drive; the EtherCAT emulator plays CiA 402 and SERCOS drives and EL5101 terminals only",
@@ -111,6 +115,50 @@ pub fn emulated_segment(spec: &EthercatSpec) -> Result<Segment, LinkError> {
     let mut seg = Segment::new(escs, HOP_DELAY_NS);
     seg.set_world(World::new(Plant::new()), spec.cycle);
     Ok(seg)
+}
+
+/// The vendor device of a drive definition with `[device] esi` (`drive from-esi`): the device
+/// of that ESI with the definition's identity (product code, and revision where given),
+/// played as [`emulated_vendor_drive`](crate::sim::esc::vendor::emulated_vendor_drive) plays it,
+/// with the built-in `cia402-generic` model under the definition's `[model]`, `[probe]` and
+/// scaling.
+fn vendor_drive(
+    axis: usize,
+    def: &crate::drive::catalogue::DriveDefinition,
+    esi_path: &str,
+    id: crate::drive::catalogue::DeviceIdentity,
+    cycle: Duration,
+) -> Result<Esc, LinkError> {
+    let other = |m: String| LinkError::Other(format!("axis {axis}, drive '{}': {m}", def.name));
+    let given = std::path::Path::new(esi_path);
+    let beside = std::path::Path::new(&def.file)
+        .parent()
+        .map(|d| d.join(given))
+        .filter(|p| !given.is_absolute() && p.exists());
+    let path = match beside {
+        Some(p) if !given.exists() => p,
+        _ => given.to_path_buf(),
+    };
+    let file = esi::load(&path).map_err(|e| other(format!("[device] esi: {e}")))?;
+    let device = file
+        .device(id.product_code, id.revision.unwrap_or(u32::MAX))
+        .or_else(|| file.device_by_product(id.product_code))
+        .ok_or_else(|| {
+            other(format!(
+                "[device] esi {}: no device with product code {:#010x}",
+                path.display(),
+                id.product_code
+            ))
+        })?;
+    let mut base = crate::drive::catalogue::builtin("cia402-generic")
+        .ok_or_else(|| other("the built-in cia402-generic drive is missing".into()))?;
+    base.name = def.name.clone();
+    base.scaling = def.scaling;
+    base.model = def.model;
+    base.probe = def.probe;
+    crate::sim::esc::vendor::emulated_vendor_drive(&file, device, &base, cycle)
+        .map(|v| v.esc)
+        .map_err(|e| other(e.to_string()))
 }
 
 impl EthercatLink {

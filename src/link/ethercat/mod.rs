@@ -201,8 +201,9 @@ struct AxisDevice {
     def: Arc<DriveDefinition>,
     mailbox: Mailbox,
     name: String,
-    /// Start-up warning of the PDO mapping ([`pdo_fit`]: touch probe left out).
-    warning: Option<CncMessage>,
+    /// Start-up warnings: the PDO mapping ([`pdo_fit`]: touch probe left out), the device's
+    /// identity checks, the mode of operation.
+    warnings: Vec<CncMessage>,
 }
 
 /// One terminal of the machine on the bus, with its process images (copied to and from
@@ -310,10 +311,14 @@ impl EthercatLink {
             }
             for ax in axes.iter_mut() {
                 if let Mailbox::Coe(c) = &mut ax.mailbox {
+                    ax.warnings
+                        .extend(pdo_fit::check_device_type(md, c, &ax.def, &ax.name).await);
                     let fitted = pdo_fit::fit_mapping(md, c, &ax.def, &ax.name).await?;
                     write_pdo_mapping(md, c, &fitted.def, &ax.name).await?;
                     ax.def = fitted.def;
-                    ax.warning = fitted.warning;
+                    ax.warnings.extend(fitted.warning);
+                    ax.warnings
+                        .extend(write_mode(md, c, &ax.def, &ax.name).await?);
                 }
             }
             let cycle = Duration::from_nanos(spec.cycle.0);
@@ -630,7 +635,7 @@ impl EthercatLink {
                 ),
             ));
         }
-        out.extend(self.axes.iter().filter_map(|a| a.warning.clone()));
+        out.extend(self.axes.iter().flat_map(|a| a.warnings.iter().cloned()));
         out.push(CncMessage::info(
             ids::ETHERCAT_WIRE_TIME,
             format!(
@@ -1202,15 +1207,22 @@ async fn assign_devices(
             )
         })
         .collect();
-    // The declared SubDevices in ring order, each found by identity after the previous one.
+    let revisions: Vec<u32> = group.iter(md).map(|sd| sd.identity().revision).collect();
+    // The declared SubDevices in ring order, each found by identity after the previous one: a
+    // drive definition with `[device]` by that identity (as a real master finds a device:
+    // vendor id and product code from the SII), a drive the emulator describes by its ESI.
     let order = terminals::ring_order(spec.drives.len(), &spec.terminals);
     let wants: Vec<Option<(u32, u32)>> = order
         .iter()
         .map(|d| match *d {
             terminals::Declared::Axis(k) => spec.drives.get(k).and_then(|def| {
-                esi_for(def)
-                    .and_then(|t| embedded(t, "embedded ESI").ok())
-                    .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)))
+                def.identity
+                    .map(|i| (i.vendor_id, i.product_code))
+                    .or_else(|| {
+                        esi_for(def)
+                            .and_then(|t| embedded(t, "embedded ESI").ok())
+                            .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)))
+                    })
             }),
             terminals::Declared::Terminal(k) => spec.terminals.get(k).and_then(|t| t.identity()),
         })
@@ -1219,16 +1231,28 @@ async fn assign_devices(
     let mut kept: Vec<Option<CoeClient>> = Vec::new();
     let found = match terminals::match_ring(&wants, &ids) {
         Ok(found) => Ok(found),
-        // A vendor's CiA 402 drive has its own identity: take it for a CiA 402 axis.
+        // A drive definition without `[device]` on a vendor's drive: take the devices whose
+        // device type (0x1000) says CiA 402, else any device with a CoE mailbox (the device
+        // type is then only checked, warning 900406).
         Err(e) => match embedded(SERVO_ESI, "embedded ESI")
             .ok()
             .and_then(|f| f.devices.first().map(|d| (f.vendor.id, d.product_code)))
         {
             Some(servo) => {
                 let stations: Vec<u16> = subs.iter().map(|s| s.0).collect();
-                let (ids, clients) = pdo_fit::cia402_as_servo(md, &stations, &ids, servo).await;
+                let (types, clients) = pdo_fit::device_types(md, &stations, &ids, servo).await;
                 kept = clients;
-                terminals::match_ring(&wants, &ids).map_err(|_| e)
+                let as_servo = |take: &dyn Fn(Option<u32>) -> bool| -> Vec<(u32, u32)> {
+                    ids.iter()
+                        .zip(&types)
+                        .map(|(id, t)| if take(*t) { servo } else { *id })
+                        .collect()
+                };
+                let cia402 = as_servo(&|t| t.is_some_and(|t| t & 0xFFFF == 402));
+                let coe = as_servo(&|t| t.is_some());
+                terminals::match_ring(&wants, &cia402)
+                    .or_else(|_| terminals::match_ring(&wants, &coe))
+                    .map_err(|_| e)
             }
             None => Err(e),
         },
@@ -1299,12 +1323,26 @@ async fn assign_devices(
                 None => Mailbox::Coe(CoeClient::new(*station, out, inp)),
             }
         };
+        let mut warnings = Vec::new();
+        if let (Some(want), Some(&got)) = (def.identity.and_then(|d| d.revision), revisions.get(i))
+        {
+            if want != got {
+                warnings.push(CncMessage::warning(
+                    ids::ETHERCAT_DEVICE_CHECK,
+                    format!(
+                        "device {axis}:{name} (position {i}) has revision {got:#010x}, drive '{}' \
+                         ({}) is for revision {want:#010x}: taken by vendor id and product code",
+                        def.name, def.file
+                    ),
+                ));
+            }
+        }
         axes.push(AxisDevice {
             sub: i,
             def: def.clone(),
             mailbox,
             name: format!("{axis}:{name}"),
-            warning: None,
+            warnings,
         });
     }
     let terminals: Vec<TerminalDevice> = spec
@@ -1353,19 +1391,31 @@ async fn assign_devices(
     Ok((axes, terminals, bus))
 }
 
-/// Write the drive definition's RxPDO / TxPDO as 0x1600 / 0x1A00 assigned to SM2 / SM3
-/// (CiA 301 procedure).
+/// Configure the PDOs of an axis in PRE-OP (CiA 301 / ETG.1000.6 §5.6.7.4 procedure):
+/// * a direction whose definition names fixed PDOs (`fixed = true`): assign them (0x1C12 /
+///   0x1C13: sub-index 0 = 0, the PDOs, sub-index 0 = their number — only when the device's
+///   assignment differs) and read their mapping back: it must be the definition's entries,
+///   object for object and bit for bit (error [`ids::ETHERCAT_FIXED_PDO`] otherwise); the
+///   mapping itself is never written;
+/// * otherwise write the entries into the definition's PDO (`pdos`, default 0x1600 / 0x1A00)
+///   and assign it alone.
 async fn write_pdo_mapping(
     md: &MainDevice<'static>,
     c: &mut CoeClient,
     def: &DriveDefinition,
     who: &str,
 ) -> Result<(), LinkError> {
-    for (assign, pdo, layout) in [
-        (0x1C12u16, 0x1600u16, &def.rxpdo),
-        (0x1C13, 0x1A00, &def.txpdo),
+    for (assign, default_pdo, layout, a) in [
+        (0x1C12u16, 0x1600u16, &def.rxpdo, &def.rx_assign),
+        (0x1C13, 0x1A00, &def.txpdo, &def.tx_assign),
     ] {
         let what = |s: &str| format!("device {who}: PDO mapping {s}");
+        if a.fixed {
+            assign_fixed(md, c, assign, &a.pdos, who).await?;
+            check_fixed(md, c, &a.pdos, layout, def, who).await?;
+            continue;
+        }
+        let pdo = a.pdos.first().copied().unwrap_or(default_pdo);
         c.sdo_download(md, assign, 0, &[0])
             .await
             .map_err(mbx_err(what(&format!("{assign:#06x}:00 = 0"))))?;
@@ -1390,6 +1440,164 @@ async fn write_pdo_mapping(
             .map_err(mbx_err(what(&format!("{assign:#06x}:00 = 1"))))?;
     }
     Ok(())
+}
+
+/// The first byte of an SDO upload (sub-index 0 counts), or the error named.
+async fn upload_u8(
+    md: &MainDevice<'static>,
+    c: &mut CoeClient,
+    index: u16,
+    sub: u8,
+    who: &str,
+) -> Result<u8, LinkError> {
+    let v = c.sdo_upload(md, index, sub).await.map_err(mbx_err(format!(
+        "device {who}: reading {index:#06x}:{sub:02x}"
+    )))?;
+    Ok(v.first().copied().unwrap_or(0))
+}
+
+/// A little-endian number of up to 4 bytes from an SDO upload.
+async fn upload_u32(
+    md: &MainDevice<'static>,
+    c: &mut CoeClient,
+    index: u16,
+    sub: u8,
+    who: &str,
+) -> Result<u32, LinkError> {
+    let v = c.sdo_upload(md, index, sub).await.map_err(mbx_err(format!(
+        "device {who}: reading {index:#06x}:{sub:02x}"
+    )))?;
+    let mut b = [0u8; 4];
+    let n = v.len().min(4);
+    b[..n].copy_from_slice(&v[..n]);
+    Ok(u32::from_le_bytes(b))
+}
+
+/// Assign the fixed PDOs `pdos` to `assign` unless the device has exactly them assigned.
+async fn assign_fixed(
+    md: &MainDevice<'static>,
+    c: &mut CoeClient,
+    assign: u16,
+    pdos: &[u16],
+    who: &str,
+) -> Result<(), LinkError> {
+    let n = upload_u8(md, c, assign, 0, who).await?;
+    let mut current = Vec::new();
+    for k in 1..=n {
+        current.push(upload_u32(md, c, assign, k, who).await? as u16);
+    }
+    if current == pdos {
+        return Ok(());
+    }
+    let refused = |e: MailboxError| {
+        LinkError::Refused(CncMessage::error(
+            ids::ETHERCAT_FIXED_PDO,
+            format!(
+                "device {who}: assigning the fixed PDOs {} to {assign:#06X} (the device has {}): {e}",
+                hex_list(pdos),
+                hex_list(&current)
+            ),
+        ))
+    };
+    c.sdo_download(md, assign, 0, &[0]).await.map_err(refused)?;
+    for (k, p) in pdos.iter().enumerate() {
+        c.sdo_download(md, assign, (k + 1) as u8, &p.to_le_bytes())
+            .await
+            .map_err(refused)?;
+    }
+    c.sdo_download(md, assign, 0, &[pdos.len() as u8])
+        .await
+        .map_err(refused)?;
+    Ok(())
+}
+
+/// `[0x1600, 0x1A00]` as `0x1600, 0x1A00` (`none` when empty).
+fn hex_list(v: &[u16]) -> String {
+    if v.is_empty() {
+        return "none".into();
+    }
+    v.iter()
+        .map(|p| format!("{p:#06X}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Read the mapping of the fixed PDOs back and compare it with the definition's entries.
+async fn check_fixed(
+    md: &MainDevice<'static>,
+    c: &mut CoeClient,
+    pdos: &[u16],
+    layout: &crate::drive::pdo::PdoLayout,
+    def: &DriveDefinition,
+    who: &str,
+) -> Result<(), LinkError> {
+    let mut got: Vec<u32> = Vec::new();
+    for &p in pdos {
+        let n = upload_u8(md, c, p, 0, who).await?;
+        for k in 1..=n {
+            got.push(upload_u32(md, c, p, k, who).await?);
+        }
+    }
+    let want: Vec<u32> = layout
+        .entries()
+        .iter()
+        .map(crate::drive::pdo::PdoEntry::mapping_value)
+        .collect();
+    if got == want {
+        return Ok(());
+    }
+    let show = |v: &[u32]| {
+        v.iter()
+            .map(|m| format!("{:04X}:{:02X}/{}", m >> 16, (m >> 8) & 0xFF, m & 0xFF))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    Err(LinkError::Refused(CncMessage::error(
+        ids::ETHERCAT_FIXED_PDO,
+        format!(
+            "device {who}: the fixed PDOs {} map [{}] (index:sub/bits), drive '{}' ({}) expects \
+             [{}]",
+            hex_list(pdos),
+            show(&got),
+            def.name,
+            def.file,
+            show(&want)
+        ),
+    )))
+}
+
+/// Cyclic synchronous position needs the mode of operation 8 (CiA 402 0x6060). When no PDO
+/// carries it, write it once by SDO in PRE-OP — to 0x6060, or the object that plays it
+/// (`[roles] modes_of_operation`, e.g. 0x7010:03 of a Beckhoff MDP 742 terminal). A device
+/// without that object gets warning [`ids::ETHERCAT_NO_MODE_OBJECT`] and runs in its own mode.
+async fn write_mode(
+    md: &MainDevice<'static>,
+    c: &mut CoeClient,
+    def: &DriveDefinition,
+    who: &str,
+) -> Result<Option<CncMessage>, LinkError> {
+    if def.profile != Profile::Cia402 || def.rxpdo.contains(0x6060, 0) {
+        return Ok(None);
+    }
+    let (index, sub) = def.object_of(0x6060, 0);
+    let mode = crate::drive::ds402::MODE_CSP as u8;
+    match c.sdo_download(md, index, sub, &[mode]).await {
+        Ok(()) => Ok(None),
+        Err(MailboxError::Abort { code, .. }) if code == 0x0602_0000 || code == 0x0609_0011 => {
+            Ok(Some(CncMessage::warning(
+                ids::ETHERCAT_NO_MODE_OBJECT,
+                format!(
+                    "device {who}: the mode of operation is in no PDO and the device has no \
+                     {index:#06X}:{sub:02X} to write it (abort {code:#010x}): the drive runs in \
+                     the mode it is in"
+                ),
+            )))
+        }
+        Err(e) => Err(mbx_err(format!(
+            "device {who}: writing the mode of operation {index:#06x}:{sub:02x} = 8 (cyclic \
+             synchronous position)"
+        ))(e)),
+    }
 }
 
 /// A mailbox failure of an acyclic access as a link error (aborts keep their CiA 301 code).

@@ -110,9 +110,16 @@ pub async fn fit_mapping(
     let mut sdo_info = true;
     let mut lacking = Vec::new();
     let mut missing_probe: Vec<(u16, u8, String)> = Vec::new();
-    for (layout, rx) in [(&def.rxpdo, true), (&def.txpdo, false)] {
-        for e in layout.entries() {
-            let bits = 8 * e.ty.size() as u32;
+    for (layout, rx, fixed) in [
+        (&def.rxpdo, true, def.rx_assign.fixed),
+        (&def.txpdo, false, def.tx_assign.fixed),
+    ] {
+        // A fixed PDO is the device's own mapping: read back and compared when assigned.
+        if fixed {
+            continue;
+        }
+        for e in layout.entries().iter().filter(|e| !e.is_gap()) {
+            let bits = u32::from(e.bits);
             let Some(why) = offered(md, c, (e.index, e.sub, bits), rx, &mut sdo_info, who).await?
             else {
                 continue;
@@ -154,10 +161,12 @@ pub async fn fit_mapping(
         let kept: Vec<_> = layout
             .entries()
             .iter()
-            .filter(|e| !drop(e.index, e.sub))
-            .map(|e| (e.index, e.sub, e.ty))
+            .filter(|e| e.is_gap() || !drop(e.index, e.sub))
+            .map(|e| e.spec())
             .collect();
-        PdoLayout::from_objects(&kept).map_err(|e| LinkError::Other(e.to_string()))
+        PdoLayout::from_specs(&kept)
+            .and_then(|l| l.with_roles(&def.roles))
+            .map_err(|e| LinkError::Other(e.to_string()))
     };
     let mut fitted = (**def).clone();
     fitted.rxpdo = cut(&def.rxpdo)?;
@@ -197,35 +206,79 @@ pub async fn fit_mapping(
     })
 }
 
-/// The identities of the SubDevices at `stations` for matching axes to devices, with every
-/// device that reports CiA 402 in 0x1000 (device type, low word 402, CiA 301 §7.5.2.1) and is
-/// not already `servo` given `servo`'s identity, so a CiA 402 axis also takes a vendor's CiA
-/// 402 drive. Devices without a mailbox, or that do not answer, keep their identity. The CoE
-/// clients used, per station (the link goes on with them: a new client would start the
-/// mailbox counter again, which the device takes for a repeated request).
-pub async fn cia402_as_servo(
+/// The device type (CoE 0x1000, CiA 301 §7.5.2.1) of each SubDevice at `stations` that is not
+/// `servo` (fieldprobe's own emulated servo, which is matched by identity): `Some(value)` when
+/// it has a CoE mailbox and answers (0 when it refuses the upload), `None` without a mailbox
+/// or an answer. The CoE clients used, per station (the link goes on with them: a new client
+/// would start the mailbox counter again, which the device takes for a repeated request).
+pub async fn device_types(
     md: &MainDevice<'_>,
     stations: &[u16],
     ids: &[(u32, u32)],
     servo: (u32, u32),
-) -> (Vec<(u32, u32)>, Vec<Option<CoeClient>>) {
-    let mut out = ids.to_vec();
+) -> (Vec<Option<u32>>, Vec<Option<CoeClient>>) {
+    let mut types = Vec::new();
     let mut clients = Vec::new();
-    for (id, &station) in out.iter_mut().zip(stations) {
+    for (id, &station) in ids.iter().zip(stations) {
         if *id == servo {
+            types.push(None);
             clients.push(None);
             continue;
         }
         let Ok(mut c) = CoeClient::discover(md, station).await else {
+            types.push(None);
             clients.push(None);
             continue;
         };
-        if let Ok(v) = c.sdo_upload(md, 0x1000, 0).await {
-            if v.len() >= 2 && u16::from_le_bytes([v[0], v[1]]) == 402 {
-                *id = servo;
+        let t = match c.sdo_upload(md, 0x1000, 0).await {
+            Ok(v) => {
+                let mut b = [0u8; 4];
+                let n = v.len().min(4);
+                b[..n].copy_from_slice(&v[..n]);
+                Some(u32::from_le_bytes(b))
             }
-        }
+            Err(MailboxError::Abort { .. }) => Some(0),
+            Err(_) => None,
+        };
+        types.push(t);
         clients.push(Some(c));
     }
-    (out, clients)
+    (types, clients)
+}
+
+/// Check the device type (0x1000) of a CiA 402 axis's device: CiA 402 says 402 in the low
+/// word (0x0192); a Beckhoff modular-device-profile terminal says 5001 (0x1389). Anything
+/// else — or no answer — is warning [`ids::ETHERCAT_DEVICE_CHECK`], not a refusal: vendor
+/// files and firmware write many values there (the device is taken by its identity and
+/// position).
+pub async fn check_device_type(
+    md: &MainDevice<'_>,
+    c: &mut CoeClient,
+    def: &DriveDefinition,
+    who: &str,
+) -> Option<CncMessage> {
+    if def.profile != crate::drive::catalogue::Profile::Cia402 {
+        return None;
+    }
+    let said = match c.sdo_upload(md, 0x1000, 0).await {
+        Ok(v) => {
+            let mut b = [0u8; 4];
+            let n = v.len().min(4);
+            b[..n].copy_from_slice(&v[..n]);
+            let t = u32::from_le_bytes(b);
+            if matches!(t & 0xFFFF, 402 | 5001) {
+                return None;
+            }
+            format!("reports device type {t:#010x}")
+        }
+        Err(e) => format!("does not give its device type 0x1000 ({e})"),
+    };
+    Some(CncMessage::warning(
+        ids::ETHERCAT_DEVICE_CHECK,
+        format!(
+            "device {who} {said}; a CiA 402 drive says 402 (0x0192) in the low word: taken as \
+             drive '{}' all the same",
+            def.name
+        ),
+    ))
 }

@@ -105,8 +105,9 @@ impl Esc {
             return g;
         }
         let g = (0..self.sm_count()).any(|n| {
-            self.active_sm(n)
-                .is_some_and(|sm| !sm.is_mailbox() && sm.ecat_writes() && sm.control & 0x40 != 0)
+            self.active_sm(n).is_some_and(|sm| {
+                !self.mailbox_sm(n, &sm) && sm.ecat_writes() && sm.control & 0x40 != 0
+            })
         });
         self.wd_guarded.set(Some(g));
         g
@@ -195,7 +196,7 @@ impl Esc {
         let in_op = self.state == AlState::Op;
         let has_outputs = (0..self.sm_count()).any(|n| {
             self.active_sm(n)
-                .is_some_and(|sm| !sm.is_mailbox() && sm.ecat_writes())
+                .is_some_and(|sm| !self.mailbox_sm(n, &sm) && sm.ecat_writes())
         });
         let error = in_op && self.op_at_last_sync0 && has_outputs && !self.outputs_since_sync0;
         if error {

@@ -355,6 +355,9 @@ pub struct CoeServer {
     descriptions: OdDescriptions,
     /// PDO configuration rules (emulated vendor devices), checked before every download.
     pdo_rules: Option<super::pdo_rules::PdoRules>,
+    /// Model-backed entries whose model object has another index: (entry, model object) — a
+    /// vendor device's object that plays a CiA 402 object (e.g. 0x7010:03 → 0x6060).
+    aliases: Vec<((u16, u8), (u16, u8))>,
     /// Fault knobs.
     pub faults: CoeFaults,
     /// Number of SDO requests handled.
@@ -387,6 +390,7 @@ impl CoeServer {
             entries,
             descriptions,
             pdo_rules: None,
+            aliases: Vec::new(),
             mbx_size: mailbox_size.max(16),
             counter: MailboxCounter::default(),
             last_request_counter: 0,
@@ -399,6 +403,21 @@ impl CoeServer {
             sdo_requests: 0,
             sdo_info_requests: 0,
         }
+    }
+
+    /// Let the model-backed entry `entry` answer with the model's object `model` (a vendor
+    /// device's object that plays a CiA 402 object of the drive model).
+    pub fn alias(&mut self, entry: (u16, u8), model: (u16, u8)) {
+        self.aliases.retain(|(e, _)| *e != entry);
+        self.aliases.push((entry, model));
+    }
+
+    /// The model's object behind entry `index:sub`.
+    fn model_object(&self, index: u16, sub: u8) -> (u16, u8) {
+        self.aliases
+            .iter()
+            .find(|(e, _)| *e == (index, sub))
+            .map_or((index, sub), |(_, m)| *m)
     }
 
     /// The descriptions the SDO information service gives.
@@ -657,7 +676,8 @@ impl CoeServer {
         if let Some(d) = &e.data {
             return Ok(f(d));
         }
-        let v = self.model.read_object(e.index, e.sub)?;
+        let (index, sub) = self.model_object(e.index, e.sub);
+        let v = self.model.read_object(index, sub)?;
         let n = e.ty.size().unwrap_or(8);
         Ok(f(&v.to_le_bytes()[..n]))
     }
@@ -685,7 +705,7 @@ impl CoeServer {
                     store(&mut self.entries[i].data, data);
                     return Ok(());
                 }
-                let (index, sub) = (e.index, e.sub);
+                let (index, sub) = self.model_object(e.index, e.sub);
                 self.model.write_object(index, sub, v)
             }
         }

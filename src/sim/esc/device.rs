@@ -179,15 +179,26 @@ impl MailboxServer {
     }
 }
 
-/// One mapped entry: bytes `len` at `bus` in the bus image are bytes at `model` in the
-/// model's image — or, for an object outside the model's layout (`object`), the value of that
-/// object in the CoE dictionary (written by an RxPDO, read for a TxPDO).
+/// One mapped entry: `bits` bits at bit `bus` of the bus image are the bits at bit `model` of
+/// the model's image — or, for an object outside the model's layout (`object`), the value of that
+/// object in the CoE dictionary (written by an RxPDO, read for a TxPDO). Bit offsets count from
+/// the least significant bit of byte 0 (PDO entries are packed LSB first, ETG.1000.6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Span {
     bus: usize,
     model: usize,
-    len: usize,
+    bits: usize,
     object: Option<(u16, u8)>,
+}
+
+/// A device object that plays (a part of) a CiA 402 object of the drive model (a vendor device's
+/// role, [`crate::drive::vendor::plan::RoleSource`]): `object` is the model's `canonical` object
+/// from its bit `at`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct RoleLink {
+    pub object: (u16, u8),
+    pub canonical: (u16, u8),
+    pub at: u16,
 }
 
 /// The application of an emulated drive: the mailbox server (owning the drive model) plus the
@@ -212,6 +223,12 @@ pub struct ServoApp {
     /// Mapped objects outside the model's layout are served from the CoE dictionary (vendor
     /// devices, [`super::vendor`]); otherwise such a mapping is refused.
     od_spans: bool,
+    /// Device objects that play the model's CiA 402 objects (vendor devices).
+    roles: Vec<RoleLink>,
+    /// Entries of the model's RxPDO layout the current mapping does not feed (e.g. the mode of
+    /// operation a master writes by SDO instead): refreshed from the model before each step,
+    /// so the step does not overwrite them with the image's zeros.
+    rx_unfed: Vec<crate::drive::pdo::PdoEntry>,
 }
 
 impl ServoApp {
@@ -222,6 +239,7 @@ impl ServoApp {
         coe: CoeServer,
         model_rx: crate::drive::pdo::PdoLayout,
         model_tx: crate::drive::pdo::PdoLayout,
+        roles: Vec<RoleLink>,
         cycle_ns: u64,
     ) -> Result<Self, AlStatusCode> {
         let (rx_len, tx_len) = (model_rx.len(), model_tx.len());
@@ -239,6 +257,8 @@ impl ServoApp {
             cycle_ns,
             synchronized: false,
             od_spans: true,
+            roles,
+            rx_unfed: Vec::new(),
         };
         app.remap()?;
         Ok(app)
@@ -277,10 +297,24 @@ impl ServoApp {
         let MailboxServer::Coe(coe) = &self.server else {
             return Ok(());
         };
-        let (rx_len, rx_plan) = plan_from_objects(coe, 0x1C12, &self.model_rx, self.od_spans)
-            .ok_or(AlStatusCode::INVALID_OUTPUT_MAPPING)?;
-        let (tx_len, tx_plan) = plan_from_objects(coe, 0x1C13, &self.model_tx, self.od_spans)
-            .ok_or(AlStatusCode::INVALID_INPUT_MAPPING)?;
+        let (rx_len, rx_plan) =
+            plan_from_objects(coe, 0x1C12, &self.model_rx, self.od_spans, &self.roles)
+                .ok_or(AlStatusCode::INVALID_OUTPUT_MAPPING)?;
+        let (tx_len, tx_plan) =
+            plan_from_objects(coe, 0x1C13, &self.model_tx, self.od_spans, &self.roles)
+                .ok_or(AlStatusCode::INVALID_INPUT_MAPPING)?;
+        self.rx_unfed = self
+            .model_rx
+            .entries()
+            .iter()
+            .filter(|e| {
+                let (from, to) = (e.bit, e.bit + usize::from(e.bits));
+                !rx_plan
+                    .iter()
+                    .any(|s| s.object.is_none() && s.model < to && from < s.model + s.bits)
+            })
+            .copied()
+            .collect();
         self.bus_rx_len = rx_len;
         self.bus_tx_len = tx_len;
         self.rx_plan = rx_plan;
@@ -289,6 +323,7 @@ impl ServoApp {
     }
 
     fn model_step(&mut self, now: Nanos) {
+        self.refresh_unfed();
         let dt = self.cycle_ns as f64 * 1e-9;
         let model = self.server.model_mut();
         model.begin_step(now, dt, &self.outputs);
@@ -296,15 +331,31 @@ impl ServoApp {
     }
 }
 
-/// Bus image length and copy plan of the PDOs assigned in `assign` (0x1C12 / 0x1C13) as the
-/// CoE objects say now; `None` if an assigned PDO or a mapped object is missing or not in the
-/// model's `layout` (with the same size) — with `od`, an object outside the layout is served
-/// from the dictionary if it has that size there — or an entry is not whole bytes.
+impl ServoApp {
+    /// Put the model's current values of the RxPDO entries no mapping feeds into its output
+    /// image ([`ServoApp::rx_unfed`]).
+    fn refresh_unfed(&mut self) {
+        for e in &self.rx_unfed {
+            if let Ok(v) = self.server.model().read_object(e.index, e.sub) {
+                let _ = e.write(&mut self.outputs, e.ty.saturate(v));
+            }
+        }
+    }
+}
+
+/// Bus image length (bytes) and copy plan of the PDOs assigned in `assign` (0x1C12 / 0x1C13)
+/// as the CoE objects say now; `None` if an assigned PDO or a mapped object is missing. Each
+/// mapped entry, bit for bit: a gap (index 0) is skipped; an object of the model's `layout` —
+/// itself, or a device object that plays one of its CiA 402 objects (`roles`) — goes to the
+/// model's image at that object's bits (a role's part at its bit within the word); with `od`,
+/// any other object the dictionary holds is served from there (as many bits as the entry has,
+/// at most the object's size); anything else fails the plan.
 fn plan_from_objects(
     coe: &CoeServer,
     assign: u16,
     layout: &crate::drive::pdo::PdoLayout,
     od: bool,
+    roles: &[RoleLink],
 ) -> Option<(usize, Vec<Span>)> {
     let value = |index: u16, sub: u8| -> Option<i64> {
         let e = coe
@@ -326,16 +377,23 @@ fn plan_from_objects(
                 ((v >> 8) & 0xFF) as u8,
                 (v & 0xFF) as usize,
             );
-            if bits % 8 != 0 {
-                return None;
-            }
-            let len = bits / 8;
             if index != 0 {
-                match layout.find(index, sub) {
-                    Some(e) if e.ty.size() == len => plan.push(Span {
+                let role = roles.iter().find(|r| r.object == (index, sub));
+                let model = match role {
+                    Some(r) => layout
+                        .find(r.canonical.0, r.canonical.1)
+                        .filter(|e| usize::from(r.at) + bits <= usize::from(e.bits))
+                        .map(|e| e.bit + usize::from(r.at)),
+                    None => layout
+                        .find(index, sub)
+                        .filter(|e| usize::from(e.bits) == bits)
+                        .map(|e| e.bit),
+                };
+                match model {
+                    Some(at) => plan.push(Span {
                         bus,
-                        model: e.offset,
-                        len,
+                        model: at,
+                        bits,
                         object: None,
                     }),
                     None if od => {
@@ -347,23 +405,23 @@ fn plan_from_objects(
                             DataType::Bytes(n) => n,
                             ty => ty.size()?,
                         };
-                        if size != len {
+                        if bits > 8 * size {
                             return None;
                         }
                         plan.push(Span {
                             bus,
                             model: 0,
-                            len,
+                            bits,
                             object: Some((index, sub)),
                         });
                     }
-                    _ => return None,
+                    None => return None,
                 }
             }
-            bus += len;
+            bus += bits;
         }
     }
-    Some((bus, plan))
+    Some((bus.div_ceil(8), plan))
 }
 
 impl EscApplication for ServoApp {
@@ -385,21 +443,26 @@ impl EscApplication for ServoApp {
 
     fn outputs_written(&mut self, _sm: u8, data: &[u8]) {
         for s in &self.rx_plan {
+            if s.bus + s.bits > data.len() * 8 {
+                continue;
+            }
             if let Some((index, sub)) = s.object {
-                if let (MailboxServer::Coe(c), Some(src)) =
-                    (&mut self.server, data.get(s.bus..s.bus + s.len))
-                {
-                    // A value the object refuses is dropped, as a drive ignores it.
-                    let _ = c.write(index, sub, src);
+                if let MailboxServer::Coe(c) = &mut self.server {
+                    // The object's bytes with the entry's bits in place (a bit field shorter
+                    // than the object fills its low bits). A value the object refuses is
+                    // dropped, as a drive ignores it.
+                    let mut bytes = [0u8; 8];
+                    let n = s.bits.div_ceil(8).min(8);
+                    crate::drive::pdo::copy_bits(data, s.bus, &mut bytes, 0, s.bits.min(64));
+                    let size = c
+                        .read_with(index, sub, <[u8]>::len)
+                        .unwrap_or(n)
+                        .clamp(n, 8);
+                    let _ = c.write(index, sub, &bytes[..size]);
                 }
                 continue;
             }
-            if let (Some(dst), Some(src)) = (
-                self.outputs.get_mut(s.model..s.model + s.len),
-                data.get(s.bus..s.bus + s.len),
-            ) {
-                dst.copy_from_slice(src);
-            }
+            crate::drive::pdo::copy_bits(data, s.bus, &mut self.outputs, s.model, s.bits);
         }
     }
 
@@ -433,23 +496,18 @@ impl EscApplication for ServoApp {
             self.model_step(now);
         }
         for s in &self.tx_plan {
+            if s.bus + s.bits > buf.len() * 8 {
+                continue;
+            }
             if let Some((index, sub)) = s.object {
-                if let (MailboxServer::Coe(c), Some(dst)) =
-                    (&self.server, buf.get_mut(s.bus..s.bus + s.len))
-                {
-                    if let Ok(v) = c.read(index, sub) {
-                        let n = v.len().min(dst.len());
-                        dst[..n].copy_from_slice(&v[..n]);
-                    }
+                if let MailboxServer::Coe(c) = &self.server {
+                    let _ = c.read_with(index, sub, |v| {
+                        crate::drive::pdo::copy_bits(v, 0, buf, s.bus, s.bits.min(v.len() * 8));
+                    });
                 }
                 continue;
             }
-            if let (Some(dst), Some(src)) = (
-                buf.get_mut(s.bus..s.bus + s.len),
-                self.inputs.get(s.model..s.model + s.len),
-            ) {
-                dst.copy_from_slice(src);
-            }
+            crate::drive::pdo::copy_bits(&self.inputs, s.model, buf, s.bus, s.bits);
         }
     }
 
@@ -461,7 +519,7 @@ impl EscApplication for ServoApp {
             };
         };
         let len = |assign, layout| {
-            plan_from_objects(coe, assign, layout, self.od_spans)
+            plan_from_objects(coe, assign, layout, self.od_spans, &self.roles)
                 .map_or(0, |(n, _)| u16::try_from(n).unwrap_or(0))
         };
         ProcessDataSizes {
@@ -490,6 +548,7 @@ impl EscApplication for ServoApp {
 
     fn port(&mut self) -> Option<Port<'_>> {
         self.exchanges += 1;
+        self.refresh_unfed();
         Some(Port {
             model: self.server.model_mut(),
             outputs: &self.outputs,
@@ -682,7 +741,7 @@ pub fn emulated_drive(
         vec![Span {
             bus: 0,
             model: 0,
-            len,
+            bits: 8 * len,
             object: None,
         }]
     };
@@ -700,6 +759,8 @@ pub fn emulated_drive(
         cycle_ns,
         synchronized: false,
         od_spans: false,
+        roles: Vec::new(),
+        rx_unfed: Vec::new(),
     };
     app.remap().map_err(|_| ServoError::PdoMismatch {
         direction: "rx/tx",
@@ -843,13 +904,15 @@ pub fn emulated_el1252(
         tx_plan: vec![Span {
             bus: 0,
             model: 0,
-            len: tx_len,
+            bits: 8 * tx_len,
             object: None,
         }],
         exchanges: 0,
         cycle_ns: DEFAULT_CYCLE.as_nanos() as u64,
         synchronized: false,
         od_spans: false,
+        roles: Vec::new(),
+        rx_unfed: Vec::new(),
     };
     Ok(Esc::new(cfg, Box::new(app)))
 }

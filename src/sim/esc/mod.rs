@@ -823,7 +823,7 @@ impl Esc {
             if !sm.overlaps(start, len.max(1)) {
                 continue;
             }
-            if sm.is_mailbox() {
+            if self.mailbox_sm(n, &sm) {
                 if sm.ecat_writes() {
                     r_ok = false;
                     if self.sm_full(n) {
@@ -889,7 +889,9 @@ impl Esc {
                 let Some(sm) = self.active_sm(n) else {
                     continue;
                 };
-                if sm.is_mailbox() || sm.ecat_writes() || !(start..start + len).contains(&sm.start)
+                if self.mailbox_sm(n, &sm)
+                    || sm.ecat_writes()
+                    || !(start..start + len).contains(&sm.start)
                 {
                     continue;
                 }
@@ -910,7 +912,7 @@ impl Esc {
             let Some(sm) = self.active_sm(n) else {
                 continue;
             };
-            if sm.is_mailbox() && !sm.ecat_writes() && sm.covers_last(start, len) {
+            if self.mailbox_sm(n, &sm) && !sm.ecat_writes() && sm.covers_last(start, len) {
                 self.set_sm_full(n, false);
                 self.load_read_mailbox();
                 self.release_held_request();
@@ -937,7 +939,9 @@ impl Esc {
         }
         let held = (0..self.sm_count()).find_map(|n| {
             self.active_sm(n)
-                .filter(|sm| sm.is_mailbox() && sm.ecat_writes() && sm.end() <= self.mem.len())
+                .filter(|sm| {
+                    self.mailbox_sm(n, sm) && sm.ecat_writes() && sm.end() <= self.mem.len()
+                })
                 .map(|sm| (n, sm))
         });
         if let Some((n, sm)) = held {
@@ -1034,7 +1038,7 @@ impl Esc {
                 self.set_sm_full(n, false);
             }
             if let Some(sm) = self.active_sm(n) {
-                if sm.is_mailbox() && !sm.ecat_writes() {
+                if self.mailbox_sm(n, &sm) && !sm.ecat_writes() {
                     if (old ^ new) & 0x02 != 0 && old & 0x01 != 0 {
                         // Repeat request: put the last reply back and acknowledge.
                         if let Some(last) = self.last_reply.clone() {
@@ -1055,7 +1059,7 @@ impl Esc {
             if !sm.ecat_writes() || !sm.covers_last(start, len) || sm.end() > self.mem.len() {
                 continue;
             }
-            if sm.is_mailbox() {
+            if self.mailbox_sm(n, &sm) {
                 self.set_sm_full(n, true);
                 if self.mbx_queue.len() >= MAILBOX_HOLD_AT {
                     // The firmware's reply buffer is taken: the request stays in the write
@@ -1137,7 +1141,7 @@ impl Esc {
     fn read_mailbox_sm(&self) -> Option<(usize, Sm)> {
         (0..self.sm_count()).find_map(|n| {
             self.active_sm(n)
-                .filter(|sm| sm.is_mailbox() && !sm.ecat_writes())
+                .filter(|sm| self.mailbox_sm(n, sm) && !sm.ecat_writes())
                 .map(|sm| (n, sm))
         })
     }
@@ -1300,7 +1304,7 @@ impl Esc {
     /// trigger) when the device enters SAFE-OP.
     fn log_process_data_sms(&self) {
         for n in 0..self.sm_count() {
-            if let Some(sm) = self.active_sm(n).filter(|sm| !sm.is_mailbox()) {
+            if let Some(sm) = self.active_sm(n).filter(|sm| !self.mailbox_sm(n, sm)) {
                 tracing::debug!(
                     station = self.station_address(),
                     sm = n,
@@ -1313,6 +1317,18 @@ impl Esc {
                 );
             }
         }
+    }
+
+    /// Is sync manager `n` (active as `sm`) a mailbox — in mailbox (one-buffer) mode and not
+    /// one of the process-data sync managers? ETG.1000.4 §6.7 lets process data run in either
+    /// mode (the Beckhoff AX2000's ESI gives its inputs control byte 0x22, one-buffer): such a
+    /// process-data SM is served as process data; the emulated PDI refreshes it before every
+    /// read, so it is never empty when the master reads it (a simplification: a real ESC
+    /// refuses the read of an empty one-buffer SM).
+    fn mailbox_sm(&self, n: usize, sm: &Sm) -> bool {
+        sm.is_mailbox()
+            && n != usize::from(self.cfg.output_sm)
+            && n != usize::from(self.cfg.input_sm)
     }
 
     fn check_transition(&self, from: AlState, to: AlState) -> Result<(), AlStatusCode> {
@@ -1375,9 +1391,7 @@ impl Esc {
                 if expected == 0 {
                     !en || sm.len == 0
                 } else {
-                    en && sm.len == usize::from(expected)
-                        && !sm.is_mailbox()
-                        && sm.ecat_writes() == write
+                    en && sm.len == usize::from(expected) && sm.ecat_writes() == write
                 }
             }
         };

@@ -37,38 +37,41 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use super::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEntry};
-use super::device::{assigned, mailbox_error, ServoApp, ServoError};
+use super::device::{assigned, mailbox_error, RoleLink, ServoApp, ServoError};
 use super::pdo_rules::PdoRules;
 use super::sdo_info::OdDescriptions;
 use super::{Esc, EscConfig};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::model::DriveModel;
 use crate::drive::pdo::PdoLayout;
+use crate::drive::vendor::esi_plan::{object_leaves, role_sources};
+use crate::drive::vendor::plan::RoleSource;
 use crate::esi::sii;
 use crate::esi::to_sii::sii_from_device;
-use crate::esi::{Device, Dictionary, EsiFile, Flags, Object, Pdo, SmKind};
-
-/// Objects the drive model needs in the RxPDO and the TxPDO (CiA 402 cyclic synchronous
-/// position: controlword, target position; statusword, position actual value).
-const REQUIRED: [(u16, bool); 4] = [
-    (0x6040, true),
-    (0x607A, true),
-    (0x6041, false),
-    (0x6064, false),
-];
+use crate::esi::{Device, Dictionary, EsiFile, Flags, Pdo, SmKind};
 
 /// Sub-indices a mapping object gets when the ESI dictionary does not declare it.
 const MAPPING_CAPACITY: u8 = super::device::MAPPING_CAPACITY;
 
+/// An emulated vendor device and what the emulator had to assume to play it.
+#[derive(Debug)]
+pub struct VendorDrive {
+    /// The device.
+    pub esc: Esc,
+    /// What the ESI left open and how the emulator filled it (e.g. an object a fixed PDO maps
+    /// but the dictionary lacks, served as 0), one line each, for stderr.
+    pub notes: Vec<String>,
+}
+
 /// Emulated vendor CiA 402 drive of the ESI `device` (see the module documentation): the
-/// model of `base` (its `[model]`, `[probe]` and scaling; its PDO layout cut to what the
-/// device declares), stepping by `cycle` per exchange when free-running.
+/// model of `base` (its `[model]`, `[probe]` and scaling; its PDO layout cut to the CiA 402
+/// objects the device offers), stepping by `cycle` per exchange when free-running.
 pub fn emulated_vendor_drive(
     esi: &EsiFile,
     device: &Device,
     base: &DriveDefinition,
     cycle: Duration,
-) -> Result<Esc, ServoError> {
+) -> Result<VendorDrive, ServoError> {
     let cycle_ns = u64::try_from(cycle.as_nanos()).unwrap_or(u64::MAX);
     if cycle_ns == 0 {
         return Err(ServoError::ZeroCycle);
@@ -87,10 +90,38 @@ pub fn emulated_vendor_drive(
             device.type_name
         ))
     })?;
-    let def = model_definition(&device.type_name, dict, base)?;
+    let sources = role_sources(device);
+    let def = model_definition(&device.type_name, &sources, base)?;
     let model =
         crate::drive::model::for_definition(&def).map_err(|e| ServoError::Model(e.to_string()))?;
+    let links: Vec<RoleLink> = sources
+        .iter()
+        .flat_map(|s| {
+            s.parts.iter().map(|p| RoleLink {
+                object: (p.index, p.sub),
+                canonical: (s.index, s.sub),
+                at: p.at,
+            })
+        })
+        .collect();
+    let mut notes = Vec::new();
     let mut entries = dictionary_entries(dict, model.as_ref());
+    add_pdo_objects(&mut entries, device, &mut notes);
+    // Whole-object roles answer from the model (an SDO of 0x7010:03 sets the mode 0x6060).
+    let mut aliases = Vec::new();
+    for s in sources.iter().filter(|s| s.word.is_none()) {
+        let (index, sub) = s.object();
+        if (index, sub) == (s.index, s.sub) || model.read_object(s.index, s.sub).is_err() {
+            continue;
+        }
+        if let Some(e) = entries
+            .iter_mut()
+            .find(|e| e.index == index && e.sub == sub && e.data.is_some())
+        {
+            e.data = None;
+            aliases.push(((index, sub), (s.index, s.sub)));
+        }
+    }
     let constant = |index, sub, ty, v| ObjectEntry::constant(index, sub, ty, v);
     for e in [
         constant(0x1018, 0, DataType::U8, 4),
@@ -118,19 +149,25 @@ pub fn emulated_vendor_drive(
     pdo_entries(&mut entries, 0x1C12, &device.rx_pdos, cfg.output_sm);
     pdo_entries(&mut entries, 0x1C13, &device.tx_pdos, cfg.input_sm);
     let mut coe = CoeServer::new(model, entries, usize::from(mbx.tx_size));
+    for (entry, model) in aliases {
+        coe.alias(entry, model);
+    }
     coe.set_descriptions(OdDescriptions::from_esi(dict, coe.entries()));
     coe.set_pdo_rules(PdoRules::new(
         sm_limit(device, SmKind::Outputs),
         sm_limit(device, SmKind::Inputs),
     ));
-    let app =
-        ServoApp::vendor(coe, def.rxpdo.clone(), def.txpdo.clone(), cycle_ns).map_err(|code| {
+    let app = ServoApp::vendor(coe, def.rxpdo.clone(), def.txpdo.clone(), links, cycle_ns)
+        .map_err(|code| {
             ServoError::Vendor(format!(
                 "ESI device {}: its default PDO mapping cannot be served (AL status {code:?})",
                 device.type_name
             ))
         })?;
-    Ok(Esc::new(cfg, Box::new(app)))
+    Ok(VendorDrive {
+        esc: Esc::new(cfg, Box::new(app)),
+        notes,
+    })
 }
 
 /// Most bytes the sync manager of `kind` may carry: its ESI `MaxSize`; without one, the space
@@ -154,28 +191,32 @@ pub fn sm_limit(device: &Device, kind: SmKind) -> usize {
     next.saturating_sub(usize::from(sm.start_address)) / 3
 }
 
-/// The drive definition the model runs with: `base` with its PDO layouts cut down to the
-/// objects `dict` declares mappable in that direction (sub-index 0 objects of a base type);
-/// `[rxpdo] defaults` of objects that remain.
+/// The drive definition the model runs with: `base` with its PDO layouts cut down to the CiA
+/// 402 objects the device offers in that direction by any of its [`RoleSource`]s;
+/// `[rxpdo] defaults` of objects that remain. The model needs the controlword and the target
+/// position (master → drive), the statusword and the position actual value (drive → master),
+/// else [`ServoError::Vendor`] names what is missing.
 pub fn model_definition(
     device: &str,
-    dict: &Dictionary,
+    sources: &[RoleSource],
     base: &DriveDefinition,
 ) -> Result<DriveDefinition, ServoError> {
-    let mappable = |index: u16, rx: bool| -> bool {
-        dict.object(index)
-            .and_then(|o| o.flags.pdo_mapping)
-            .is_some_and(|m| if rx { m.rx() } else { m.tx() })
-    };
-    let missing: Vec<String> = REQUIRED
-        .iter()
-        .filter(|(i, rx)| !mappable(*i, *rx))
-        .map(|(i, rx)| format!("{i:#06X} ({})", if *rx { "RxPDO" } else { "TxPDO" }))
-        .collect();
+    let offered =
+        |index: u16, rx: bool| -> bool { sources.iter().any(|s| s.index == index && s.rx == rx) };
+    let missing: Vec<String> = [
+        (0x6040u16, true),
+        (0x607A, true),
+        (0x6041, false),
+        (0x6064, false),
+    ]
+    .iter()
+    .filter(|(i, rx)| !offered(*i, *rx))
+    .map(|(i, rx)| format!("{i:#06X} ({})", if *rx { "RxPDO" } else { "TxPDO" }))
+    .collect();
     if !missing.is_empty() {
         return Err(ServoError::Vendor(format!(
-            "ESI device {device}: the CiA 402 drive model needs {} mappable in the ESI \
-             dictionary (Flags/PdoMapping)",
+            "ESI device {device}: the CiA 402 drive model needs {}: neither the CiA 402 object \
+             nor an object of the device that plays it (drive from-esi names what it found)",
             missing.join(", ")
         )));
     }
@@ -183,7 +224,7 @@ pub fn model_definition(
         let kept: Vec<_> = layout
             .entries()
             .iter()
-            .filter(|e| e.sub == 0 && mappable(e.index, rx))
+            .filter(|e| e.sub == 0 && offered(e.index, rx))
             .map(|e| (e.index, e.sub, e.ty))
             .collect();
         PdoLayout::from_objects(&kept).map_err(|e| ServoError::Model(e.to_string()))
@@ -191,9 +232,45 @@ pub fn model_definition(
     let mut def = base.clone();
     def.rxpdo = cut(&base.rxpdo, true)?;
     def.txpdo = cut(&base.txpdo, false)?;
+    def.roles.clear();
     let rx = def.rxpdo.clone();
     def.rxpdo_defaults.retain(|d| rx.contains(d.index, d.sub));
     Ok(def)
+}
+
+/// Objects the ESI's PDOs map but its dictionary lacks (vendor objects of a fixed PDO such as
+/// MyActuator's 0x5FF1, the AX2000's 0x6062): added as plain values, 0 at start, read-write
+/// in an RxPDO, read-only in a TxPDO, as many bytes as the entry's bits need; one note each.
+fn add_pdo_objects(entries: &mut Vec<ObjectEntry>, device: &Device, notes: &mut Vec<String>) {
+    for (pdos, rx) in [(&device.rx_pdos, true), (&device.tx_pdos, false)] {
+        for p in pdos {
+            for e in p.entries.iter().filter(|e| e.index != 0) {
+                if entries
+                    .iter()
+                    .any(|x| x.index == e.index && x.sub == e.subindex)
+                {
+                    continue;
+                }
+                let ty = match (e.bit_len, e.data_type.as_deref().map(str::trim)) {
+                    (16, Some("INT")) => DataType::I16,
+                    (32, Some("DINT")) => DataType::I32,
+                    (b, _) if b <= 8 => DataType::U8,
+                    (b, _) if b <= 16 => DataType::U16,
+                    (b, _) if b <= 32 => DataType::U32,
+                    (b, _) => DataType::Bytes(usize::from(b).div_ceil(8)),
+                };
+                entries.push(ObjectEntry {
+                    access: if rx { Access::Rw } else { Access::Ro },
+                    ..ObjectEntry::constant(e.index, e.subindex, ty, 0)
+                });
+                notes.push(format!(
+                    "{:#06X}:{:02X} ({} bits) is mapped by PDO {:#06X} but not in the ESI \
+                     dictionary: served as a plain value, 0 at start",
+                    e.index, e.subindex, e.bit_len, p.index
+                ));
+            }
+        }
+    }
 }
 
 /// The server entry type of an ESI type name with `bits` bits: the CiA 301 integer types by
@@ -224,56 +301,6 @@ fn access_of(f: &Flags, fallback: Access) -> Access {
     }
 }
 
-/// One sub-index of an ESI object: (sub-index, type name, bits, flags).
-type SubSpec<'a> = (u8, String, u32, &'a Flags);
-
-/// The sub-indices of object `o` as its data type lays them out: a base type is sub-index 0;
-/// a record its `SubItem`s with `SubIdx`; an array element `SubItem` (no `SubIdx`, of a type
-/// with `ArrayInfo`) expands to the elements `LBound` … `LBound + Elements − 1`.
-fn object_subs<'a>(dict: &'a Dictionary, o: &'a Object) -> Vec<SubSpec<'a>> {
-    use crate::bus::ethercat::sdo_info::data_type_of_esi_name;
-    let single = || vec![(0u8, o.type_name.clone(), o.bit_size, &o.flags)];
-    if data_type_of_esi_name(&o.type_name).is_some() {
-        return single();
-    }
-    let Some(t) = dict.data_type(&o.type_name) else {
-        return single();
-    };
-    if t.subitems.is_empty() {
-        return match t.base_type.as_deref() {
-            Some(b) if t.array.is_none() => vec![(0, b.to_string(), o.bit_size, &o.flags)],
-            _ => single(),
-        };
-    }
-    let mut out = Vec::new();
-    for s in &t.subitems {
-        let flags = if s.flags.access.is_some() {
-            &s.flags
-        } else {
-            &o.flags
-        };
-        if let Some(k) = s.subindex {
-            out.push((k, s.type_name.clone(), s.bit_size, flags));
-            continue;
-        }
-        let Some(arr) = dict.data_type(&s.type_name) else {
-            continue;
-        };
-        let (Some(info), Some(base)) = (arr.array, arr.base_type.as_deref()) else {
-            continue;
-        };
-        let each = dict
-            .data_type(base)
-            .map(|b| b.bit_size)
-            .filter(|&b| b > 0)
-            .unwrap_or(arr.bit_size / info.elements.max(1));
-        for k in info.lbound..info.lbound.saturating_add(info.elements).min(256) {
-            out.push((k as u8, base.to_string(), each, flags));
-        }
-    }
-    out
-}
-
 /// The server table of the ESI dictionary `dict` (see the module documentation): defaults from
 /// `Info/DefaultData` (a record's or array's `Info/SubItem`s in sub-index order), the CiA 402
 /// objects the model answers backed by `model`.
@@ -285,9 +312,10 @@ pub fn dictionary_entries(dict: &Dictionary, model: &dyn DriveModel) -> Vec<Obje
         .collect();
     let mut out = Vec::new();
     for o in &dict.objects {
-        let subs = object_subs(dict, o);
-        let record = !(subs.len() == 1 && subs[0].0 == 0);
-        for (n, (sub, type_name, bits, flags)) in subs.into_iter().enumerate() {
+        let subs = object_leaves(dict, o);
+        let record = !(subs.len() == 1 && subs[0].sub == 0);
+        for (n, leaf) in subs.into_iter().enumerate() {
+            let (sub, type_name, bits, flags) = (leaf.sub, leaf.type_name, leaf.bits, &leaf.flags);
             let Some(ty) = entry_type(&type_name, bits) else {
                 continue;
             };
@@ -298,7 +326,13 @@ pub fn dictionary_entries(dict: &Dictionary, model: &dyn DriveModel) -> Vec<Obje
                 continue;
             }
             let access = access_of(flags, Access::Ro);
-            if backed.get(&(o.index, sub)) == Some(&ty) && model.read_object(o.index, sub).is_ok() {
+            // Backed by the model when the ESI gives the object the model's size (an enum or
+            // unsigned type of the same width, as vendors declare 0x6060 or 0x6064, included).
+            if backed
+                .get(&(o.index, sub))
+                .is_some_and(|t| t.size() == ty.size())
+                && model.read_object(o.index, sub).is_ok()
+            {
                 out.push(ObjectEntry::model(o.index, sub, ty, access));
                 continue;
             }

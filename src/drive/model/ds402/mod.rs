@@ -114,6 +114,9 @@ const MAX_ZERO_PULSES_PER_STEP: usize = 1024;
 pub struct Ds402Model {
     rx: PdoLayout,
     tx: PdoLayout,
+    /// Whole objects of the device that play CiA 402 objects (`[roles]`): SDO access by the
+    /// device's index reaches the CiA 402 object.
+    roles: Vec<crate::drive::pdo::Role>,
     enable_delay_cycles: u32,
     /// Zero pulse period in increments.
     zero_pulse_period: f64,
@@ -172,6 +175,12 @@ impl Ds402Model {
         Ds402Model {
             rx: def.rxpdo.clone(),
             tx: def.txpdo.clone(),
+            roles: def
+                .roles
+                .iter()
+                .filter(|r| r.bits.is_none())
+                .copied()
+                .collect(),
             enable_delay_cycles: m.enable_delay_cycles,
             zero_pulse_period: positive_or(m.zero_pulse_period, 10_000.0),
             state: PowerState::NotReadyToSwitchOn,
@@ -324,8 +333,14 @@ impl Ds402Model {
             self.rx_length_errors += 1;
             return;
         }
-        for i in 0..self.rx.entries().len() {
-            let e = self.rx.entries()[i];
+        // The entries under their own index, then the CiA 402 objects other objects play
+        // (`[roles]`: e.g. the controlword in 0x7010:01, the touch probe function in single bits).
+        for i in 0..self.rx.entries().len() + self.rx.roles().len() {
+            let e = match self.rx.entries().get(i) {
+                Some(e) if e.is_gap() || self.rx.in_role(e) => continue,
+                Some(e) => *e,
+                None => self.rx.roles()[i - self.rx.entries().len()],
+            };
             if let Some(v) = e.read(rx) {
                 // Read-only or out-of-range values in the RxPDO are ignored, as a drive that
                 // keeps its previous value (e.g. an unsupported mode of operation).
@@ -428,7 +443,12 @@ impl Ds402Model {
     }
 
     fn write_tx(&self, tx: &mut [u8]) {
-        for e in self.tx.entries() {
+        let plain = self
+            .tx
+            .entries()
+            .iter()
+            .filter(|e| !e.is_gap() && !self.tx.in_role(e));
+        for e in plain.chain(self.tx.roles()) {
             // Objects the model does not know (vendor objects) read as 0.
             let v = self.read_object(e.index, e.sub).unwrap_or(0);
             // Entries past a short image are left out; values beyond a narrower mapped type

@@ -6,8 +6,17 @@ use crate::drive::model::abort;
 use crate::drive::pdo;
 
 impl Ds402Model {
+    /// The CiA 402 object a device object plays (`[roles]`), else the object itself.
+    fn canonical(&self, index: u16, sub: u8) -> (u16, u8) {
+        self.roles
+            .iter()
+            .find(|r| (r.object, r.object_sub) == (index, sub))
+            .map_or((index, sub), |r| (r.index, r.sub))
+    }
+
     /// Read an object (SDO upload / CoE). Errors are CiA 301 abort codes ([`abort`]).
     pub fn read_object(&self, index: u16, sub: u8) -> Result<i64, u32> {
+        let (index, sub) = self.canonical(index, sub);
         Ok(match (index, sub) {
             (0x603F, 0) => self.error_code.into(),
             (0x6040, 0) => self.controlword.into(),
@@ -46,6 +55,7 @@ impl Ds402Model {
     /// Write an object (SDO download / CoE). Read-only objects abort with 0x06010002, values
     /// outside the data type (or an unsupported mode of operation) with 0x06090030.
     pub fn write_object(&mut self, index: u16, sub: u8, value: i64) -> Result<(), u32> {
+        let (index, sub) = self.canonical(index, sub);
         let info = pdo::lookup(index, sub).ok_or_else(|| missing(index))?;
         if matches!(
             (index, sub),
