@@ -59,6 +59,13 @@ pub const MAX_ESI_SLOT_INSTANCES: usize = 256;
 /// (a few tens of MB). A module with hundreds of entries in 256 slots stays below it.
 pub const MAX_ESI_RESOLVED_ITEMS: usize = 1 << 18;
 
+/// Warnings one ESI file may give: 64, one per kind of odd value and element (the places of
+/// each are counted, not kept). Further kinds are counted in one last warning.
+pub const MAX_ESI_WARNINGS: usize = 64;
+
+/// Places listed in one ESI warning besides the first: 8 (the rest are counted).
+pub const MAX_ESI_WARNING_PLACES: usize = 8;
+
 /// Largest EDS / DCF file (CiA 306): 16 MiB. Big multi-axis drives have EDS files of ~1 MB.
 pub const MAX_EDS_FILE_BYTES: u64 = 16 * MIB;
 

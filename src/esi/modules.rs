@@ -122,13 +122,13 @@ impl std::fmt::Display for ModuleChoice {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ModuleError {
     /// Modules were named for a device without slots.
-    #[error("device {device} has no slots; it takes no modules")]
+    #[error("the device has no slots; it takes no modules")]
     NotModular {
         /// Device type name.
         device: String,
     },
     /// More modules than the slots take.
-    #[error("device {device} takes at most {max} module(s) ({slots}), {given} given")]
+    #[error("the device takes at most {max} module(s) ({slots}), {given} given")]
     TooMany {
         /// Device type name.
         device: String,

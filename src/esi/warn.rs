@@ -4,18 +4,15 @@
 //!
 //! One warning per kind of problem and element: the first place in full (file, line, column,
 //! element path, the object or PDO it belongs to) and how many more there are, the first
-//! [`MAX_PLACES`] of them with their line, column and text. At most [`MAX_WARNINGS`] warnings per
-//! file; further kinds are counted in a last [`Oddity::TooMany`] warning. Positions are worked
-//! out once after parsing, in one pass over the text.
+//! `MAX_ESI_WARNING_PLACES` of them with their line, column and text. At most
+//! `MAX_ESI_WARNINGS` warnings per file ([`crate::limits`]); further kinds are counted in a last
+//! [`Oddity::TooMany`] warning. Positions are worked out once after parsing, in one pass over
+//! the text.
 
 use std::collections::HashMap;
 use std::fmt;
 
-/// Further places kept per warning (the rest are only counted).
-pub const MAX_PLACES: usize = 8;
-
-/// Warnings kept per file.
-pub const MAX_WARNINGS: usize = 64;
+use crate::limits::{MAX_ESI_WARNINGS as MAX_WARNINGS, MAX_ESI_WARNING_PLACES as MAX_PLACES};
 
 /// What was odd about a value, and what was read instead.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -77,7 +74,8 @@ pub enum Oddity {
         /// Why.
         why: String,
     },
-    /// More kinds of problems than [`MAX_WARNINGS`]: this many more places, not shown.
+    /// More kinds of problems than [`crate::limits::MAX_ESI_WARNINGS`]: this many more places, not
+    /// shown.
     TooMany {
         /// Places not shown.
         count: usize,
@@ -194,7 +192,7 @@ pub struct EsiWarning {
     /// What was odd and what was read.
     pub oddity: Oddity,
     /// Further places of the same kind of problem in the same element (at most
-    /// [`MAX_PLACES`]).
+    /// [`crate::limits::MAX_ESI_WARNING_PLACES`]).
     pub more: Vec<Place>,
     /// How many further places there are in all (≥ `more.len()`).
     pub more_count: usize,
