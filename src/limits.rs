@@ -50,6 +50,22 @@ pub const MAX_ESI_FILE_BYTES: u64 = 64 * MIB;
 /// one element) linear in the file size.
 pub const MAX_ESI_ATTRIBUTES_PER_ELEMENT: usize = 256;
 
+/// Most slot instances of one modular ESI device resolved with its modules (ETG.2000 `Slots`):
+/// 256. Modular EtherCAT devices have a few slots to a few dozen (a coupler with its terminals
+/// up to 255); each instance copies its module's PDOs into the resolved device.
+pub const MAX_ESI_SLOT_INSTANCES: usize = 256;
+
+/// Most PDO entries and dictionary objects the modules of one resolved ESI device add: 262,144
+/// (a few tens of MB). A module with hundreds of entries in 256 slots stays below it.
+pub const MAX_ESI_RESOLVED_ITEMS: usize = 1 << 18;
+
+/// Warnings one ESI file may give: 64, one per kind of odd value and element (the places of
+/// each are counted, not kept). Further kinds are counted in one last warning.
+pub const MAX_ESI_WARNINGS: usize = 64;
+
+/// Places listed in one ESI warning besides the first: 8 (the rest are counted).
+pub const MAX_ESI_WARNING_PLACES: usize = 8;
+
 /// Largest EDS / DCF file (CiA 306): 16 MiB. Big multi-axis drives have EDS files of ~1 MB.
 pub const MAX_EDS_FILE_BYTES: u64 = 16 * MIB;
 

@@ -742,7 +742,9 @@ fn out_of_range_and_bad_values() {
 
 #[test]
 fn bad_access_in_vendor_file_names_line() {
-    // corrupt one Access of the real file: line 3751 is #x6065's <Access>rw</Access>
+    // corrupt one Access of the real file: line 3751 is #x6065's <Access>rw</Access>. An Access
+    // text ETG.2000 does not define is no longer a refusal of the file (issue 25): the file
+    // parses, the object reads as having no Access, and a warning names the line and path.
     let Some(text) = ingenia_text("bad_access_in_vendor_file_names_line") else {
         return;
     };
@@ -750,16 +752,27 @@ fn bad_access_in_vendor_file_names_line() {
     assert_eq!(lines[3750].trim(), "<Access>rw</Access>");
     lines[3750] = "                  <Access>rx</Access>";
     let text = lines.join("\n");
-    let (line, path, problem) = invalid(esi::parse(&text, "i.xml").unwrap_err());
-    assert_eq!(line, 3751);
+    let f = esi::parse(&text, "i.xml").expect("an odd Access is a warning");
+    assert_eq!(f.warnings.len(), 1, "{:?}", f.warnings);
+    let w = &f.warnings[0];
+    assert_eq!(w.line, 3751);
     assert!(
-        path.starts_with(
+        w.path.starts_with(
             "EtherCATInfo/Descriptions/Devices/Device/Profile/Dictionary/Objects/Object["
         ),
-        "{path}"
+        "{}",
+        w.path
     );
-    assert!(path.ends_with("]/Flags/Access"), "{path}");
-    assert_eq!(problem, Problem::BadValue("rx".into()));
+    assert!(w.path.ends_with("]/Flags/Access"), "{}", w.path);
+    assert_eq!(w.oddity, esi::Oddity::Access { text: "rx".into() });
+    assert_eq!(
+        w.subject.as_deref(),
+        Some("device EVS-NET-01, object #x6065")
+    );
+    assert_eq!(f.devices[0].object(0x6065).unwrap().flags.access, None);
+    let shown = w.to_string();
+    assert!(shown.starts_with("i.xml:3751:"), "{shown}");
+    assert!(shown.contains("Access \"rx\""), "{shown}");
 }
 
 #[test]

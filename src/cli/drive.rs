@@ -1,13 +1,15 @@
 //! `fieldprobe drive`: drive definitions (`drives/*.toml`) from vendor files.
 //!
 //! ```text
-//! fieldprobe drive from-esi FILE.xml [--device PRODUCT] [--name NAME] [--out FILE.toml]
+//! fieldprobe drive from-esi FILE.xml[#SEL] [--device SEL] [--name NAME] [--out FILE.toml]
 //! fieldprobe drive from-eds FILE.eds [--name NAME] [--out FILE.toml]
 //! ```
 //! Writes the definition ([`fieldprobe::drive::vendor`]) to stdout or `--out`; what was left out
 //! (optional objects the device lacks, the touch probe) goes to stderr as `note:` lines. Exit 0;
 //! 2 on bad input: an unreadable file, no such device, or a device that lacks objects a CiA 402
-//! axis needs (the message names them and the file).
+//! axis needs (the message names them and the file). SEL chooses the device of a file with
+//! several and its modules ([`fieldprobe::esi::select`]); the definition is made from the
+//! resolved device (module PDOs and objects included).
 
 use super::EXIT_OK;
 use anyhow::Context;
@@ -43,11 +45,14 @@ struct Output {
 /// Arguments of `fieldprobe drive from-esi`.
 #[derive(Debug, clap::Args)]
 struct FromEsiArgs {
-    /// The ESI file (EtherCATInfo XML).
-    file: PathBuf,
-    /// The device: product code (`0x3B11002`, `#x3B11002`, decimal) or type name
-    /// (`EVS-NET-01`); needed when the file describes several devices.
-    #[arg(long, value_name = "PRODUCT")]
+    /// The ESI file (EtherCATInfo XML), optionally `#SEL`: the device (TYPE[/REVISION],
+    /// PRODUCT_CODE[/REVISION] or @N) and its modules (+MODULE per slot).
+    #[arg(value_name = "FILE.xml[#SEL]")]
+    file: String,
+    /// The device, as SEL of FILE.xml#SEL: product code (`0x3B11002`, `#x3B11002`, decimal),
+    /// type name (`EVS-NET-01`), TYPE/REVISION or @N; needed when the file describes several
+    /// devices.
+    #[arg(long, value_name = "SEL")]
     device: Option<String>,
     #[command(flatten)]
     output: Output,
@@ -70,57 +75,8 @@ pub fn run(a: DriveArgs) -> anyhow::Result<i32> {
     }
 }
 
-/// `0x…` / `#x…` hexadecimal or decimal.
-fn number(s: &str) -> Option<u32> {
-    let t = s.trim();
-    match t
-        .strip_prefix("0x")
-        .or_else(|| t.strip_prefix("0X"))
-        .or_else(|| t.strip_prefix("#x"))
-    {
-        Some(h) => u32::from_str_radix(h, 16).ok(),
-        None => t.parse().ok(),
-    }
-}
-
 fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
-    let file = fieldprobe::esi::load(&a.file)?;
-    let list = || {
-        file.devices
-            .iter()
-            .map(|d| format!("{} (product code 0x{:08X})", d.type_name, d.product_code))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let device = match a.device.as_deref() {
-        Some(want) => {
-            let code = number(want);
-            file.devices
-                .iter()
-                .find(|d| {
-                    code == Some(d.product_code)
-                        || d.type_name.eq_ignore_ascii_case(want.trim())
-                        || d.name().eq_ignore_ascii_case(want.trim())
-                })
-                .with_context(|| {
-                    format!(
-                        "{}: --device {want}: no such device; the file has: {}",
-                        file.file,
-                        list()
-                    )
-                })?
-        }
-        None => match file.devices.as_slice() {
-            [one] => one,
-            [] => anyhow::bail!("{}: the file describes no device", file.file),
-            _ => anyhow::bail!(
-                "{}: the file describes {} devices; pick one with --device: {}",
-                file.file,
-                file.devices.len(),
-                list()
-            ),
-        },
-    };
+    let (file, device) = super::esi_load::load_device(&a.file, a.device.as_deref())?;
     if device.dictionary().is_none() {
         anyhow::bail!(
             "{}: device {} has no CoE object dictionary (Profile/Dictionary); a CiA 402 drive \
@@ -129,7 +85,7 @@ fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
             device.type_name
         );
     }
-    write(&VendorDevice::from_esi(&file, device), &a.output)
+    write(&VendorDevice::from_esi(&file, &device), &a.output)
 }
 
 fn from_eds(a: FromEdsArgs) -> anyhow::Result<i32> {

@@ -1,16 +1,20 @@
 //! `fieldprobe esi`: read EtherCAT Slave Information (ETG.2000 XML) files.
 //!
 //! ```text
-//! fieldprobe esi show FILE.xml [--device PRODUCT_CODE] [--objects]
+//! fieldprobe esi list FILE.xml
+//! fieldprobe esi show FILE.xml[#SEL] [--device SEL] [--objects]
 //! ```
-//! Prints the vendor and, per device, its identity, sync managers, FMMUs, PDOs with their
-//! entries, mailbox protocols, DC op modes and the number of dictionary objects (`--objects`:
-//! the object list). Exit 0; 2 on bad input, with the parser's error
+//! `list` prints one line per device: position, type name, product code, revision, profiles,
+//! slots and modules, name. `show` prints the vendor and, per device, its identity, profiles,
+//! 0x1000, sync managers, FMMUs, PDOs with their entries, mailbox protocols, DC op modes and the
+//! number of dictionary objects (`--objects`: the object list): every device of the file, or
+//! the one SEL names ([`fieldprobe::esi::select`]), resolved with its modules. The reader's
+//! warnings go to stderr as `warning: …`. Exit 0; 2 on bad input, with the parser's error
 //! (`file:line:column: element path: problem`) on stderr.
 
+use super::esi_load;
 use super::EXIT_OK;
 use fieldprobe::esi::{self, Access, Device, Pdo, SmKind};
-use std::path::PathBuf;
 
 /// Arguments of `fieldprobe esi`.
 #[derive(Debug, clap::Args)]
@@ -21,79 +25,134 @@ pub struct EsiArgs {
 
 #[derive(Debug, clap::Subcommand)]
 enum EsiCommand {
+    /// One line per device of an ESI file: @N position, type, product code, revision,
+    /// profiles, slots and modules, name. @N, the type name or PRODUCT/REVISION select a
+    /// device in every command (FILE.xml#SEL).
+    List(ListArgs),
     /// Show the devices of an ESI file: identity, sync managers, PDOs, mailbox, DC, objects.
     Show(ShowArgs),
+}
+
+/// Arguments of `fieldprobe esi list`.
+#[derive(Debug, clap::Args)]
+struct ListArgs {
+    /// The ESI file (EtherCATInfo XML).
+    file: String,
 }
 
 /// Arguments of `fieldprobe esi show`.
 #[derive(Debug, clap::Args)]
 struct ShowArgs {
-    /// The ESI file (EtherCATInfo XML).
-    file: PathBuf,
-    /// Only the device with this product code (`0x10402`, `#x10402` or decimal).
-    #[arg(long, value_name = "PRODUCT_CODE", value_parser = parse_number)]
-    device: Option<u32>,
+    /// The ESI file (EtherCATInfo XML), optionally `#SEL` to show one device resolved with its
+    /// modules (SEL: TYPE[/REVISION], PRODUCT_CODE[/REVISION] or @N, then +MODULE per slot).
+    #[arg(value_name = "FILE.xml[#SEL]")]
+    file: String,
+    /// Only this device (the SEL of FILE.xml#SEL, e.g. a product code `0x10402`).
+    #[arg(long, value_name = "SEL")]
+    device: Option<String>,
     /// List the dictionary objects (index, name, type, access, default).
     #[arg(long)]
     objects: bool,
 }
 
-/// `0x…` / `#x…` hexadecimal or decimal.
-fn parse_number(s: &str) -> Result<u32, String> {
-    let t = s.trim();
-    let r = if let Some(h) = t
-        .strip_prefix("0x")
-        .or_else(|| t.strip_prefix("0X"))
-        .or_else(|| t.strip_prefix("#x"))
-    {
-        u32::from_str_radix(h, 16)
-    } else {
-        t.parse()
-    };
-    r.map_err(|_| format!("not a number: {s:?} (expected 0x hex, #x hex or decimal)"))
-}
-
 /// Run the command; returns the exit code.
 pub fn run(a: EsiArgs) -> anyhow::Result<i32> {
     match a.command {
+        EsiCommand::List(l) => list(l),
         EsiCommand::Show(s) => show(s),
     }
 }
 
-fn show(a: ShowArgs) -> anyhow::Result<i32> {
-    let file = esi::load(&a.file)?;
-    let devices: Vec<&Device> = match a.device {
-        Some(code) => {
-            let found: Vec<&Device> = file
-                .devices
-                .iter()
-                .filter(|d| d.product_code == code)
-                .collect();
-            if found.is_empty() {
-                let have: Vec<String> = file
-                    .devices
-                    .iter()
-                    .map(|d| format!("0x{:08X} ({})", d.product_code, d.type_name))
-                    .collect();
-                anyhow::bail!(
-                    "{}: no device with product code 0x{code:08X}; the file has: {}",
-                    file.file,
-                    if have.is_empty() {
-                        "no devices".to_string()
-                    } else {
-                        have.join(", ")
-                    }
-                );
-            }
-            found
-        }
-        None => file.devices.iter().collect(),
+fn list(a: ListArgs) -> anyhow::Result<i32> {
+    let (path, sel) = esi_load::split(&a.file);
+    anyhow::ensure!(
+        sel.is_none(),
+        "esi list takes a file without #SEL (it lists every device)"
+    );
+    let file = esi_load::load(&path)?;
+    for (i, d) in file.devices.iter().enumerate() {
+        outln!("{}", list_line(i + 1, d));
+    }
+    Ok(EXIT_OK)
+}
+
+/// `@3 EJ7211-0010 0x1C2B2852/0x001A000A profiles 5001:513,5001:742 slots - "name"`.
+fn list_line(position: usize, d: &Device) -> String {
+    format!(
+        "@{position} {} 0x{:08X}/0x{:08X} profiles {} slots {} {:?}",
+        if d.type_name.is_empty() {
+            "-"
+        } else {
+            &d.type_name
+        },
+        d.product_code,
+        d.revision_no,
+        profiles(d),
+        slots(d),
+        d.name()
+    )
+}
+
+/// `402`, `5001:513,5001:742` (profile number, `:AddInfo` where given), `-` for none.
+fn profiles(d: &Device) -> String {
+    let v: Vec<String> = d
+        .profile_infos()
+        .iter()
+        .map(|(n, add)| match add {
+            Some(a) => format!("{n}:{a}"),
+            None => n.to_string(),
+        })
+        .collect();
+    if v.is_empty() {
+        "-".to_string()
+    } else {
+        v.join(",")
+    }
+}
+
+/// `-`, or per slot `NAME[min..max]=DEFAULT(choices)`: `Axis 0[1..1]=#x119800(3 modules)`.
+fn slots(d: &Device) -> String {
+    let Some(slots) = &d.slots else {
+        return "-".to_string();
     };
+    let v: Vec<String> = slots
+        .slots
+        .iter()
+        .map(|s| {
+            let def = s
+                .modules
+                .iter()
+                .find(|m| m.default)
+                .map_or_else(|| "none".to_string(), |m| format!("#x{:X}", m.ident));
+            format!(
+                "{:?}[{}..{}]={def}({} modules)",
+                s.name,
+                s.min_instances,
+                s.max_instances,
+                s.modules.len() + s.classes.len()
+            )
+        })
+        .collect();
+    v.join(";")
+}
+
+fn show(a: ShowArgs) -> anyhow::Result<i32> {
+    let (path, sel) = esi_load::split(&a.file);
+    let file = esi_load::load(&path)?;
+    let sel = esi_load::selector(sel.as_deref(), a.device.as_deref())?;
+    let chosen = sel
+        .map(|sel| esi_load::choose(&file, Some(&sel)))
+        .transpose()?;
     outln!("file: {}", file.file);
     outln!("vendor: 0x{:08X} {}", file.vendor.id, file.vendor.name);
     outln!("devices: {}", file.devices.len());
-    for d in devices {
-        show_device(file.vendor.id, d, a.objects);
+    match &chosen {
+        Some(r) => show_device(file.vendor.id, r, a.objects),
+        None => {
+            for d in &file.devices {
+                show_device(file.vendor.id, d, a.objects);
+            }
+        }
     }
     Ok(EXIT_OK)
 }
@@ -111,6 +170,44 @@ fn show_device(vendor: u32, d: &Device, objects: bool) {
     }
     if let Some(p) = &d.physics {
         outln!("  physics: {p}");
+    }
+    outln!("  profiles: {}", profiles(d));
+    for c in d.channels() {
+        let add = c
+            .add_info
+            .map(|a| format!(" AddInfo {a}"))
+            .unwrap_or_default();
+        let name = c
+            .display_name
+            .as_deref()
+            .map(|n| format!(" {n}"))
+            .unwrap_or_default();
+        outln!("    channel: ProfileNo {}{add}{name}", c.profile_no);
+    }
+    if let Some(t) = d.device_type() {
+        outln!("  device type (0x1000): 0x{t:08X}");
+    }
+    if let Some(s) = &d.slots {
+        outln!(
+            "  slots: {} (SlotIndexIncrement #x{:X}, SlotPdoIncrement {})",
+            self::slots(d),
+            s.slot_index_increment,
+            s.slot_pdo_increment
+        );
+        for m in &d.modules {
+            outln!("    module #x{:X}: {}", m.ident, m.type_name);
+        }
+    }
+    if let Some(plugged) = &d.plugged {
+        for p in plugged {
+            outln!(
+                "  slot {} ({}): module #x{:X} {}",
+                p.slot,
+                p.slot_name,
+                p.ident,
+                p.type_name
+            );
+        }
     }
     outln!("  mailbox: {}", mailbox(d));
     if !d.fmmus.is_empty() {

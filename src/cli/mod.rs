@@ -41,6 +41,7 @@ mod canopen_od;
 mod check;
 mod drive;
 mod esi;
+mod esi_load;
 mod jog;
 mod number;
 mod params;

@@ -2,15 +2,17 @@
 //! on a CAN bus (`sim canopen`, see [`CanopenArgs`]).
 //!
 //! ```text
-//! fieldprobe sim ethercat --iface IF --device FILE.xml[:COUNT]... [--drive POS=DRIVE]...
+//! fieldprobe sim ethercat --iface IF --device FILE.xml[#SEL][:COUNT]... [--drive POS=DRIVE]...
 //!                         [--probe-at POS=MM]... [--probe-input POS:CH]... [--lockstep]
 //!                         [--seconds N]
 //!                         [--rt-priority N] [--cpu N] [--mlock]
 //! ```
-//! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; the
-//! first device of each file is used; ring positions count from 0 nearest the master), with the
-//! SII image generated from the ESI, and answers EtherCAT frames on `IF` until `--seconds` pass
-//! (default: forever) or the process is killed. Needs CAP_NET_RAW (e.g. inside `unshare -rn`).
+//! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; `#SEL`
+//! chooses the device of a file with several and the modules of its slots, as in every command
+//! ([`fieldprobe::esi::select`]; without it a file must describe one device); ring positions
+//! count from 0 nearest the master), with the SII image generated from the resolved device, and
+//! answers EtherCAT frames on `IF` until `--seconds` pass (default: forever) or the process is
+//! killed. Needs CAP_NET_RAW (e.g. inside `unshare -rn`).
 //!
 //! What runs behind each device's process data:
 //! * a device whose ESI `Profile/ProfileNo` is 402 (CiA 402 drive), or any device named by
@@ -72,7 +74,7 @@ use anyhow::Context;
 use fieldprobe::bus::can::{CanBus, CanError};
 use fieldprobe::bus::canopen::eds;
 use fieldprobe::drive::catalogue;
-use fieldprobe::esi::{self, Device, EsiFile};
+use fieldprobe::esi::{Device, EsiFile};
 use fieldprobe::limits::MAX_SEGMENT_DEVICES;
 use fieldprobe::sim::canopen::{CanopenSegment, EmulatedNode};
 use fieldprobe::sim::esc::{
@@ -115,10 +117,15 @@ struct EthercatArgs {
     /// Network interface to answer on (e.g. one end of a veth pair).
     #[arg(long, value_name = "IF")]
     iface: String,
-    /// ESI file of the next device(s) in ring order, optionally `:COUNT` for several.
-    /// A device whose ESI profile is 402 (CiA 402) is an emulated servo with the built-in
-    /// drive `cia402-generic` unless `--drive` names another one.
-    #[arg(long = "device", value_name = "FILE.xml[:COUNT]", required = true)]
+    /// ESI file of the next device(s) in ring order, optionally `#SEL` to choose the device
+    /// (TYPE[/REVISION], PRODUCT_CODE[/REVISION] or @N, then +MODULE per slot) and `:COUNT`
+    /// for several. A device whose ESI profile is 402 (CiA 402) is an emulated servo with the
+    /// built-in drive `cia402-generic` unless `--drive` names another one.
+    #[arg(
+        long = "device",
+        value_name = "FILE.xml[#SEL][:COUNT]",
+        required = true
+    )]
     devices: Vec<String>,
     /// Emulate the device at ring position POS (0 = nearest the master) as a CiA 402 servo
     /// with drive definition DRIVE (built-in name or drives/*.toml file). Its PDO layout must
@@ -229,14 +236,11 @@ enum Hosted {
 fn build_device(
     path: &Path,
     file: &EsiFile,
+    device: &Device,
     position: usize,
     drive: Option<&str>,
 ) -> anyhow::Result<(Esc, Hosted)> {
     let shown = path.display();
-    let device = file
-        .devices
-        .first()
-        .with_context(|| format!("--device {shown}: the ESI file describes no device"))?;
     let given = drive.is_some();
     // A device that declares CiA 402, or offers its roles (a modular device profile servo
     // terminal), is a drive: never played as a plain terminal.
@@ -310,20 +314,22 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
              {MAX_SEGMENT_DEVICES} devices per emulated segment (docs/limits.md)",
             escs.len() + count
         );
-        let file = esi::load(&path).map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
+        let (path, sel) = super::esi_load::split(&path.to_string_lossy());
+        let (file, device) = super::esi_load::load(&path)
+            .and_then(|file| {
+                let sel = super::esi_load::selector(sel.as_deref(), None)?;
+                let device = super::esi_load::choose(&file, sel.as_ref())?;
+                Ok((file, device))
+            })
+            .map_err(|e| anyhow::anyhow!("--device {spec}: {e}"))?;
         for _ in 0..count {
             let pos = escs.len();
-            let (esc, what) = build_device(&path, &file, pos, drives.get(&pos).copied())?;
+            let (esc, what) = build_device(&path, &file, &device, pos, drives.get(&pos).copied())?;
             if !matches!(what, Hosted::Nothing) {
                 hosted.push((pos, what));
             }
             escs.push(esc);
-            names.push(
-                file.devices
-                    .first()
-                    .map(|d| d.type_name.clone())
-                    .unwrap_or_default(),
-            );
+            names.push(device.type_name.clone());
         }
     }
     if let Some((pos, drive)) = drives.range(escs.len()..).next() {

@@ -1,10 +1,15 @@
 //! The device description read from an ESI file (ETG.2000 element names in the doc comments).
+//! The dictionary types are in [`dictionary`](super::Dictionary), profiles in
+//! [`Profile`](super::Profile), modules and slots in [`Module`](super::Module).
 //!
 //! Numbers are kept as the ESI writes them (`#x1A00` hex or decimal), already converted; names
 //! of data types are kept as text (`UINT`, `DT1018`) and resolved through
 //! [`Dictionary::data_type`]. Codes the parser does not know (an `Sm` text such as `MBoxState`,
 //! an unknown `Fmmu` text) are kept as [`SmKind::Other`] / [`FmmuKind::Other`] instead of
 //! failing, like the wire codecs of this crate keep unknown codes.
+
+use super::{Dictionary, EsiWarning, Module, Object, PluggedModule, Profile, Slots};
+use std::sync::Arc;
 
 /// One ESI file: `EtherCATInfo` (ETG.2000 §4).
 #[derive(Debug, Clone, PartialEq)]
@@ -17,6 +22,12 @@ pub struct EsiFile {
     pub groups: Vec<Group>,
     /// `Descriptions/Devices/Device`.
     pub devices: Vec<Device>,
+    /// `Descriptions/Modules/Module` (ETG.2000 modular devices; shared with the devices whose
+    /// slots take them, [`Device::modules`]).
+    pub modules: Vec<Arc<Module>>,
+    /// Values read another way than written, or left out (see [`EsiWarning`]); empty for a
+    /// file that follows ETG.2000.
+    pub warnings: Vec<EsiWarning>,
 }
 
 impl EsiFile {
@@ -100,6 +111,15 @@ pub struct Device {
     pub profile: Option<Profile>,
     /// `Eeprom`, if given.
     pub eeprom: Option<Eeprom>,
+    /// `Slots`: the device is modular (ETG.2000 §4 "Modules and slots"); `None` for a device
+    /// without slots.
+    pub slots: Option<Slots>,
+    /// The modules of the file (`Descriptions/Modules/Module`) that [`Device::slots`] name, in
+    /// file order.
+    pub modules: Vec<Arc<Module>>,
+    /// `None`: the device as the file describes it. `Some`: a device resolved with a module
+    /// per slot ([`Device::resolve`]); its PDOs and dictionary then include the modules'.
+    pub plugged: Option<Vec<PluggedModule>>,
 }
 
 impl Device {
@@ -207,6 +227,9 @@ pub struct Pdo {
     pub excludes: Vec<u16>,
     /// `Entry` elements, in mapping order.
     pub entries: Vec<PdoEntry>,
+    /// `Index DependOnSlot`: in a module, the index moves by the slot number ×
+    /// `SlotPdoIncrement` ([`Device::resolve`]).
+    pub depend_on_slot: bool,
 }
 
 impl Pdo {
@@ -229,6 +252,9 @@ pub struct PdoEntry {
     pub name: Option<String>,
     /// `DataType` text (e.g. `UINT`), if given.
     pub data_type: Option<String>,
+    /// `Index DependOnSlot`: in a module, the index moves by the slot number ×
+    /// `SlotIndexIncrement` ([`Device::resolve`]).
+    pub depend_on_slot: bool,
 }
 
 impl PdoEntry {
@@ -315,176 +341,4 @@ pub struct Eeprom {
     pub config_data: Option<Vec<u8>>,
     /// `BootStrap` bytes (bootstrap mailbox offsets/sizes), if given.
     pub boot_strap: Option<Vec<u8>>,
-}
-
-/// `Profile`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Profile {
-    /// `ProfileNo` (402 = CiA 402 drive), if given.
-    pub profile_no: Option<u32>,
-    /// `Dictionary`, if given.
-    pub dictionary: Option<Dictionary>,
-}
-
-/// `Profile/Dictionary`: the CoE object dictionary.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Dictionary {
-    /// `DataTypes/DataType`.
-    pub data_types: Vec<DataType>,
-    /// `Objects/Object`.
-    pub objects: Vec<Object>,
-}
-
-impl Dictionary {
-    /// The object with this index.
-    pub fn object(&self, index: u16) -> Option<&Object> {
-        self.objects.iter().find(|o| o.index == index)
-    }
-
-    /// The data type with this name (`UINT`, `DT1018`).
-    pub fn data_type(&self, name: &str) -> Option<&DataType> {
-        self.data_types.iter().find(|t| t.name == name)
-    }
-}
-
-/// `DataType`: a base type, a record (with `SubItem`s) or an array (`BaseType` + `ArrayInfo`).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DataType {
-    /// `Name`.
-    pub name: String,
-    /// `BaseType` (array element type), if given.
-    pub base_type: Option<String>,
-    /// `BitSize`.
-    pub bit_size: u32,
-    /// `ArrayInfo`, if given.
-    pub array: Option<ArrayInfo>,
-    /// `SubItem` elements (records, and arrays written out with sub-index 0).
-    pub subitems: Vec<DataTypeSubItem>,
-}
-
-/// `DataType/ArrayInfo`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ArrayInfo {
-    /// `LBound`: first sub-index of the elements.
-    pub lbound: u32,
-    /// `Elements`: number of elements.
-    pub elements: u32,
-}
-
-/// `DataType/SubItem`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DataTypeSubItem {
-    /// `SubIdx`, if given (absent for the element of an array).
-    pub subindex: Option<u8>,
-    /// `Name`.
-    pub name: String,
-    /// `Type`.
-    pub type_name: String,
-    /// `BitSize`.
-    pub bit_size: u32,
-    /// `BitOffs`.
-    pub bit_offs: u32,
-    /// `Flags`.
-    pub flags: Flags,
-}
-
-/// `Flags` of an object or sub-item.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Flags {
-    /// `Access`, if given.
-    pub access: Option<Access>,
-    /// `Access WriteRestrictions` attribute (e.g. `PreOP`), if given.
-    pub write_restrictions: Option<String>,
-    /// `PdoMapping`, if given.
-    pub pdo_mapping: Option<PdoMapping>,
-    /// `Category` (`m` mandatory, `o` optional, `c` conditional), if given.
-    pub category: Option<String>,
-}
-
-/// `Flags/Access`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Access {
-    /// `ro`.
-    ReadOnly,
-    /// `rw`.
-    ReadWrite,
-    /// `wo`.
-    WriteOnly,
-}
-
-/// `Flags/PdoMapping`: in which PDO direction the object may be mapped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PdoMapping {
-    /// `R`: RxPDO (master → device).
-    Rx,
-    /// `T`: TxPDO (device → master).
-    Tx,
-    /// `RT` / `TR`: both.
-    RxTx,
-}
-
-impl PdoMapping {
-    /// Mappable into an RxPDO.
-    pub fn rx(self) -> bool {
-        matches!(self, PdoMapping::Rx | PdoMapping::RxTx)
-    }
-
-    /// Mappable into a TxPDO.
-    pub fn tx(self) -> bool {
-        matches!(self, PdoMapping::Tx | PdoMapping::RxTx)
-    }
-}
-
-/// `Objects/Object`: one dictionary entry.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Object {
-    /// `Index`.
-    pub index: u16,
-    /// `Name` (first one).
-    pub name: String,
-    /// `Type`: a data type name of the dictionary.
-    pub type_name: String,
-    /// `BitSize`.
-    pub bit_size: u32,
-    /// `Info/DefaultData`: the default value's bytes (ETG.2000 hexBinary, little-endian, as on
-    /// the wire), if given.
-    pub default_data: Option<Vec<u8>>,
-    /// `Flags` (empty when absent: records carry flags per sub-item in the data type).
-    pub flags: Flags,
-    /// `Info/SubItem` elements (per-sub-index defaults of a record or array).
-    pub subitems: Vec<ObjectSubItem>,
-}
-
-impl Object {
-    /// The default value as an unsigned little-endian number (up to 8 bytes).
-    pub fn default_u64(&self) -> Option<u64> {
-        self.default_data.as_deref().and_then(le_u64)
-    }
-}
-
-/// `Object/Info/SubItem`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ObjectSubItem {
-    /// `Name`.
-    pub name: String,
-    /// `Info/DefaultData` bytes, if given.
-    pub default_data: Option<Vec<u8>>,
-}
-
-impl ObjectSubItem {
-    /// The default value as an unsigned little-endian number (up to 8 bytes).
-    pub fn default_u64(&self) -> Option<u64> {
-        self.default_data.as_deref().and_then(le_u64)
-    }
-}
-
-fn le_u64(b: &[u8]) -> Option<u64> {
-    if b.is_empty() || b.len() > 8 {
-        return None;
-    }
-    Some(
-        b.iter()
-            .rev()
-            .fold(0u64, |acc, &byte| acc << 8 | u64::from(byte)),
-    )
 }

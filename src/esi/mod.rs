@@ -3,27 +3,56 @@
 //!
 //! [`parse`] reads one `EtherCATInfo` document into an [`EsiFile`]: the vendor, and per device
 //! its identity, names, group, sync managers, FMMUs, RxPDOs / TxPDOs with their entries,
-//! mailbox protocols, DC operation modes, EEPROM configuration data and the CoE object
-//! dictionary (`Profile/Dictionary`). [`load`] reads a file from disk first.
+//! mailbox protocols, DC operation modes, EEPROM configuration data, its profiles
+//! ([`Profile`] with `ChannelInfo`), the CoE object dictionary (`Profile/Dictionary`), and for
+//! a modular device its `Slots` and the file's `Modules`. [`load`] reads a file from disk first.
+//!
+//! Files are read the way their makers' tools (TwinCAT, the ETG conformance tool) read them:
+//! a value in a form ETG.2000 does not define but with one reading (odd-length hexBinary
+//! `<DefaultData>0</DefaultData>` = `00`, `0x1A00`, `TRUE`) is read that way, an optional
+//! value without a reading (an `Access` of `rx`) is left out; each is an [`EsiWarning`] in
+//! [`EsiFile::warnings`] (`file:line:col: path: subject: what was read`), many alike in one
+//! warning. The readings are listed in `docs/interpretations.md` (section ESI files).
 //!
 //! Numbers follow ETG.2000: `#x1A00` is hexadecimal, anything else decimal. `DefaultData` and
-//! EEPROM data are hexBinary byte strings (little-endian values, as on the wire).
+//! EEPROM data are hexBinary byte strings (little-endian values, as on the wire);
+//! `DefaultValue` / `MinValue` / `MaxValue` are numbers ([`InfoValues`]).
 //!
-//! Errors never panic and name the file, the line and column, and the element path
+//! Errors — for what cannot be read: not well-formed XML, a missing `Vendor/Id` or
+//! `Type ProductCode`, a PDO entry without `Index` — never panic and name the file, the line
+//! and column, and the element path
 //! (`EtherCATInfo/Descriptions/Devices/Device/RxPdo[2]/Entry[3]`), e.g.
 //!
 //! ```text
 //! drive.xml:12218:13: EtherCATInfo/Descriptions/Devices/Device/RxPdo[1]/Entry[1]: missing element <Index>
 //! ```
 //!
+//! Choosing a device of a file (type name, product code and revision, position) and plugging
+//! modules into its slots is [`select`]: [`resolve`] gives the [`Resolved`] device every
+//! consumer (emulator, SII builder, drive definitions) uses. The profile questions
+//! ([`Device::is_cia402`], [`Device::is_mdp_servo`], [`Device::profile_numbers`],
+//! [`Device::device_type`]) are methods of [`Device`].
+//!
 //! The files the emulator plays live in the repository folder `esi/`.
 
 mod device;
+mod dictionary;
+mod modules;
 mod parse;
+mod profile;
+mod scan;
+pub mod select;
 pub mod sii;
 pub mod to_sii;
+mod values;
+mod warn;
 
 pub use device::*;
+pub use dictionary::*;
+pub use modules::*;
+pub use profile::*;
+pub use select::{resolve, split_spec, DeviceSelector, Resolved, SelectError, Selector};
+pub use warn::{EsiWarning, Oddity, Place};
 
 use std::path::Path;
 
@@ -151,7 +180,7 @@ pub fn parse(text: &str, file: &str) -> Result<EsiFile, EsiError> {
         ..Default::default()
     };
     let max = crate::limits::MAX_ESI_ATTRIBUTES_PER_ELEMENT;
-    if let Some((offset, name)) = parse::too_many_attributes(text, max) {
+    if let Some((offset, name)) = scan::too_many_attributes(text, max) {
         let (line, column) = end_position(&text[..offset]);
         return Err(EsiError::Limit {
             file: file.to_string(),
@@ -169,7 +198,7 @@ pub fn parse(text: &str, file: &str) -> Result<EsiFile, EsiError> {
             // the elements still open there
             roxmltree::Error::UnclosedRootNode | roxmltree::Error::UnexpectedEndOfStream => {
                 let (line, column) = end_position(text);
-                let open = parse::open_elements(text);
+                let open = scan::open_elements(text);
                 let message = if open.is_empty() {
                     format!("{e} (file truncated?)")
                 } else {

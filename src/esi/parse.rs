@@ -1,23 +1,41 @@
 //! ETG.2000 XML → [`EsiFile`] with `roxmltree`.
 //!
-//! Interpretations (see also the module docs of [`super`]):
-//! - Numbers: `#x` prefix = hexadecimal, otherwise decimal (a leading `-` allowed where the
-//!   value is signed). Values out of the target type's range are errors.
-//! - Booleans: `true` / `false` / `1` / `0`.
-//! - Elements the description does not model (images, `Info`, `InitCmd`, `Modules`, …) are
-//!   ignored; a missing required element is an error naming its parent.
+//! What is read how (see also the module docs of [`super`] and of [`super::values`]):
+//! * A value the file writes in a form ETG.2000 does not define but that has one reading (C hex
+//!   `0x1A00`, `TRUE`, odd-length hexBinary, `-1` in an unsigned field) is read that way with a
+//!   warning ([`EsiWarning`](super::EsiWarning)).
+//! * An optional value that has no reading (an `Access` text such as `rx`, a `DefaultData` that
+//!   is not hex, a `LcId` that is not a number) is left out with a warning.
+//! * A value that identifies the device or lays out its process data and has no reading
+//!   (`Vendor/Id`, `Type ProductCode` / `RevisionNo`, PDO and entry `Index` / `SubIndex` /
+//!   `BitLen`, `Sm StartAddress` / `ControlByte`, a boolean that is none of the forms) is an
+//!   error naming file, line, column and element path, as is a missing required element.
+//! * Elements the description does not model (images, `Info`, `InitCmd`, `Su`, …) are ignored.
 
-use super::device::*;
-use super::{EsiError, Problem};
+mod dict;
+mod modules;
+
+use super::scan::element_path;
+use super::values::{self, Fit, Hex};
+use super::warn::{Collector, Oddity, Where};
+use super::*;
 use roxmltree::{Document, Node};
+use std::cell::RefCell;
+use std::sync::Arc;
 
-/// Parser context: the document (for line numbers) and the file name (for messages).
+/// Parser context: the document (for line numbers), the file name (for messages) and the
+/// warnings so far.
 struct Ctx<'a, 'input> {
     doc: &'a Document<'input>,
     file: &'a str,
+    warnings: RefCell<Collector>,
 }
 
 type Res<T> = Result<T, EsiError>;
+
+const U8: i128 = u8::MAX as i128;
+const U16: i128 = u16::MAX as i128;
+const U32: i128 = u32::MAX as i128;
 
 impl<'a, 'input> Ctx<'a, 'input> {
     fn err_at(&self, node: Node, pos: usize, problem: Problem) -> EsiError {
@@ -33,6 +51,28 @@ impl<'a, 'input> Ctx<'a, 'input> {
 
     fn err(&self, node: Node, problem: Problem) -> EsiError {
         self.err_at(node, node.range().start, problem)
+    }
+
+    /// Record a warning about `node`'s text (`attr` `None`) or one of its attributes.
+    fn warn(&self, node: Node, attr: Option<&str>, oddity: Oddity) {
+        let (offset, name) = match attr.and_then(|a| node.attribute_node(a)) {
+            Some(a) => (a.range().start, format!("@{}", a.name())),
+            None => (node.range().start, node.tag_name().name().to_string()),
+        };
+        let path = || match attr {
+            Some(a) => format!("{}/@{a}", element_path(node)),
+            None => element_path(node),
+        };
+        let subject = || subject(node);
+        self.warnings.borrow_mut().add(
+            Where {
+                offset,
+                name: &name,
+                path: &path,
+                subject: &subject,
+            },
+            oddity,
+        );
     }
 
     /// First child element named `name`.
@@ -69,7 +109,81 @@ impl<'a, 'input> Ctx<'a, 'input> {
         Ok(self.text(c).to_string())
     }
 
-    /// Number in the text of a child element, range-checked to `[min, max]`.
+    /// Read `t` for a field `[min, max]` of `node` (attribute `attr`): odd forms and two's
+    /// complement readings are warned about; `Err` carries the problem when there is no reading.
+    fn read_num(
+        &self,
+        node: Node,
+        attr: Option<&str>,
+        t: &str,
+        min: i128,
+        max: i128,
+    ) -> Result<i128, Problem> {
+        let bad = || match attr {
+            Some(a) => Problem::BadAttribute(a.to_string(), t.to_string()),
+            None => Problem::BadNumber(t.to_string()),
+        };
+        let n = values::read_number(t).ok_or_else(bad)?;
+        let v = match values::fit(n.value, min, max) {
+            Fit::Fits(v) => v,
+            Fit::TwosComplement(v) => {
+                let oddity = Oddity::TwosComplement {
+                    text: t.to_string(),
+                    read: v,
+                };
+                self.warn(node, attr, oddity);
+                return Ok(v);
+            }
+            Fit::OutOfRange => {
+                return Err(match attr {
+                    Some(_) => bad(),
+                    None => Problem::OutOfRange(t.to_string()),
+                })
+            }
+        };
+        if n.odd_form {
+            let oddity = Oddity::NumberForm {
+                text: t.to_string(),
+                read: v,
+            };
+            self.warn(node, attr, oddity);
+        }
+        Ok(v)
+    }
+
+    /// Number in the text of `node`, range-checked to `[min, max]`: an error when unreadable.
+    fn elem_num(&self, node: Node, min: i128, max: i128) -> Res<i128> {
+        let t = self.text(node);
+        self.read_num(node, None, t, min, max)
+            .map_err(|p| self.err(node, p))
+    }
+
+    /// Number in the text of `node` for an optional field: unreadable → warning, `None`.
+    fn elem_opt_num(&self, node: Node, min: i128, max: i128) -> Option<i128> {
+        let t = self.text(node);
+        match self.read_num(node, None, t, min, max) {
+            Ok(v) => Some(v),
+            Err(p) => {
+                self.left_out(node, None, t, &p, min, max);
+                None
+            }
+        }
+    }
+
+    fn left_out(&self, node: Node, attr: Option<&str>, t: &str, p: &Problem, min: i128, max: i128) {
+        let why = match p {
+            Problem::OutOfRange(_) => format!("is outside {min}..={max}"),
+            _ if values::read_number(t).is_some() => format!("is outside {min}..={max}"),
+            _ => "is not a number".to_string(),
+        };
+        let oddity = Oddity::NumberLeftOut {
+            text: t.to_string(),
+            why,
+        };
+        self.warn(node, attr, oddity);
+    }
+
+    /// Number in the text of a child element, range-checked (unreadable: an error).
     fn child_num(&self, node: Node, name: &str, min: i128, max: i128) -> Res<Option<i128>> {
         match self.child(node, name) {
             None => Ok(None),
@@ -77,246 +191,165 @@ impl<'a, 'input> Ctx<'a, 'input> {
         }
     }
 
+    /// Number in the text of a child element of an optional field (unreadable: a warning).
+    fn child_opt_num(&self, node: Node, name: &str, min: i128, max: i128) -> Option<i128> {
+        self.child(node, name)
+            .and_then(|c| self.elem_opt_num(c, min, max))
+    }
+
     fn required_num(&self, node: Node, name: &str, min: i128, max: i128) -> Res<i128> {
         let c = self.require(node, name)?;
         self.elem_num(c, min, max)
     }
 
-    fn elem_num(&self, node: Node, min: i128, max: i128) -> Res<i128> {
-        let t = self.text(node);
-        let v = parse_number(t).ok_or_else(|| self.err(node, Problem::BadNumber(t.to_string())))?;
-        if v < min || v > max {
-            return Err(self.err(node, Problem::OutOfRange(t.to_string())));
-        }
-        Ok(v)
-    }
-
-    /// Number in an attribute, range-checked.
+    /// Number in an attribute, range-checked (unreadable: an error).
     fn attr_num(&self, node: Node, name: &str, min: i128, max: i128) -> Res<Option<i128>> {
         let Some(a) = node.attribute_node(name) else {
             return Ok(None);
         };
-        let t = a.value().trim();
-        let pos = a.range().start;
-        let v = parse_number(t).ok_or_else(|| {
-            self.err_at(
-                node,
-                pos,
-                Problem::BadAttribute(name.to_string(), t.to_string()),
-            )
-        })?;
-        if v < min || v > max {
-            return Err(self.err_at(
-                node,
-                pos,
-                Problem::BadAttribute(name.to_string(), t.to_string()),
-            ));
-        }
-        Ok(Some(v))
+        self.read_num(node, Some(name), a.value().trim(), min, max)
+            .map(Some)
+            .map_err(|p| self.err_at(node, a.range().start, p))
     }
 
+    /// Number in an attribute of an optional field (unreadable: a warning, `None`).
+    fn attr_opt_num(&self, node: Node, name: &str, min: i128, max: i128) -> Option<i128> {
+        let a = node.attribute_node(name)?;
+        let t = a.value().trim();
+        match self.read_num(node, Some(name), t, min, max) {
+            Ok(v) => Some(v),
+            Err(p) => {
+                self.left_out(node, Some(name), t, &p, min, max);
+                None
+            }
+        }
+    }
+
+    /// A boolean attribute (false when absent); `TRUE`, `yes`, … with a warning; a text that
+    /// is no boolean form is an error.
     fn attr_bool(&self, node: Node, name: &str) -> Res<bool> {
         let Some(a) = node.attribute_node(name) else {
             return Ok(false);
         };
-        match a.value().trim() {
-            "true" | "1" => Ok(true),
-            "false" | "0" => Ok(false),
-            other => Err(self.err_at(
+        match values::read_bool(a.value()) {
+            Some((v, false)) => Ok(v),
+            Some((v, true)) => {
+                let oddity = Oddity::Boolean {
+                    text: a.value().to_string(),
+                    read: v,
+                };
+                self.warn(node, Some(name), oddity);
+                Ok(v)
+            }
+            None => Err(self.err_at(
                 node,
                 a.range().start,
-                Problem::BadAttribute(name.to_string(), other.to_string()),
+                Problem::BadAttribute(name.to_string(), a.value().trim().to_string()),
             )),
         }
     }
 
-    fn names(&self, node: Node) -> Res<Vec<LocalName>> {
+    fn names(&self, node: Node) -> Vec<LocalName> {
         self.children(node, "Name")
-            .map(|n| {
-                Ok(LocalName {
-                    lcid: self
-                        .attr_num(n, "LcId", 0, u32::MAX.into())?
-                        .map(|v| v as u32),
-                    text: self.text(n).to_string(),
-                })
+            .map(|n| LocalName {
+                lcid: self.attr_opt_num(n, "LcId", 0, U32).map(|v| v as u32),
+                text: self.text(n).to_string(),
             })
             .collect()
     }
 
-    fn hex_bytes(&self, node: Node) -> Res<Vec<u8>> {
+    /// hexBinary of an optional value: odd length read with a leading 0 nibble (warning), not
+    /// hex: left out (warning).
+    fn hex_bytes(&self, node: Node) -> Option<Vec<u8>> {
         let t = self.text(node);
-        decode_hex_binary(t).ok_or_else(|| self.err(node, Problem::BadHexBinary(t.to_string())))
+        match values::read_hex_binary(t) {
+            Hex::Bytes(b) => Some(b),
+            Hex::Odd(b) => {
+                let oddity = Oddity::OddHexBinary {
+                    text: t.to_string(),
+                    read: b.clone(),
+                };
+                self.warn(node, None, oddity);
+                Some(b)
+            }
+            Hex::Bad => {
+                self.warn(
+                    node,
+                    None,
+                    Oddity::NotHexBinary {
+                        text: t.to_string(),
+                    },
+                );
+                None
+            }
+        }
+    }
+
+    /// `DependOnSlot` of an `Index` element.
+    fn depends_on_slot(&self, index: Option<Node>) -> Res<bool> {
+        index.map_or(Ok(false), |i| self.attr_bool(i, "DependOnSlot"))
     }
 }
 
-const U8: i128 = u8::MAX as i128;
-const U16: i128 = u16::MAX as i128;
-const U32: i128 = u32::MAX as i128;
-
-/// `#x1A00` → 0x1A00, `42` → 42, `-3` → -3. `None` on anything else.
-pub(crate) fn parse_number(t: &str) -> Option<i128> {
-    let t = t.trim();
-    if let Some(h) = t.strip_prefix("#x").or_else(|| t.strip_prefix("#X")) {
-        if h.is_empty() || h.len() > 16 || !h.bytes().all(|b| b.is_ascii_hexdigit()) {
-            return None;
-        }
-        return i128::from_str_radix(h, 16).ok();
-    }
-    let (neg, digits) = match t.strip_prefix('-') {
-        Some(d) => (true, d),
-        None => (false, t),
+/// What the value at `node` belongs to, as written in the file: `device LC10E, object #x2001
+/// SubItem[2]` (the second `Info/SubItem`). Ancestors only; small.
+fn subject(node: Node) -> Option<String> {
+    let text_of = |n: Node, tag: &str| {
+        n.children()
+            .find(|c| c.has_tag_name(tag))
+            .and_then(|c| c.text())
+            .map(|t| t.trim().to_string())
     };
-    if digits.is_empty() || digits.len() > 20 || !digits.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    let v: i128 = digits.parse().ok()?;
-    Some(if neg { -v } else { v })
-}
-
-/// ETG.2000 hexBinary (`92010200` → [0x92, 0x01, 0x02, 0x00]); whitespace allowed.
-fn decode_hex_binary(t: &str) -> Option<Vec<u8>> {
-    let digits: Vec<u8> = t.bytes().filter(|b| !b.is_ascii_whitespace()).collect();
-    if !digits.len().is_multiple_of(2) {
-        return None;
-    }
-    digits
-        .chunks(2)
-        .map(|p| {
-            let hi = (p[0] as char).to_digit(16)?;
-            let lo = (p[1] as char).to_digit(16)?;
-            Some((hi * 16 + lo) as u8)
-        })
-        .collect()
-}
-
-/// `EtherCATInfo/Descriptions/Devices/Device[2]/RxPdo[1]/Entry[3]`: the element names from the
-/// root, with a 1-based position where a parent has more than one child of that name.
-pub(crate) fn element_path(node: Node) -> String {
-    let mut parts: Vec<String> = node
-        .ancestors()
-        .filter(|n| n.is_element())
-        .map(|n| {
-            let name = n.tag_name().name();
-            let same = |s: &Node| s.is_element() && s.tag_name().name() == name;
-            let before = n.prev_siblings().skip(1).filter(same).count();
-            let after = n.next_siblings().skip(1).filter(same).count();
-            if before + after > 0 {
-                format!("{name}[{}]", before + 1)
-            } else {
-                name.to_string()
+    let mut parts: Vec<String> = Vec::new();
+    let mut sub_item: Option<usize> = None;
+    for a in node.ancestors().filter(|n| n.is_element()) {
+        let tag = a.tag_name().name();
+        match tag {
+            "SubItem"
+                if sub_item.is_none() && a.parent().is_some_and(|p| p.has_tag_name("Info")) =>
+            {
+                // 1-based position among the SubItems (prev_siblings starts with the node)
+                let k = a
+                    .prev_siblings()
+                    .filter(|s| s.has_tag_name("SubItem"))
+                    .count();
+                sub_item = Some(k);
             }
-        })
-        .collect();
+            "Object" => {
+                let mut s = format!("object {}", text_of(a, "Index").unwrap_or_default());
+                if let Some(k) = sub_item {
+                    s.push_str(&format!(" SubItem[{k}]"));
+                }
+                parts.push(s);
+            }
+            "RxPdo" | "TxPdo" => {
+                parts.push(format!("{tag} {}", text_of(a, "Index").unwrap_or_default()));
+            }
+            "DataType" => parts.push(format!(
+                "data type {}",
+                text_of(a, "Name").unwrap_or_default()
+            )),
+            "Device" | "Module" => {
+                parts.push(format!(
+                    "{} {}",
+                    tag.to_ascii_lowercase(),
+                    text_of(a, "Type").unwrap_or_default()
+                ));
+            }
+            _ => {}
+        }
+    }
     parts.reverse();
-    parts.join("/")
-}
-
-/// Best-effort path of the elements still open at the end of `text` (`EtherCATInfo/Vendor`),
-/// for the message about a truncated file. A plain tag scan: comments, CDATA, processing
-/// instructions and declarations are skipped; it is only used when the XML parser has already
-/// failed.
-pub(crate) fn open_elements(text: &str) -> String {
-    let mut stack: Vec<&str> = Vec::new();
-    let mut rest = text;
-    while let Some(i) = rest.find('<') {
-        rest = &rest[i..];
-        let skip_to = |rest: &str, end: &str| rest.find(end).map(|j| j + end.len());
-        let next = if rest.starts_with("<!--") {
-            skip_to(rest, "-->")
-        } else if rest.starts_with("<![CDATA[") {
-            skip_to(rest, "]]>")
-        } else if rest.starts_with("<?") {
-            skip_to(rest, "?>")
-        } else if rest.starts_with("<!") {
-            skip_to(rest, ">")
-        } else {
-            let end = rest.find('>');
-            let tag = &rest[1..end.unwrap_or(rest.len())];
-            let name_end = tag
-                .find(|c: char| c.is_whitespace() || c == '/' || c == '>')
-                .unwrap_or(tag.len());
-            if let Some(closing) = tag.strip_prefix('/') {
-                let name = closing.trim();
-                if stack.last() == Some(&name) {
-                    stack.pop();
-                }
-            } else if end.is_some() && !tag.ends_with('/') && name_end > 0 {
-                stack.push(&tag[..name_end]);
-            } else if end.is_none() && name_end > 0 {
-                // cut inside a start tag
-                stack.push(&tag[..name_end]);
-            }
-            end.map(|j| j + 1)
-        };
-        match next {
-            Some(n) => rest = &rest[n..],
-            None => break,
-        }
-    }
-    stack.join("/")
-}
-
-/// The first start tag with more than `max` attributes: (byte offset of its `<`, its name).
-/// A linear scan that runs before the XML parser, whose duplicate-attribute check is quadratic
-/// in the number of attributes of one element (100,000 attributes took 18 s). Comments, CDATA,
-/// processing instructions and declarations are skipped; quoted attribute values may contain
-/// `=` and `>`.
-pub(crate) fn too_many_attributes(text: &str, max: usize) -> Option<(usize, &str)> {
-    let bytes = text.as_bytes();
-    let mut i = 0;
-    while let Some(k) = text[i..].find('<') {
-        let start = i + k;
-        let rest = &text[start..];
-        let skip_to = |end: &str| rest.find(end).map(|j| start + j + end.len());
-        let next = if rest.starts_with("<!--") {
-            skip_to("-->")
-        } else if rest.starts_with("<![CDATA[") {
-            skip_to("]]>")
-        } else if rest.starts_with("<?") {
-            skip_to("?>")
-        } else if rest.starts_with("<!") || rest.starts_with("</") {
-            skip_to(">")
-        } else {
-            // A start tag: count `=` outside quoted values up to its `>`.
-            let mut quote: Option<u8> = None;
-            let mut count = 0usize;
-            let mut j = start + 1;
-            let mut end = None;
-            while j < bytes.len() {
-                let b = bytes[j];
-                match quote {
-                    Some(q) if b == q => quote = None,
-                    Some(_) => {}
-                    None if b == b'"' || b == b'\'' => quote = Some(b),
-                    None if b == b'=' => count += 1,
-                    None if b == b'>' => {
-                        end = Some(j + 1);
-                        break;
-                    }
-                    None => {}
-                }
-                j += 1;
-            }
-            if count > max {
-                let tag = &text[start + 1..];
-                let name_end = tag
-                    .find(|c: char| c.is_whitespace() || c == '/' || c == '>')
-                    .unwrap_or(tag.len());
-                return Some((start, &tag[..name_end]));
-            }
-            end
-        };
-        match next {
-            Some(n) => i = n,
-            None => break,
-        }
-    }
-    None
+    (!parts.is_empty()).then(|| parts.join(", "))
 }
 
 /// Parse a whole document.
 pub(crate) fn parse_document(doc: &Document, file: &str) -> Res<EsiFile> {
-    let cx = Ctx { doc, file };
+    let cx = Ctx {
+        doc,
+        file,
+        warnings: RefCell::new(Collector::default()),
+    };
     let root = doc.root_element();
     if root.tag_name().name() != "EtherCATInfo" {
         return Err(cx.err(
@@ -334,20 +367,28 @@ pub(crate) fn parse_document(doc: &Document, file: &str) -> Res<EsiFile> {
         for group in cx.children(g, "Group") {
             groups.push(Group {
                 group_type: cx.required_text(group, "Type")?,
-                names: cx.names(group)?,
+                names: cx.names(group),
             });
         }
     }
+    let modules: Vec<Arc<Module>> = match cx.child(desc, "Modules") {
+        None => Vec::new(),
+        Some(m) => modules::parse_modules(&cx, m)?,
+    };
+    let index = modules::ModuleIndex::new(&modules);
     let devs = cx.require(desc, "Devices")?;
     let devices = cx
         .children(devs, "Device")
-        .map(|d| parse_device(&cx, d))
+        .map(|d| parse_device(&cx, d, &modules, &index))
         .collect::<Res<Vec<_>>>()?;
+    let warnings = cx.warnings.into_inner().finish(doc.input_text(), file);
     Ok(EsiFile {
         file: file.to_string(),
         vendor,
         groups,
         devices,
+        modules,
+        warnings,
     })
 }
 
@@ -358,7 +399,12 @@ fn parse_vendor(cx: &Ctx, v: Node) -> Res<Vendor> {
     })
 }
 
-fn parse_device(cx: &Ctx, d: Node) -> Res<Device> {
+fn parse_device(
+    cx: &Ctx,
+    d: Node,
+    file_modules: &[Arc<Module>],
+    index: &modules::ModuleIndex,
+) -> Res<Device> {
     let ty = cx.require(d, "Type")?;
     let product_code = cx
         .attr_num(ty, "ProductCode", 0, U32)?
@@ -381,14 +427,8 @@ fn parse_device(cx: &Ctx, d: Node) -> Res<Device> {
         .map(|sm| parse_sm(cx, sm))
         .collect::<Res<Vec<_>>>()?;
     check_sm_layout(cx, d, cx.text(ty), &sync_managers)?;
-    let rx_pdos = cx
-        .children(d, "RxPdo")
-        .map(|p| parse_pdo(cx, p))
-        .collect::<Res<Vec<_>>>()?;
-    let tx_pdos = cx
-        .children(d, "TxPdo")
-        .map(|p| parse_pdo(cx, p))
-        .collect::<Res<Vec<_>>>()?;
+    let rx_pdos = parse_pdos(cx, d, "RxPdo")?;
+    let tx_pdos = parse_pdos(cx, d, "TxPdo")?;
     let mailbox = cx
         .child(d, "Mailbox")
         .map(|m| parse_mailbox(cx, m))
@@ -400,21 +440,23 @@ fn parse_device(cx: &Ctx, d: Node) -> Res<Device> {
             .map(|m| parse_op_mode(cx, m))
             .collect::<Res<Vec<_>>>()?,
     };
-    let profile = cx
-        .child(d, "Profile")
-        .map(|p| parse_profile(cx, p))
+    let profile = dict::parse_profiles(cx, d)?;
+    let eeprom = cx.child(d, "Eeprom").map(|e| parse_eeprom(cx, e));
+    let slots_node = cx.child(d, "Slots");
+    let slots = slots_node
+        .map(|s| modules::parse_slots(cx, s))
         .transpose()?;
-    let eeprom = cx
-        .child(d, "Eeprom")
-        .map(|e| parse_eeprom(cx, e))
-        .transpose()?;
+    let modules = match (slots_node, &slots) {
+        (Some(n), Some(s)) => modules::slot_modules(cx, n, s, file_modules, index)?,
+        _ => Vec::new(),
+    };
 
     Ok(Device {
         physics: d.attribute("Physics").map(str::to_string),
         type_name: cx.text(ty).to_string(),
         product_code,
         revision_no,
-        names: cx.names(d)?,
+        names: cx.names(d),
         group: cx.child_text(d, "GroupType"),
         fmmus,
         sync_managers,
@@ -424,6 +466,9 @@ fn parse_device(cx: &Ctx, d: Node) -> Res<Device> {
         dc_op_modes,
         profile,
         eeprom,
+        slots,
+        modules,
+        plugged: None,
     })
 }
 
@@ -508,16 +553,34 @@ fn parse_sm(cx: &Ctx, sm: Node) -> Res<SyncManager> {
         .attr_num(sm, "StartAddress", 0, U16)?
         .ok_or_else(|| cx.err(sm, Problem::MissingAttribute("StartAddress".into())))?
         as u16;
-    let size = |name| -> Res<Option<u16>> { Ok(cx.attr_num(sm, name, 0, U16)?.map(|v| v as u16)) };
+    let size = |name| cx.attr_opt_num(sm, name, 0, U16).map(|v| v as u16);
+    // `Enable` is a number (bit 0 used); `true` / `false` are read as 1 / 0 with a warning
+    let enable = match sm.attribute("Enable") {
+        Some(t) if values::read_number(t).is_none() && values::read_bool(t).is_some() => {
+            let on = values::read_bool(t).is_some_and(|(on, _)| on);
+            let oddity = Oddity::Boolean {
+                text: t.to_string(),
+                read: on,
+            };
+            cx.warn(sm, Some("Enable"), oddity);
+            on
+        }
+        _ => cx.attr_num(sm, "Enable", 0, U8)?.unwrap_or(0) & 1 == 1,
+    };
     Ok(SyncManager {
         kind,
         start_address,
-        default_size: size("DefaultSize")?,
-        min_size: size("MinSize")?,
-        max_size: size("MaxSize")?,
+        default_size: size("DefaultSize"),
+        min_size: size("MinSize"),
+        max_size: size("MaxSize"),
         control_byte: cx.attr_num(sm, "ControlByte", 0, U8)?.unwrap_or(0) as u8,
-        enable: cx.attr_num(sm, "Enable", 0, U8)?.unwrap_or(0) & 1 == 1,
+        enable,
     })
+}
+
+/// The `RxPdo` / `TxPdo` children of a device or module.
+fn parse_pdos(cx: &Ctx, parent: Node, tag: &'static str) -> Res<Vec<Pdo>> {
+    cx.children(parent, tag).map(|p| parse_pdo(cx, p)).collect()
 }
 
 fn parse_pdo(cx: &Ctx, p: Node) -> Res<Pdo> {
@@ -527,27 +590,30 @@ fn parse_pdo(cx: &Ctx, p: Node) -> Res<Pdo> {
         .collect::<Res<Vec<_>>>()?;
     let excludes = cx
         .children(p, "Exclude")
-        .map(|e| cx.elem_num(e, 0, U16).map(|v| v as u16))
-        .collect::<Res<Vec<_>>>()?;
+        .filter_map(|e| cx.elem_opt_num(e, 0, U16).map(|v| v as u16))
+        .collect();
+    let index = cx.require(p, "Index")?;
     Ok(Pdo {
-        index: cx.required_num(p, "Index", 0, U16)? as u16,
+        index: cx.elem_num(index, 0, U16)? as u16,
         name: cx.child_text(p, "Name").unwrap_or_default(),
         sm: cx.attr_num(p, "Sm", 0, U8)?.map(|v| v as u8),
         fixed: cx.attr_bool(p, "Fixed")?,
         mandatory: cx.attr_bool(p, "Mandatory")?,
         excludes,
         entries,
+        depend_on_slot: cx.depends_on_slot(Some(index))?,
     })
 }
 
 fn parse_entry(cx: &Ctx, e: Node) -> Res<PdoEntry> {
-    let index = cx.required_num(e, "Index", 0, U16)? as u16;
+    let index = cx.require(e, "Index")?;
     Ok(PdoEntry {
-        index,
+        index: cx.elem_num(index, 0, U16)? as u16,
         subindex: cx.child_num(e, "SubIndex", 0, U8)?.unwrap_or(0) as u8,
         bit_len: cx.required_num(e, "BitLen", 0, U16)? as u16,
         name: cx.child_text(e, "Name").filter(|s| !s.is_empty()),
         data_type: cx.child_text(e, "DataType").filter(|s| !s.is_empty()),
+        depend_on_slot: cx.depends_on_slot(Some(index))?,
     })
 }
 
@@ -577,220 +643,29 @@ fn parse_mailbox(cx: &Ctx, m: Node) -> Res<Mailbox> {
 }
 
 fn parse_op_mode(cx: &Ctx, m: Node) -> Res<DcOpMode> {
-    let time = |name: &str| -> Res<Option<DcTime>> {
-        match cx.child(m, name) {
-            None => Ok(None),
-            Some(t) => Ok(Some(DcTime {
-                value: cx.elem_num(t, i64::MIN.into(), i64::MAX.into())? as i64,
-                factor: cx
-                    .attr_num(t, "Factor", i64::MIN.into(), i64::MAX.into())?
-                    .map(|v| v as i64),
-            })),
-        }
+    const I64: (i128, i128) = (i64::MIN as i128, i64::MAX as i128);
+    let time = |name: &str| -> Option<DcTime> {
+        let t = cx.child(m, name)?;
+        Some(DcTime {
+            value: cx.elem_opt_num(t, I64.0, I64.1)? as i64,
+            factor: cx.attr_opt_num(t, "Factor", I64.0, I64.1).map(|v| v as i64),
+        })
     };
     Ok(DcOpMode {
         name: cx.required_text(m, "Name")?,
         desc: cx.child_text(m, "Desc"),
         assign_activate: cx.required_num(m, "AssignActivate", 0, U16)? as u16,
-        cycle_time_sync0: time("CycleTimeSync0")?,
-        shift_time_sync0: time("ShiftTimeSync0")?,
-        cycle_time_sync1: time("CycleTimeSync1")?,
-        shift_time_sync1: time("ShiftTimeSync1")?,
+        cycle_time_sync0: time("CycleTimeSync0"),
+        shift_time_sync0: time("ShiftTimeSync0"),
+        cycle_time_sync1: time("CycleTimeSync1"),
+        shift_time_sync1: time("ShiftTimeSync1"),
     })
 }
 
-fn parse_eeprom(cx: &Ctx, e: Node) -> Res<Eeprom> {
-    Ok(Eeprom {
-        byte_size: cx.child_num(e, "ByteSize", 0, U32)?.map(|v| v as u32),
-        config_data: cx
-            .child(e, "ConfigData")
-            .map(|c| cx.hex_bytes(c))
-            .transpose()?,
-        boot_strap: cx
-            .child(e, "BootStrap")
-            .map(|c| cx.hex_bytes(c))
-            .transpose()?,
-    })
-}
-
-fn parse_profile(cx: &Ctx, p: Node) -> Res<Profile> {
-    let dictionary = cx
-        .child(p, "Dictionary")
-        .map(|d| parse_dictionary(cx, d))
-        .transpose()?;
-    Ok(Profile {
-        profile_no: cx.child_num(p, "ProfileNo", 0, U32)?.map(|v| v as u32),
-        dictionary,
-    })
-}
-
-fn parse_dictionary(cx: &Ctx, d: Node) -> Res<Dictionary> {
-    let mut dict = Dictionary::default();
-    if let Some(dts) = cx.child(d, "DataTypes") {
-        for t in cx.children(dts, "DataType") {
-            dict.data_types.push(parse_data_type(cx, t)?);
-        }
-    }
-    if let Some(objs) = cx.child(d, "Objects") {
-        for o in cx.children(objs, "Object") {
-            dict.objects.push(parse_object(cx, o)?);
-        }
-    }
-    Ok(dict)
-}
-
-fn parse_data_type(cx: &Ctx, t: Node) -> Res<DataType> {
-    let array = cx
-        .child(t, "ArrayInfo")
-        .map(|a| -> Res<ArrayInfo> {
-            Ok(ArrayInfo {
-                lbound: cx.required_num(a, "LBound", 0, U32)? as u32,
-                elements: cx.required_num(a, "Elements", 0, U32)? as u32,
-            })
-        })
-        .transpose()?;
-    let subitems = cx
-        .children(t, "SubItem")
-        .map(|s| -> Res<DataTypeSubItem> {
-            Ok(DataTypeSubItem {
-                subindex: cx.child_num(s, "SubIdx", 0, U8)?.map(|v| v as u8),
-                name: cx.required_text(s, "Name")?,
-                type_name: cx.required_text(s, "Type")?,
-                bit_size: cx.required_num(s, "BitSize", 0, U32)? as u32,
-                bit_offs: cx.child_num(s, "BitOffs", 0, U32)?.unwrap_or(0) as u32,
-                flags: parse_flags(cx, s)?,
-            })
-        })
-        .collect::<Res<Vec<_>>>()?;
-    Ok(DataType {
-        name: cx.required_text(t, "Name")?,
-        base_type: cx.child_text(t, "BaseType"),
-        bit_size: cx.required_num(t, "BitSize", 0, U32)? as u32,
-        array,
-        subitems,
-    })
-}
-
-fn parse_flags(cx: &Ctx, parent: Node) -> Res<Flags> {
-    let Some(f) = cx.child(parent, "Flags") else {
-        return Ok(Flags::default());
-    };
-    let access = match cx.child(f, "Access") {
-        None => None,
-        Some(a) => Some(match cx.text(a) {
-            "ro" | "RO" => Access::ReadOnly,
-            "rw" | "RW" => Access::ReadWrite,
-            "wo" | "WO" => Access::WriteOnly,
-            other => return Err(cx.err(a, Problem::BadValue(other.to_string()))),
-        }),
-    };
-    let write_restrictions = cx
-        .child(f, "Access")
-        .and_then(|a| a.attribute("WriteRestrictions"))
-        .map(str::to_string);
-    let pdo_mapping = match cx.child(f, "PdoMapping") {
-        None => None,
-        Some(p) => match cx.text(p).to_ascii_uppercase().as_str() {
-            "R" => Some(PdoMapping::Rx),
-            "T" => Some(PdoMapping::Tx),
-            "RT" | "TR" => Some(PdoMapping::RxTx),
-            "" => None,
-            _ => return Err(cx.err(p, Problem::BadValue(cx.text(p).to_string()))),
-        },
-    };
-    Ok(Flags {
-        access,
-        write_restrictions,
-        pdo_mapping,
-        category: cx.child_text(f, "Category"),
-    })
-}
-
-fn parse_object(cx: &Ctx, o: Node) -> Res<Object> {
-    let info = cx.child(o, "Info");
-    let default_data = info
-        .and_then(|i| cx.child(i, "DefaultData"))
-        .map(|d| cx.hex_bytes(d))
-        .transpose()?;
-    let subitems = match info {
-        None => Vec::new(),
-        Some(i) => cx
-            .children(i, "SubItem")
-            .map(|s| -> Res<ObjectSubItem> {
-                Ok(ObjectSubItem {
-                    name: cx.child_text(s, "Name").unwrap_or_default(),
-                    default_data: cx
-                        .child(s, "Info")
-                        .and_then(|si| cx.child(si, "DefaultData"))
-                        .map(|d| cx.hex_bytes(d))
-                        .transpose()?,
-                })
-            })
-            .collect::<Res<Vec<_>>>()?,
-    };
-    Ok(Object {
-        index: cx.required_num(o, "Index", 0, U16)? as u16,
-        name: cx.required_text(o, "Name")?,
-        type_name: cx.required_text(o, "Type")?,
-        bit_size: cx.required_num(o, "BitSize", 0, U32)? as u32,
-        default_data,
-        flags: parse_flags(cx, o)?,
-        subitems,
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn numbers() {
-        assert_eq!(parse_number("#x1A00"), Some(0x1A00));
-        assert_eq!(parse_number("#x1a00"), Some(0x1A00));
-        assert_eq!(parse_number("42"), Some(42));
-        assert_eq!(parse_number(" -3 "), Some(-3));
-        assert_eq!(parse_number("#xZZ"), None);
-        assert_eq!(parse_number("#x"), None);
-        assert_eq!(parse_number("0x10"), None);
-        assert_eq!(parse_number(""), None);
-        assert_eq!(parse_number("-"), None);
-        assert_eq!(parse_number("#x11112222333344445"), None);
-    }
-
-    #[test]
-    fn hex_binary() {
-        assert_eq!(decode_hex_binary("92010200"), Some(vec![0x92, 1, 2, 0]));
-        assert_eq!(decode_hex_binary(""), Some(vec![]));
-        assert_eq!(decode_hex_binary("123"), None);
-        assert_eq!(decode_hex_binary("zz"), None);
-    }
-
-    #[test]
-    fn attribute_count_scan() {
-        let t =
-            r#"<?xml version="1.0"?><!-- a=1 b=2 c=3 --><A x="=" y='>'><B p="1" q="2" r="3"/></A>"#;
-        assert_eq!(too_many_attributes(t, 3), None);
-        assert_eq!(
-            too_many_attributes(t, 2),
-            Some((t.find("<B").unwrap(), "B"))
-        );
-        assert_eq!(too_many_attributes("<![CDATA[<C a=1 b=2>]]><D/>", 1), None);
-    }
-
-    #[test]
-    fn open_elements_at_cut() {
-        assert_eq!(
-            open_elements("<?xml?><A><!-- <X> --><B/><C x=\"1\"><D>t</D><E"),
-            "A/C/E"
-        );
-        assert_eq!(open_elements("<A></A>"), "");
-        assert_eq!(open_elements("<A><![CDATA[<B>"), "A");
-    }
-
-    #[test]
-    fn path_names_positions() {
-        let doc = Document::parse("<A><B/><B><C/></B></A>").unwrap();
-        let c = doc.descendants().find(|n| n.has_tag_name("C")).unwrap();
-        assert_eq!(element_path(c), "A/B[2]/C");
+fn parse_eeprom(cx: &Ctx, e: Node) -> Eeprom {
+    Eeprom {
+        byte_size: cx.child_opt_num(e, "ByteSize", 0, U32).map(|v| v as u32),
+        config_data: cx.child(e, "ConfigData").and_then(|c| cx.hex_bytes(c)),
+        boot_strap: cx.child(e, "BootStrap").and_then(|c| cx.hex_bytes(c)),
     }
 }

@@ -10,13 +10,24 @@
 //!   are cut. When the table is full (255 strings) further names get index 0 ("no string").
 //! * General: group = `GroupType`, order = `Type` text, name = [`Device::name`], no image;
 //!   CoE details get the SDO bit whenever `Mailbox/CoE` is present; an SoE device has 1 SoE
-//!   channel, a `ProfileNo` 402 device 1 DS402 channel; the only flag set is the mailbox data
-//!   link layer. Physical ports follow the `Physics` letters (`Y` MII, `E` EBUS; `EBUS` = two
-//!   EBUS ports).
+//!   channel, a device that states profile 402 anywhere ([`Device::is_cia402`]) 1 DS402
+//!   channel; the only flag set is the mailbox data link layer. Physical ports follow the
+//!   `Physics` letters (`Y` MII, `E` EBUS; `EBUS` = two EBUS ports).
 //! * A PDO with no default sync manager gets 0xFF; PDO flags are mandatory (bit 0), default
 //!   (bit 1, assigned by default) and fixed content (bit 4).
 //! * An odd number of FMMUs is padded with one unused FMMU (0x00) to a whole word.
 //! * `ByteSize` absent → 2048 bytes (16 KiBit).
+//! * **An image larger than the ESI's EEPROM** (`Beckhoff-EJ7211-EJ7047.xml`: 2862 bytes of
+//!   strings, PDOs and DC modes against `ByteSize` 2048): the header's EEPROM-size word (0x3E)
+//!   declares the next size a real serial EEPROM has (powers of two from 1 KiBit; 2862 bytes →
+//!   32 KiBit = 4096 bytes) and [`sii_from_device_noted`] says so in a note. The categories stay
+//!   in the order and form above, so a master reads identity, strings, General, FMMUs, sync
+//!   managers, PDOs and DC as from any image: ethercrab and SOEM walk the category chain and do
+//!   not stop at the declared size (SOEM's SII cache holds 4096 bytes, enough for such an
+//!   image). An emulated ESC with more than 2048 bytes reports two address bytes (register
+//!   0x0502 bit 7), as an ESC with a 32 KiBit EEPROM does. Devices with such ESIs exist: their
+//!   makers fit the data, a configurator writing the ESI's categories needs the larger part.
+//!   Larger than 4 MiBit (the largest two-address-byte EEPROM) stays an error.
 
 use super::sii::{self, Category, General, MailboxLayout, SiiContent, SiiError, SiiHeader};
 use super::{Device, EsiFile, FmmuKind, SmKind};
@@ -24,10 +35,54 @@ use super::{Device, EsiFile, FmmuKind, SmKind};
 /// EEPROM size used when the ESI gives no `Eeprom/ByteSize`.
 pub const DEFAULT_EEPROM_BYTES: u32 = 2048;
 
-/// Build the SII EEPROM content of `device` (one of `file.devices`; the vendor ID comes from
-/// `file.vendor`). Fails on values the SII cannot hold (a PDO entry longer than 255 bits, a DC
-/// factor outside `i16`, a DC time outside 32 bits, an EEPROM larger than 8 MiBit).
+/// Largest EEPROM the header may declare for a grown image: 4 MiBit (512 KiB).
+const MAX_EEPROM_BYTES: usize = 512 * 1024;
+
+/// [`sii_from_device_noted`]'s result: the content and what the caller should know about it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SiiBuild {
+    /// The SII content.
+    pub content: SiiContent,
+    /// Notes (an EEPROM declared larger than the ESI's `ByteSize`, see the module docs).
+    pub notes: Vec<String>,
+}
+
+/// Build the SII EEPROM content of `device` (one of `file.devices`, or a device resolved from
+/// it; the vendor ID comes from `file.vendor`). Fails on values the SII cannot hold (a PDO
+/// entry longer than 255 bits, a DC factor outside `i16`, a DC time outside 32 bits, an EEPROM
+/// larger than 8 MiBit). An image that does not fit the ESI's EEPROM gets a larger one (module
+/// docs); [`sii_from_device_noted`] returns the note that says so.
 pub fn sii_from_device(file: &EsiFile, device: &Device) -> Result<SiiContent, SiiError> {
+    sii_from_device_noted(file, device).map(|b| b.content)
+}
+
+/// [`sii_from_device`] with its notes.
+pub fn sii_from_device_noted(file: &EsiFile, device: &Device) -> Result<SiiBuild, SiiError> {
+    let mut content = build(file, device)?;
+    let mut notes = Vec::new();
+    let needed = sii::encode(&content)?.len();
+    let declared = content.header.eeprom_size_bytes();
+    if needed > declared {
+        let size = needed.next_power_of_two().max(128);
+        if size > MAX_EEPROM_BYTES {
+            return Err(SiiError::Encode(format!(
+                "image needs {needed} bytes, more than the largest EEPROM ({MAX_EEPROM_BYTES} \
+                 bytes, 4 MiBit)"
+            )));
+        }
+        content.header.eeprom_size = (size / 128 - 1) as u16;
+        notes.push(format!(
+            "device {}: the SII image needs {needed} bytes, more than the {declared}-byte EEPROM \
+             the ESI declares (Eeprom/ByteSize); the image declares a {size}-byte ({} KiBit) \
+             EEPROM, the next size a real EEPROM has",
+            device.type_name,
+            size / 128
+        ));
+    }
+    Ok(SiiBuild { content, notes })
+}
+
+fn build(file: &EsiFile, device: &Device) -> Result<SiiContent, SiiError> {
     let mut c = SiiContent {
         header: header(file, device)?,
         categories: vec![Category::Strings(Vec::new())],
@@ -69,7 +124,7 @@ pub fn sii_from_device(file: &EsiFile, device: &Device) -> Result<SiiContent, Si
             general.flags |= sii::general_flags::MBOX_DLL;
         }
     }
-    if device.profile.as_ref().and_then(|p| p.profile_no) == Some(402) {
+    if device.is_cia402() {
         general.ds402_channels = 1;
     }
     c.categories.push(Category::General(general));
