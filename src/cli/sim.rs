@@ -203,9 +203,10 @@ fn split_position<'a>(option: &str, spec: &'a str) -> anyhow::Result<(usize, &'a
     Ok((pos, value.trim()))
 }
 
-/// Is the ESI device a CiA 402 drive (`Profile/ProfileNo` 402)?
+/// Does the ESI device declare CiA 402 (`ProfileNo` 402 in its profile, a `ChannelInfo` or a
+/// module's profile, [`Device::is_cia402`])?
 fn is_cia402(device: &Device) -> bool {
-    device.profile.as_ref().and_then(|p| p.profile_no) == Some(402)
+    device.is_cia402()
 }
 
 /// Does the device offer what a CiA 402 axis needs (controlword, target position, statusword,

@@ -149,7 +149,11 @@ fn vendor_drive(
                 path.display(),
                 id.product_code
             ))
-        })?;
+        })?
+        // A modular device with the default module in every slot.
+        .resolve(&[])
+        .map_err(|e| other(format!("[device] esi {}: {e}", path.display())))?;
+    let device = &device;
     let mut base = crate::drive::catalogue::builtin("cia402-generic")
         .ok_or_else(|| other("the built-in cia402-generic drive is missing".into()))?;
     base.name = def.name.clone();

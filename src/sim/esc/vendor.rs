@@ -336,10 +336,20 @@ pub fn dictionary_entries(dict: &Dictionary, model: &dyn DriveModel) -> Vec<Obje
                 out.push(ObjectEntry::model(o.index, sub, ty, access));
                 continue;
             }
+            // `DefaultData` (hexBinary), else `DefaultValue` (a number, as Inovance writes
+            // 0x1000), little-endian in the entry's size.
+            let size_of = ty.size().unwrap_or(match ty {
+                DataType::Bytes(n) => n,
+                _ => 0,
+            });
+            let number =
+                |v: Option<i128>| v.map(|v| (v as i64).to_le_bytes()[..size_of.min(8)].to_vec());
             let default = if record {
-                o.subitems.get(n).and_then(|s| s.default_data.clone())
+                o.subitems
+                    .get(n)
+                    .and_then(|s| s.default_data.clone().or_else(|| number(s.values.default)))
             } else {
-                o.default_data.clone()
+                o.default_data.clone().or_else(|| number(o.values.default))
             };
             let size = ty.size().unwrap_or(match ty {
                 DataType::Bytes(n) => n,
