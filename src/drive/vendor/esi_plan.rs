@@ -98,11 +98,17 @@ pub fn object_leaves(dict: &Dictionary, o: &Object) -> Vec<Leaf> {
             o.flags.clone()
         };
         if let Some(k) = s.subindex {
+            // An enumeration (`DT0800EN08`: `BaseType` USINT, `EnumInfo`s) is its base type.
+            let type_name = dict
+                .data_type(&s.type_name)
+                .filter(|t| t.subitems.is_empty() && t.array.is_none())
+                .and_then(|t| t.base_type.clone())
+                .unwrap_or_else(|| s.type_name.clone());
             out.push(Leaf {
                 index: o.index,
                 sub: k,
                 name: s.name.clone(),
-                type_name: s.type_name.clone(),
+                type_name,
                 bits: s.bit_size,
                 bit_offs: s.bit_offs,
                 flags,

@@ -279,6 +279,8 @@ fn add_pdo_objects(entries: &mut Vec<ObjectEntry>, device: &Device, notes: &mut 
 fn entry_type(name: &str, bits: u32) -> Option<DataType> {
     Some(match name.trim() {
         "BOOL" | "BIT" => DataType::Bool,
+        // ETG.2000 BIT2 … BIT8: a few bits, held in a byte.
+        n if n.starts_with("BIT") && bits <= 8 => DataType::U8,
         "SINT" => DataType::I8,
         "INT" => DataType::I16,
         "DINT" => DataType::I32,
