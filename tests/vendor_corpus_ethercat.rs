@@ -7,7 +7,8 @@
 //! `ChannelInfo`, the default modules' `Profile`) and whether a device offers a touch probe
 //! (CiA 402 0x60B8 and 0x60B9, or a Beckhoff modular-device-profile `TP1 Enable` in its
 //! outputs and inputs). Then:
-//! 1. `drive from-esi FILE#@N` for every device: a CiA 402 device (402 declared, or a modular
+//! 1. `esi list` names every device at its position with its identity and name; `drive
+//!    from-esi FILE#@N` for every device: a CiA 402 device (402 declared, or a modular
 //!    device profile 5001 servo interface with a `Controlword`) gets a definition whose
 //!    `[device]` is its identity; any other device is refused with exit 2, naming what a CiA
 //!    402 axis lacks;
@@ -40,7 +41,7 @@ mod test_data;
 mod veth;
 use esi_xml::esi_number;
 use veth::netns::{manifest_path, run_bounded};
-use veth::{Emulator, VethPair, EMULATOR_IF, MASTER_IF};
+use veth::Emulator;
 
 const INNER_ENV: &str = "FIELDPROBE_VENDOR_CORPUS_PYTHON";
 const TEST_NAME: &str = "every_vendor_esi_over_veth";
@@ -254,21 +255,14 @@ fn fieldprobe(args: &[&str]) -> (Option<std::process::ExitStatus>, String, Strin
 
 /// `fieldprobe sim ethercat` with `devices` (`FILE#@N` each), a probe surface at 100 mm on ring
 /// position 2 (axis Z), waited for until it listens.
-fn start_segment(devices: &[String]) -> Emulator {
+fn start_segment(devices: &[String], iface: &str, work: &Path) -> Emulator {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_fieldprobe"));
-    cmd.args([
-        "sim",
-        "ethercat",
-        "--iface",
-        EMULATOR_IF,
-        "--seconds",
-        "200",
-    ])
-    .args(["--probe-at", "2=100"]);
+    cmd.args(["sim", "ethercat", "--iface", iface, "--seconds", "200"])
+        .args(["--probe-at", "2=100"]);
     for d in devices {
         cmd.arg("--device").arg(d);
     }
-    let log = std::env::temp_dir().join(format!("corpus-emu-{}.log", std::process::id()));
+    let log = work.join(format!("emulator-{iface}.log"));
     let file = std::fs::File::create(&log).expect("emulator log");
     let emu = Emulator(
         cmd.current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -292,221 +286,298 @@ fn start_segment(devices: &[String]) -> Emulator {
     emu
 }
 
+/// Veth pairs worked on at once (files checked in parallel): two halve the test's wall time;
+/// each file's master and emulator need about a tenth of a core, and two pairs leave a 2-core
+/// machine room for a start-up's bursts (a PDU unanswered for 30 ms fails the init).
+const WORKERS: usize = 2;
+
+/// A veth pair `fcm{k}` (master) ↔ `fce{k}` (emulator) inside the test's namespace, deleted
+/// when dropped.
+struct Pair(String);
+
+impl Pair {
+    fn create(k: usize) -> Pair {
+        let (m, e) = (format!("fcm{k}"), format!("fce{k}"));
+        for args in [
+            vec!["link", "add", &m, "type", "veth", "peer", "name", &e],
+            vec!["link", "set", &m, "up"],
+            vec!["link", "set", &e, "up"],
+        ] {
+            let st = Command::new("ip").args(&args).status().expect("run ip");
+            assert!(st.success(), "ip {args:?}: {st}");
+        }
+        Pair(m)
+    }
+}
+
+impl Drop for Pair {
+    fn drop(&mut self) {
+        let _ = Command::new("ip")
+            .args(["link", "del", &self.0])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status();
+    }
+}
+
 fn inner(python: &Path) {
     let dir = esi_dir().expect("checked outside");
     let work = tempfile::tempdir().expect("temp dir");
-    let _pair = VethPair::create();
-    let link = format!("ethercat:{MASTER_IF}");
-    let mut summary = Vec::new();
-    for file in esi_files(&dir) {
-        let file_name = file.file_name().unwrap().to_string_lossy().to_string();
-        let devices = file_devices(&file);
-        assert!(!devices.is_empty(), "{file_name}: no device");
-        // 1. drive from-esi for every device.
-        let mut defs: Vec<(usize, PathBuf)> = Vec::new();
-        for d in &devices {
-            let spec = format!("{}#@{}", file.display(), d.position);
-            let (status, toml, err) = fieldprobe(&["drive", "from-esi", &spec]);
-            if d.cia402() {
+    let queue = std::sync::Mutex::new(esi_files(&dir));
+    let results = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..WORKERS)
+            .map(|k| {
+                let (queue, results, work) = (&queue, &results, work.path());
+                scope.spawn(move || {
+                    let _pair = Pair::create(k);
+                    let (master, emulator) = (format!("fcm{k}"), format!("fce{k}"));
+                    loop {
+                        let next = queue.lock().unwrap().pop();
+                        let Some(file) = next else { break };
+                        let line = check_file(&file, python, work, &master, &emulator);
+                        results.lock().unwrap().push(line);
+                    }
+                })
+            })
+            .collect();
+        for h in handles {
+            if let Err(e) = h.join() {
+                std::panic::resume_unwind(e);
+            }
+        }
+    });
+    let mut summary = results.into_inner().unwrap();
+    summary.sort();
+    for l in &summary {
+        println!("{l}");
+    }
+    println!("INNER OK");
+}
+
+/// Steps 1–3 of the module documentation for one ESI file, the master on `master`, the
+/// emulator on `emulator`; the summary line.
+fn check_file(file: &Path, python: &Path, work: &Path, master: &str, emulator: &str) -> String {
+    let link = format!("ethercat:{master}");
+    let file_name = file.file_name().unwrap().to_string_lossy().to_string();
+    let devices = file_devices(&file);
+    assert!(!devices.is_empty(), "{file_name}: no device");
+    // `esi list`: every device with its position, identity and name.
+    let (status, list, err) = fieldprobe(&["esi", "list", file.to_str().unwrap()]);
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "{file_name}: esi list {status:?}\n{err}"
+    );
+    for d in &devices {
+        let head = format!(
+            "@{} {} 0x{:08X}/0x{:08X} ",
+            d.position, d.type_name, d.product, d.revision
+        );
+        let line = list
+            .lines()
+            .find(|l| l.starts_with(&head))
+            .unwrap_or_else(|| panic!("{file_name}: {head:?} in esi list:\n{list}"));
+        assert!(line.contains(&format!("\"{}\"", d.name)), "{file_name}: {line}");
+    }
+    // 1. drive from-esi for every device.
+    let mut defs: Vec<(usize, PathBuf)> = Vec::new();
+    for d in &devices {
+        let spec = format!("{}#@{}", file.display(), d.position);
+        let (status, toml, err) = fieldprobe(&["drive", "from-esi", &spec]);
+        if d.cia402() {
+            assert!(
+                status.is_some_and(|s| s.success()),
+                "{file_name} device {} ({}): drive from-esi: {status:?}\n{err}",
+                d.position,
+                d.type_name
+            );
+            for (key, v) in [
+                ("vendor_id", d.vendor),
+                ("product_code", d.product),
+                ("revision", d.revision),
+            ] {
                 assert!(
-                    status.is_some_and(|s| s.success()),
-                    "{file_name} device {} ({}): drive from-esi: {status:?}\n{err}",
-                    d.position,
-                    d.type_name
-                );
-                for (key, v) in [
-                    ("vendor_id", d.vendor),
-                    ("product_code", d.product),
-                    ("revision", d.revision),
-                ] {
-                    assert!(
-                        toml.contains(&format!("{key} = 0x{v:08X}")),
-                        "{file_name} device {}: [device] {key} should be 0x{v:08X}:\n{toml}",
-                        d.position
-                    );
-                }
-                let path = work.path().join(format!(
-                    "{}-{}.toml",
-                    file_name.trim_end_matches(".xml"),
-                    d.position
-                ));
-                std::fs::write(&path, &toml).unwrap();
-                defs.push((d.position, path));
-            } else {
-                assert_eq!(
-                    status.and_then(|s| s.code()),
-                    Some(2),
-                    "{file_name} device {} ({}, profiles {:?}) is not CiA 402: a clear refusal\n{toml}{err}",
-                    d.position,
-                    d.type_name,
-                    d.profiles
-                );
-                assert!(
-                    err.contains("cannot run a CiA 402 axis") && err.contains("0x6040:00"),
-                    "{file_name} device {}: the refusal names what is missing: {err}",
+                    toml.contains(&format!("{key} = 0x{v:08X}")),
+                    "{file_name} device {}: [device] {key} should be 0x{v:08X}:\n{toml}",
                     d.position
                 );
             }
-        }
-        let segment = segment_of(&devices);
-        if segment.is_empty() {
-            summary.push(format!(
-                "CORPUS {file_name}: {} devices, none CiA 402: refused by drive from-esi",
-                devices.len()
+            let path = work.join(format!(
+                "{}-{}.toml",
+                file_name.trim_end_matches(".xml"),
+                d.position
             ));
-            continue;
-        }
-        // 2. The segment and the machine.
-        let mut machine = String::from("[channel]\n");
-        for (axis, d) in ["X", "Y", "Z"].iter().zip(&segment) {
-            let def = &defs.iter().find(|(p, _)| *p == d.position).unwrap().1;
-            machine.push_str(&format!(
-                "[[axis]]\nname = \"{axis}\"\ndrive = \"{}\"\n\"kenngr.messachse\" = 1\n\
-                 \"kenngr.measure.signal\" = \"DRIVE\"\n\"kenngr.measure.input\" = 1\n\
-                 \"kenngr.measure.edge\" = \"POS\"\n",
-                def.display()
-            ));
-        }
-        machine.push_str("[tool.1]\nradius = 20000\n");
-        let m = work.path().join(format!(
-            "{}.machine.toml",
-            file_name.trim_end_matches(".xml")
-        ));
-        std::fs::write(&m, &machine).unwrap();
-        let m = m.to_str().unwrap();
-        let specs: Vec<String> = segment
-            .iter()
-            .map(|d| format!("{}#@{}", file.display(), d.position))
-            .collect();
-        let emu = start_segment(&specs);
-        let (status, scan, err) = fieldprobe(&["scan", "--link", &link]);
-        assert!(
-            status.is_some_and(|s| s.success()),
-            "{file_name}: scan {status:?}\n{scan}\n{err}"
-        );
-        let rows: Vec<&str> = scan.lines().skip(1).collect();
-        assert_eq!(rows.len(), 3, "{file_name}: {scan}");
-        for (pos, (row, d)) in rows.iter().zip(&segment).enumerate() {
-            let cols: Vec<&str> = row.split_whitespace().collect();
-            assert_eq!(cols[0], pos.to_string(), "{row}");
-            assert_eq!(cols[2], format!("{:#010x}", d.vendor), "{file_name}: {row}");
+            std::fs::write(&path, &toml).unwrap();
+            defs.push((d.position, path));
+        } else {
             assert_eq!(
-                cols[3],
-                format!("{:#010x}", d.product),
-                "{file_name}: {row}"
+                status.and_then(|s| s.code()),
+                Some(2),
+                "{file_name} device {} ({}, profiles {:?}) is not CiA 402: a clear refusal\n{toml}{err}",
+                d.position,
+                d.type_name,
+                d.profiles
             );
-            assert_eq!(
-                cols[4],
-                format!("{:#010x}", d.revision),
-                "{file_name}: {row}"
-            );
-            // ethercrab shows the SII order string, the ESI `Type` text (ETG.2010 OrderIdx).
             assert!(
-                row.ends_with(&d.type_name),
-                "{file_name}: type {:?}: {row}",
-                d.type_name
+                err.contains("cannot run a CiA 402 axis") && err.contains("0x6040:00"),
+                "{file_name} device {}: the refusal names what is missing: {err}",
+                d.position
             );
         }
-        let (status, want, err) = fieldprobe(&[
-            "run",
-            "examples/nc/hello.nc",
-            "--machine",
-            m,
-            "--link",
-            "sim",
-        ]);
-        assert!(
-            status.is_some_and(|s| s.success()),
-            "{file_name}: hello.nc on --link sim: {want}{err}"
+    }
+    let segment = segment_of(&devices);
+    if segment.is_empty() {
+        return format!(
+            "CORPUS {file_name}: {} devices, none CiA 402: refused by drive from-esi",
+            devices.len()
         );
-        let t0 = Instant::now();
+    }
+    // 2. The segment and the machine.
+    let mut machine = String::from("[channel]\n");
+    for (axis, d) in ["X", "Y", "Z"].iter().zip(&segment) {
+        let def = &defs.iter().find(|(p, _)| *p == d.position).unwrap().1;
+        machine.push_str(&format!(
+            "[[axis]]\nname = \"{axis}\"\ndrive = \"{}\"\n\"kenngr.messachse\" = 1\n\
+             \"kenngr.measure.signal\" = \"DRIVE\"\n\"kenngr.measure.input\" = 1\n\
+             \"kenngr.measure.edge\" = \"POS\"\n",
+            def.display()
+        ));
+    }
+    machine.push_str("[tool.1]\nradius = 20000\n");
+    let m = work.join(format!(
+        "{}.machine.toml",
+        file_name.trim_end_matches(".xml")
+    ));
+    std::fs::write(&m, &machine).unwrap();
+    let m = m.to_str().unwrap();
+    let specs: Vec<String> = segment
+        .iter()
+        .map(|d| format!("{}#@{}", file.display(), d.position))
+        .collect();
+    let emu = start_segment(&specs, emulator, work);
+    let (status, scan, err) = fieldprobe(&["scan", "--link", &link]);
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "{file_name}: scan {status:?}\n{scan}\n{err}"
+    );
+    let rows: Vec<&str> = scan.lines().skip(1).collect();
+    assert_eq!(rows.len(), 3, "{file_name}: {scan}");
+    for (pos, (row, d)) in rows.iter().zip(&segment).enumerate() {
+        let cols: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!(cols[0], pos.to_string(), "{row}");
+        assert_eq!(cols[2], format!("{:#010x}", d.vendor), "{file_name}: {row}");
+        assert_eq!(
+            cols[3],
+            format!("{:#010x}", d.product),
+            "{file_name}: {row}"
+        );
+        assert_eq!(
+            cols[4],
+            format!("{:#010x}", d.revision),
+            "{file_name}: {row}"
+        );
+        // ethercrab shows the SII order string, the ESI `Type` text (ETG.2010 OrderIdx).
+        assert!(
+            row.ends_with(&d.type_name),
+            "{file_name}: type {:?}: {row}",
+            d.type_name
+        );
+    }
+    let (status, want, err) = fieldprobe(&[
+        "run",
+        "examples/nc/hello.nc",
+        "--machine",
+        m,
+        "--link",
+        "sim",
+    ]);
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "{file_name}: hello.nc on --link sim: {want}{err}"
+    );
+    let t0 = Instant::now();
+    let (status, out, err) = fieldprobe(&[
+        "run",
+        "examples/nc/hello.nc",
+        "--machine",
+        m,
+        "--link",
+        &link,
+    ]);
+    let hello_s = t0.elapsed().as_secs_f64();
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "{file_name}: hello.nc over veth {status:?}\n{out}\n{err}"
+    );
+    assert_eq!(out, want, "{file_name}: hello.nc over veth vs sim\n{err}");
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning ")).collect();
+    let z = &segment[2];
+    let mut meas = "no touch probe on Z".to_string();
+    if z.touch_probe && seed004_present() {
         let (status, out, err) = fieldprobe(&[
             "run",
-            "examples/nc/hello.nc",
+            "examples/nc/seed004/meas1.nc",
             "--machine",
             m,
             "--link",
             &link,
         ]);
-        let hello_s = t0.elapsed().as_secs_f64();
         assert!(
             status.is_some_and(|s| s.success()),
-            "{file_name}: hello.nc over veth {status:?}\n{out}\n{err}"
+            "{file_name}: meas1.nc over veth {status:?}\n{out}\n{err}"
         );
-        assert_eq!(out, want, "{file_name}: hello.nc over veth vs sim\n{err}");
-        let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning ")).collect();
-        let z = &segment[2];
-        let mut meas = "no touch probe on Z".to_string();
-        if z.touch_probe && seed004_present() {
-            let (status, out, err) = fieldprobe(&[
-                "run",
-                "examples/nc/seed004/meas1.nc",
-                "--machine",
-                m,
-                "--link",
-                &link,
-            ]);
-            assert!(
-                status.is_some_and(|s| s.success()),
-                "{file_name}: meas1.nc over veth {status:?}\n{out}\n{err}"
-            );
-            let got: Vec<&str> = out.lines().collect();
-            assert_eq!(
-                got,
-                seed004::seed_stdout_lines("meas1"),
-                "{file_name}: meas1 with the drive latch of {} ({})\n{err}",
-                z.type_name,
-                z.position
-            );
-            meas = "meas1 = seed 004 §5".to_string();
-        }
-        // 3. SOEM.
-        let spec = json!({ "devices": segment.iter().map(|d| json!({
-            "vendor": d.vendor, "product": d.product, "revision": d.revision
-        })).collect::<Vec<_>>() });
-        let (status, out, err) = run_bounded(
-            Command::new(python)
-                .stdin(Stdio::null())
-                .arg(manifest_path("tests/pysoem/corpus.py"))
-                .arg(MASTER_IF)
-                .arg(spec.to_string()),
-            STEP_TIMEOUT,
-        );
-        drop(emu);
-        let line = out
-            .lines()
-            .find_map(|l| l.strip_prefix("CORPUS_RESULT "))
-            .unwrap_or_else(|| {
-                panic!("{file_name}: corpus.py printed no result ({status:?})\n{out}\n{err}")
-            });
-        let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
+        let got: Vec<&str> = out.lines().collect();
         assert_eq!(
-            r["ok"], true,
-            "{file_name}: SOEM: {} ({})",
-            r["error"], r["steps"]
+            got,
+            seed004::seed_stdout_lines("meas1"),
+            "{file_name}: meas1 with the drive latch of {} ({})\n{err}",
+            z.type_name,
+            z.position
         );
-        let types: Vec<String> = segment
-            .iter()
-            .map(|d| format!("{} rev {:#x}", d.type_name, d.revision))
-            .collect();
-        summary.push(format!(
-            "CORPUS {file_name}: {} devices ({} CiA 402); segment {}; hello.nc over veth = sim \
-             ({hello_s:.1} s); {meas}; SOEM OP (wkc {}); warnings: {}",
-            devices.len(),
-            devices.iter().filter(|d| d.cia402()).count(),
-            types.join(", "),
-            r["steps"][2]["expected_wkc"],
-            if warnings.is_empty() {
-                "none".to_string()
-            } else {
-                warnings.join(" | ")
-            }
-        ));
+        meas = "meas1 = seed 004 §5".to_string();
     }
-    for l in &summary {
-        println!("{l}");
-    }
-    println!("INNER OK");
+    // 3. SOEM.
+    let spec = json!({ "devices": segment.iter().map(|d| json!({
+        "vendor": d.vendor, "product": d.product, "revision": d.revision
+    })).collect::<Vec<_>>() });
+    let (status, out, err) = run_bounded(
+        Command::new(python)
+            .stdin(Stdio::null())
+            .arg(manifest_path("tests/pysoem/corpus.py"))
+            .arg(master)
+            .arg(spec.to_string()),
+        STEP_TIMEOUT,
+    );
+    drop(emu);
+    let line = out
+        .lines()
+        .find_map(|l| l.strip_prefix("CORPUS_RESULT "))
+        .unwrap_or_else(|| {
+            panic!("{file_name}: corpus.py printed no result ({status:?})\n{out}\n{err}")
+        });
+    let r: serde_json::Value = serde_json::from_str(line).expect("JSON");
+    assert_eq!(
+        r["ok"], true,
+        "{file_name}: SOEM: {} ({})",
+        r["error"], r["steps"]
+    );
+    let types: Vec<String> = segment
+        .iter()
+        .map(|d| format!("{} rev {:#x}", d.type_name, d.revision))
+        .collect();
+    format!(
+        "CORPUS {file_name}: {} devices ({} CiA 402); segment {}; hello.nc over veth = sim \
+         ({hello_s:.1} s); {meas}; SOEM OP (wkc {}); warnings: {}",
+        devices.len(),
+        devices.iter().filter(|d| d.cia402()).count(),
+        types.join(", "),
+        r["steps"][2]["expected_wkc"],
+        if warnings.is_empty() {
+            "none".to_string()
+        } else {
+            warnings.join(" | ")
+        }
+    )
 }
 
 fn seed004_present() -> bool {
