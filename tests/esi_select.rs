@@ -83,6 +83,34 @@ fn selector_forms() {
 }
 
 #[test]
+fn selectors_built_in_code() {
+    let s = Selector::new(
+        DeviceSelector::Product {
+            code: 0x1C2B_2852,
+            revision: Some(0x001B_000B),
+        },
+        vec![ModuleChoice::Default],
+    );
+    assert_eq!(s.to_string(), "0x1C2B2852/0x001B000B+");
+    assert_eq!(sel(&s.to_string()), s);
+    // position 0 does not exist: no match, no panic
+    let f = esi::parse(
+        "<EtherCATInfo><Vendor><Id>1</Id></Vendor><Descriptions><Devices><Device>\
+         <Type ProductCode=\"1\">A</Type></Device></Devices></Descriptions></EtherCATInfo>",
+        "p.xml",
+    )
+    .unwrap();
+    let s = Selector::new(DeviceSelector::Position(0), Vec::new());
+    let e = esi::resolve(&f, Some(&s)).unwrap_err();
+    assert!(matches!(e, SelectError::NoMatch { .. }), "{e}");
+    assert!(
+        e.to_string()
+            .contains("@1 0x00000001 (A) revision 0x00000000"),
+        "{e}"
+    );
+}
+
+#[test]
 fn bad_selectors_name_the_problem() {
     for (text, why) in [
         ("", "no device"),

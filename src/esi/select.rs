@@ -60,6 +60,31 @@ pub struct Selector {
     text: String,
 }
 
+impl fmt::Display for DeviceSelector {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let rev = |r: &Option<u32>| r.map(|r| format!("/0x{r:08X}")).unwrap_or_default();
+        match self {
+            DeviceSelector::Position(n) => write!(f, "@{n}"),
+            DeviceSelector::Product { code, revision } => {
+                write!(f, "0x{code:08X}{}", rev(revision))
+            }
+            DeviceSelector::Type { name, revision } => write!(f, "{name}{}", rev(revision)),
+        }
+    }
+}
+
+impl Selector {
+    /// A selector built in code (e.g. from the identity a master read): the device and the
+    /// modules of its slots in order.
+    pub fn new(device: DeviceSelector, modules: Vec<ModuleChoice>) -> Selector {
+        Selector {
+            text: device.to_string(),
+            device,
+            modules,
+        }
+    }
+}
+
 impl fmt::Display for Selector {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.text)?;
@@ -325,7 +350,7 @@ impl EsiFile {
         };
         let found: Vec<usize> = match &sel.device {
             DeviceSelector::Position(n) => {
-                return match self.devices.get(n - 1) {
+                return match n.checked_sub(1).and_then(|i| self.devices.get(i)) {
                     Some(d) => Ok((*n, d, Vec::new())),
                     None => Err(no_match(format!(
                         "no device at position @{n} (the file has {})",
