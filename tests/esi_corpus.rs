@@ -456,3 +456,35 @@ fn lc10e_odd_hex_is_read_with_a_leading_zero_nibble() {
     }
     assert_eq!(checked, 1 + w.more.len());
 }
+
+#[test]
+fn drive_from_esi_notes_what_does_not_say_402() {
+    for path in corpus("drive_from_esi_notes_what_does_not_say_402") {
+        let file = path.to_str().unwrap();
+        for (i, x) in esi_file_facts(&path).iter().enumerate() {
+            let states_402 = x.profile_numbers.contains(&402);
+            let odd_type = x.device_type.filter(|t| t & 0xFFFF != 402);
+            if states_402 && odd_type.is_none() {
+                continue;
+            }
+            let o = fieldprobe(&["drive", "from-esi", &format!("{file}#@{}", i + 1)]);
+            let err = stderr(&o);
+            if err.contains("has no CoE object dictionary") {
+                continue;
+            }
+            assert_eq!(
+                err.contains("states no CiA 402 profile"),
+                !states_402,
+                "{file} @{}: {err}",
+                i + 1
+            );
+            if let Some(t) = odd_type {
+                assert!(
+                    err.contains(&format!("0x1000 default 0x{t:08X} (as the file gives it)")),
+                    "{file} @{}: {err}",
+                    i + 1
+                );
+            }
+        }
+    }
+}
