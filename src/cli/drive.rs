@@ -9,7 +9,9 @@
 //! 2 on bad input: an unreadable file, no such device, or a device that lacks objects a CiA 402
 //! axis needs (the message names them and the file). SEL chooses the device of a file with
 //! several and its modules ([`fieldprobe::esi::select`]); the definition is made from the
-//! resolved device (module PDOs and objects included).
+//! resolved device (module PDOs and objects included). A device that states no CiA 402 profile,
+//! or whose 0x1000 default does not say 402, gets a `note:` (the file's word is a hint: the
+//! device answers 0x1000 itself).
 
 use super::EXIT_OK;
 use anyhow::Context;
@@ -83,6 +85,31 @@ fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
              definition needs one",
             file.file,
             device.type_name
+        );
+    }
+    // What the file states is a hint, not a gate: the device answers 0x1000 itself.
+    if !device.is_cia402() {
+        let profiles: Vec<String> = device
+            .profile_numbers()
+            .iter()
+            .map(u32::to_string)
+            .collect();
+        eprintln!(
+            "note: {}: device {} states no CiA 402 profile (profiles: {})",
+            file.file,
+            device.type_name,
+            if profiles.is_empty() {
+                "none".to_string()
+            } else {
+                profiles.join(", ")
+            }
+        );
+    }
+    if let Some(t) = device.device_type().filter(|t| t & 0xFFFF != 402) {
+        eprintln!(
+            "note: {}: device {}: 0x1000 default 0x{t:08X} (as the file gives it) does not \
+             say profile 402 in its low word",
+            file.file, device.type_name
         );
     }
     write(&VendorDevice::from_esi(&file, &device), &a.output)

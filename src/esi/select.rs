@@ -10,7 +10,8 @@
 //! MODULE := IDENT | NAME | ''    ModuleIdent number, module Type text, or the slot's default
 //! ```
 //! Numbers are `0x…` / `#x…` hex or decimal. A number is a product code; if no device has that
-//! product code, a device whose `Type` text is that number. A type name matches the `Type` text
+//! product code, a device whose `Type` text is that number. A `/` followed by something other
+//! than a number is part of the type name. A type name matches the `Type` text
 //! case-insensitively; when none does, a device `Name` (the old `--device NAME` form).
 //!
 //! * A selector several devices match (revisions of one product, or -0010 / -0011 variants that
@@ -57,6 +58,31 @@ pub struct Selector {
     pub modules: Vec<ModuleChoice>,
     /// The device part as written (a number is also tried as a type name).
     text: String,
+}
+
+impl fmt::Display for DeviceSelector {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let rev = |r: &Option<u32>| r.map(|r| format!("/0x{r:08X}")).unwrap_or_default();
+        match self {
+            DeviceSelector::Position(n) => write!(f, "@{n}"),
+            DeviceSelector::Product { code, revision } => {
+                write!(f, "0x{code:08X}{}", rev(revision))
+            }
+            DeviceSelector::Type { name, revision } => write!(f, "{name}{}", rev(revision)),
+        }
+    }
+}
+
+impl Selector {
+    /// A selector built in code (e.g. from the identity a master read): the device and the
+    /// modules of its slots in order.
+    pub fn new(device: DeviceSelector, modules: Vec<ModuleChoice>) -> Selector {
+        Selector {
+            text: device.to_string(),
+            device,
+            modules,
+        }
+    }
 }
 
 impl fmt::Display for Selector {
@@ -121,7 +147,7 @@ pub enum SelectError {
         device: String,
         /// Why.
         #[source]
-        source: ModuleError,
+        source: Box<ModuleError>,
     },
 }
 
@@ -178,14 +204,11 @@ impl FromStr for Selector {
                 }
             }
         } else {
+            // a tail that is no number belongs to the type name (`A/B`)
             let (what, revision) = match dev.rsplit_once('/') {
                 Some((what, rev)) => match number(rev) {
                     Some(r) => (what.trim(), Some(r)),
-                    None => {
-                        return Err(syntax(&format!(
-                            "revision {rev:?} is not a number (0x… / #x… hex or decimal)"
-                        )))
-                    }
+                    None => (dev, None),
                 },
                 None => (dev, None),
             };
@@ -327,7 +350,7 @@ impl EsiFile {
         };
         let found: Vec<usize> = match &sel.device {
             DeviceSelector::Position(n) => {
-                return match self.devices.get(n - 1) {
+                return match n.checked_sub(1).and_then(|i| self.devices.get(i)) {
                     Some(d) => Ok((*n, d, Vec::new())),
                     None => Err(no_match(format!(
                         "no device at position @{n} (the file has {})",
@@ -351,20 +374,23 @@ impl EsiFile {
                 } else {
                     by_code
                 };
-                found.pipe_nonempty(|| {
-                    no_match(format!(
+                if found.is_empty() {
+                    return Err(no_match(format!(
                         "no device with product code 0x{code:08X}{}",
                         rev_text(*revision)
-                    ))
-                })?
+                    )));
+                }
+                found
             }
             DeviceSelector::Type { name, revision } => {
-                by_name(name, *revision).pipe_nonempty(|| {
-                    no_match(format!(
+                let found = by_name(name, *revision);
+                if found.is_empty() {
+                    return Err(no_match(format!(
                         "no device with type name {name}{}",
                         rev_text(*revision)
-                    ))
-                })?
+                    )));
+                }
+                found
             }
         };
         let best = found
@@ -401,21 +427,6 @@ impl EsiFile {
     }
 }
 
-/// A non-empty list or the error.
-trait NonEmpty: Sized {
-    fn pipe_nonempty(self, e: impl FnOnce() -> SelectError) -> Result<Self, SelectError>;
-}
-
-impl NonEmpty for Vec<usize> {
-    fn pipe_nonempty(self, e: impl FnOnce() -> SelectError) -> Result<Self, SelectError> {
-        if self.is_empty() {
-            Err(e())
-        } else {
-            Ok(self)
-        }
-    }
-}
-
 /// Choose the device `sel` names ([`EsiFile::select`]) and resolve it with the modules `sel`
 /// names, each remaining slot getting its default module ([`Device::resolve`]).
 pub fn resolve(file: &EsiFile, sel: Option<&Selector>) -> Result<Resolved, SelectError> {
@@ -426,7 +437,7 @@ pub fn resolve(file: &EsiFile, sel: Option<&Selector>) -> Result<Resolved, Selec
         .map_err(|source| SelectError::Module {
             file: file.file.clone(),
             device: device.type_name.clone(),
-            source,
+            source: Box::new(source),
         })?;
     if let Some(plugged) = device.plugged.as_ref().filter(|p| !p.is_empty()) {
         let named = choices.len();
