@@ -360,7 +360,7 @@ fn inner(python: &Path) {
 fn check_file(file: &Path, python: &Path, work: &Path, master: &str, emulator: &str) -> String {
     let link = format!("ethercat:{master}");
     let file_name = file.file_name().unwrap().to_string_lossy().to_string();
-    let devices = file_devices(&file);
+    let devices = file_devices(file);
     assert!(!devices.is_empty(), "{file_name}: no device");
     // `esi list`: every device with its position, identity and name.
     let (status, list, err) = fieldprobe(&["esi", "list", file.to_str().unwrap()]);
@@ -377,7 +377,10 @@ fn check_file(file: &Path, python: &Path, work: &Path, master: &str, emulator: &
             .lines()
             .find(|l| l.starts_with(&head))
             .unwrap_or_else(|| panic!("{file_name}: {head:?} in esi list:\n{list}"));
-        assert!(line.contains(&format!("\"{}\"", d.name)), "{file_name}: {line}");
+        assert!(
+            line.contains(&format!("\"{}\"", d.name)),
+            "{file_name}: {line}"
+        );
     }
     // 1. drive from-esi for every device.
     let mut defs: Vec<(usize, PathBuf)> = Vec::new();

@@ -80,11 +80,16 @@ pub fn run(a: DriveArgs) -> anyhow::Result<i32> {
 fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
     let (file, device) = super::esi_load::load_device(&a.file, a.device.as_deref())?;
     if device.dictionary().is_none() {
-        anyhow::bail!(
-            "{}: device {} has no CoE object dictionary (Profile/Dictionary); a CiA 402 drive \
-             definition needs one",
+        // Said, then the roles decide: without a dictionary only fixed PDOs could carry them.
+        eprintln!(
+            "note: {}: device {} has no CoE object dictionary (Profile/Dictionary){}",
             file.file,
-            device.type_name
+            device.type_name,
+            if device.mailbox.as_ref().is_some_and(|m| m.soe) {
+                "; it speaks SoE (SERCOS over EtherCAT), not CoE"
+            } else {
+                ""
+            }
         );
     }
     // What the file states is a hint, not a gate: the device answers 0x1000 itself.

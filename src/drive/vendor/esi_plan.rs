@@ -413,11 +413,13 @@ pub fn plan(device: &Device) -> Result<Plan, PlanError> {
     for rx in [true, false] {
         let dir = direction(device, &sources, rx, &mut p);
         if let Err(m) = dir {
-            missing.extend(m);
+            missing.extend(m.into_iter().map(|i| (i, rx)));
         }
     }
     if !missing.is_empty() {
-        return Err(PlanError { missing });
+        return Err(PlanError {
+            missing: missing_text(&sources, &missing),
+        });
     }
     finish(&mut p);
     // The mode of operation, when no PDO carries it: written once by SDO, where the device
@@ -441,7 +443,7 @@ fn direction(
     sources: &[RoleSource],
     rx: bool,
     p: &mut Plan,
-) -> Result<(), Vec<String>> {
+) -> Result<(), Vec<u16>> {
     let pdos = if rx { &device.rx_pdos } else { &device.tx_pdos };
     let roles: Vec<(u16, bool)> = ROLES
         .iter()
@@ -480,7 +482,7 @@ fn direction(
             return Ok(());
         }
         if pdos.iter().all(|p| !p.fixed) {
-            return Err(missing_text(sources, &missing, rx));
+            return Err(missing);
         }
     }
     // Fixed PDOs: choose.
@@ -558,7 +560,7 @@ fn direction(
         .map(|(i, _)| *i)
         .collect();
     if !missing.is_empty() {
-        return Err(missing_text(sources, &missing, rx));
+        return Err(missing);
     }
     let mut entries = Vec::new();
     for c in &chosen {
@@ -676,22 +678,233 @@ fn role_entries(s: &RoleSource) -> Vec<EntrySpec> {
     out
 }
 
-fn missing_text(sources: &[RoleSource], missing: &[u16], rx: bool) -> Vec<String> {
-    missing
-        .iter()
-        .map(|&index| {
-            let name = pdo::lookup(index, 0).map_or("object", |o| o.name);
-            let why = if sources.iter().any(|s| s.index == index) {
-                format!(
-                    "not mappable into {} and in no PDO of the device",
-                    if rx { "an RxPDO" } else { "a TxPDO" }
-                )
-            } else {
-                "not in the file (no CiA 402 object in its dictionary or its fixed PDOs, no \
-                 modular device profile object of that name)"
-                    .to_string()
-            };
-            format!("0x{index:04X}:00 {name}: {why}")
-        })
+fn missing_text(sources: &[RoleSource], missing: &[(u16, bool)]) -> Vec<String> {
+    // Objects with the same reason are named together, the reason once.
+    let mut out: Vec<(Vec<String>, String)> = Vec::new();
+    for &(index, rx) in missing {
+        let name = pdo::lookup(index, 0).map_or("object", |o| o.name);
+        let why = if sources.iter().any(|s| s.index == index) {
+            format!(
+                "not mappable into {} and in no PDO of the device",
+                if rx { "an RxPDO" } else { "a TxPDO" }
+            )
+        } else {
+            "not in the file (no CiA 402 object in its dictionary or its fixed PDOs, no \
+             modular device profile object of that name)"
+                .to_string()
+        };
+        let object = format!("0x{index:04X}:00 {name}");
+        match out.iter_mut().find(|(_, w)| *w == why) {
+            Some((objects, _)) => objects.push(object),
+            None => out.push((vec![object], why)),
+        }
+    }
+    out.into_iter()
+        .map(|(objects, why)| format!("{}: {why}", objects.join(", ")))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    //! The choice on small ESI excerpts written here, one kind of device each.
+    use super::*;
+
+    /// A PDO of [`esi`]: (RxPDO, index, fixed, sync manager, excludes, entries (index, sub,
+    /// bits)).
+    type TestPdo<'a> = (bool, u16, bool, Option<u8>, &'a [u16], &'a [(u16, u8, u16)]);
+
+    /// An ESI document: dictionary objects `(index, name, type, bits, mapping)` and PDOs
+    /// `(rx, index, fixed, sm, excludes, entries (index, sub, bits))`.
+    fn esi(
+        objects: &[(u16, &str, &str, u32, &str)],
+        pdos: &[TestPdo],
+    ) -> crate::esi::EsiFile {
+        let mut x = String::from(
+            "<EtherCATInfo><Vendor><Id>#x99</Id></Vendor><Descriptions><Devices><Device>\
+             <Type ProductCode=\"#x1\" RevisionNo=\"#x1\">T</Type><Name>T</Name>\
+             <Sm StartAddress=\"#x1000\" ControlByte=\"#x26\" DefaultSize=\"128\" Enable=\"1\">MBoxOut</Sm>\
+             <Sm StartAddress=\"#x1080\" ControlByte=\"#x22\" DefaultSize=\"128\" Enable=\"1\">MBoxIn</Sm>\
+             <Sm StartAddress=\"#x1100\" ControlByte=\"#x64\" Enable=\"1\">Outputs</Sm>\
+             <Sm StartAddress=\"#x1180\" ControlByte=\"#x20\" Enable=\"1\">Inputs</Sm>",
+        );
+        for &(rx, index, fixed, sm, excludes, entries) in pdos {
+            let tag = if rx { "RxPdo" } else { "TxPdo" };
+            let sm = sm.map_or(String::new(), |s| format!(" Sm=\"{s}\""));
+            x.push_str(&format!(
+                "<{tag} Fixed=\"{}\"{sm}><Index>#x{index:X}</Index><Name>P</Name>",
+                u8::from(fixed)
+            ));
+            for e in excludes {
+                x.push_str(&format!("<Exclude>#x{e:X}</Exclude>"));
+            }
+            for &(i, s, b) in entries {
+                x.push_str(&format!("<Entry><Index>#x{i:X}</Index><SubIndex>{s}</SubIndex><BitLen>{b}</BitLen></Entry>"));
+            }
+            x.push_str(&format!("</{tag}>"));
+        }
+        x.push_str(
+            "<Mailbox><CoE/></Mailbox><Profile><ProfileNo>402</ProfileNo><Dictionary><DataTypes>",
+        );
+        x.push_str("<DataType><Name>DT7001</Name><BitSize>32</BitSize>\
+            <SubItem><SubIdx>1</SubIdx><Name>TP1 Enable</Name><Type>BOOL</Type><BitSize>1</BitSize><BitOffs>16</BitOffs><Flags><PdoMapping>R</PdoMapping></Flags></SubItem>\
+            <SubItem><SubIdx>5</SubIdx><Name>TP1 Enable pos edge</Name><Type>BOOL</Type><BitSize>1</BitSize><BitOffs>20</BitOffs><Flags><PdoMapping>R</PdoMapping></Flags></SubItem>\
+            </DataType></DataTypes><Objects>");
+        for &(index, name, ty, bits, mapping) in objects {
+            x.push_str(&format!(
+                "<Object><Index>#x{index:X}</Index><Name>{name}</Name><Type>{ty}</Type><BitSize>{bits}</BitSize>\
+                 <Flags><Access>rw</Access><PdoMapping>{mapping}</PdoMapping></Flags></Object>"
+            ));
+        }
+        x.push_str(
+            "</Objects></Dictionary></Profile></Device></Devices></Descriptions></EtherCATInfo>",
+        );
+        crate::esi::parse(&x, "t.xml").unwrap_or_else(|e| panic!("{e}\n{x}"))
+    }
+
+    const CIA: &[(u16, &str, &str, u32, &str)] = &[
+        (0x6040, "Controlword", "UINT", 16, "R"),
+        (0x607A, "Target position", "DINT", 32, "R"),
+        (0x6041, "Statusword", "UINT", 16, "T"),
+        (0x6064, "Position actual value", "DINT", 32, "T"),
+    ];
+
+    /// All PDOs fixed: the one with every required role is taken, never together with a PDO
+    /// it excludes; the default-assigned one wins a tie; a torque limit in it gets a value.
+    #[test]
+    fn fixed_pdos_chosen_among_alternatives() {
+        let f = esi(
+            CIA,
+            &[
+                (true, 0x1700, true, Some(2), &[0x1701], &[(0x6040, 0, 16)]),
+                (
+                    true,
+                    0x1701,
+                    true,
+                    None,
+                    &[0x1700],
+                    &[
+                        (0x6040, 0, 16),
+                        (0x607A, 0, 32),
+                        (0x0, 0, 8),
+                        (0x6072, 0, 16),
+                    ],
+                ),
+                (
+                    false,
+                    0x1B00,
+                    true,
+                    Some(3),
+                    &[],
+                    &[(0x6041, 0, 16), (0x6064, 0, 32)],
+                ),
+                (
+                    false,
+                    0x1B01,
+                    true,
+                    None,
+                    &[],
+                    &[(0x6041, 0, 16), (0x6064, 0, 32)],
+                ),
+            ],
+        );
+        let p = plan(&f.devices[0]).unwrap();
+        assert_eq!((p.rx.pdos.as_slice(), p.rx.fixed), (&[0x1701][..], true));
+        assert_eq!(p.rx.entries[2], EntrySpec::gap(8));
+        assert_eq!(p.rx.defaults.len(), 1);
+        assert_eq!((p.rx.defaults[0].0, p.rx.defaults[0].2), (0x6072, 65535));
+        // Equal roles, equal bits: the PDO the ESI assigns by default.
+        assert_eq!(p.tx.pdos, [0x1B00]);
+    }
+
+    /// No fixed PDO carries 0x607A: refused, naming it; a 0x6062 position set-point in a fixed
+    /// RxPDO plays it instead (position interface).
+    #[test]
+    fn target_position_from_a_position_interface() {
+        let without = esi(
+            CIA,
+            &[
+                (true, 0x1700, true, Some(2), &[], &[(0x6040, 0, 16)]),
+                (
+                    false,
+                    0x1B00,
+                    true,
+                    Some(3),
+                    &[],
+                    &[(0x6041, 0, 16), (0x6064, 0, 32)],
+                ),
+            ],
+        );
+        let e = plan(&without.devices[0]).unwrap_err();
+        assert!(e.to_string().contains("0x607A:00 target position"), "{e}");
+        let with = esi(
+            CIA,
+            &[
+                (
+                    true,
+                    0x1701,
+                    true,
+                    Some(2),
+                    &[],
+                    &[(0x6062, 0, 32), (0x6040, 0, 16)],
+                ),
+                (
+                    false,
+                    0x1B00,
+                    true,
+                    Some(3),
+                    &[],
+                    &[(0x6041, 0, 16), (0x6064, 0, 32)],
+                ),
+            ],
+        );
+        let p = plan(&with.devices[0]).unwrap();
+        let r = p.roles();
+        assert_eq!((r[0].index, r[0].object), (0x607A, 0x6062));
+    }
+
+    /// A configurable PDO takes the roles' objects the dictionary marks mappable; a word of
+    /// bits is mapped bit for bit with gaps, its role a 16-bit word from its first bit.
+    #[test]
+    fn configurable_pdo_and_a_word_of_bits() {
+        let mut objects = CIA.to_vec();
+        objects.push((0x7001, "FB Touch probe outputs", "DT7001", 32, ""));
+        let f = esi(
+            &objects,
+            &[
+                (true, 0x1600, false, Some(2), &[], &[(0x6040, 0, 16)]),
+                (false, 0x1A00, false, Some(3), &[], &[(0x6041, 0, 16)]),
+            ],
+        );
+        let sources = role_sources(&f.devices[0]);
+        let tp = sources
+            .iter()
+            .find(|s| s.index == 0x60B8)
+            .expect("a TP word");
+        assert_eq!(tp.word, Some(16));
+        assert_eq!(tp.parts.iter().map(|p| p.at).collect::<Vec<_>>(), [0, 4]);
+        assert_eq!(
+            role_entries(tp),
+            [
+                EntrySpec {
+                    index: 0x7001,
+                    sub: 1,
+                    ty: DataType::U8,
+                    bits: 1
+                },
+                EntrySpec::gap(3),
+                EntrySpec {
+                    index: 0x7001,
+                    sub: 5,
+                    ty: DataType::U8,
+                    bits: 1
+                },
+                EntrySpec::gap(11),
+            ]
+        );
+        let p = plan(&f.devices[0]).unwrap();
+        assert_eq!((p.rx.pdos.as_slice(), p.rx.fixed), (&[0x1600][..], false));
+        // Without a status word the touch probe is incomplete and left out.
+        assert!(p.source(0x60B8).is_none());
+        assert!(p.rx.entries.iter().all(|e| e.index != 0x7001));
+    }
 }

@@ -1409,13 +1409,22 @@ async fn write_pdo_mapping(
         (0x1C12u16, 0x1600u16, &def.rxpdo, &def.rx_assign),
         (0x1C13, 0x1A00, &def.txpdo, &def.tx_assign),
     ] {
-        let what = |s: &str| format!("device {who}: PDO mapping {s}");
         if a.fixed {
             assign_fixed(md, c, assign, &a.pdos, who).await?;
             check_fixed(md, c, &a.pdos, layout, def, who).await?;
             continue;
         }
         let pdo = a.pdos.first().copied().unwrap_or(default_pdo);
+        // A device that refuses the mapping often has fixed PDOs (or fewer entries): say where
+        // a definition that takes them as they are comes from.
+        let what = |s: &str| {
+            format!(
+                "device {who}: PDO mapping {s} (drive '{}' maps its entries into {pdo:#06x}; for \
+                 a device whose PDOs are fixed or smaller, `fieldprobe drive from-esi \
+                 VENDOR.xml` writes a definition with the PDOs its ESI offers)",
+                def.name
+            )
+        };
         c.sdo_download(md, assign, 0, &[0])
             .await
             .map_err(mbx_err(what(&format!("{assign:#06x}:00 = 0"))))?;
