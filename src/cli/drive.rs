@@ -117,7 +117,17 @@ fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
             file.file, device.type_name
         );
     }
-    write(&VendorDevice::from_esi(&file, &device), &a.output)
+    let mut dev = VendorDevice::from_esi(&file, &device);
+    // `[device] esi`: the file, the device's position and its modules, so that the emulator
+    // plays exactly this device.
+    let modules: String = device
+        .plugged
+        .iter()
+        .flatten()
+        .map(|m| format!("+#x{:X}", m.ident))
+        .collect();
+    dev.reference = Some(format!("{}#@{}{modules}", file.file, device.position));
+    write(&dev, &a.output)
 }
 
 fn from_eds(a: FromEdsArgs) -> anyhow::Result<i32> {

@@ -90,6 +90,9 @@ pub struct VendorDevice {
     pub plan: Option<plan::Plan>,
     /// Why no plan could be made (the required roles the device cannot carry).
     pub plan_error: Option<plan::PlanError>,
+    /// The device as a reference to its file (`FILE.xml#@N+MODULE…`, modules included), for
+    /// `[device] esi`; `None`: [`Self::file`].
+    pub reference: Option<String>,
 }
 
 impl VendorDevice {
@@ -541,7 +544,7 @@ fn planned_sections(dev: &VendorDevice, plan: &plan::Plan) -> Sections {
             t,
             "# the vendor's ESI, which `--link ethercat-emu` plays the device from (relative to the\n\
              # current directory, else to this file's)\nesi = \"{}\"",
-            toml_escape(&dev.file)
+            toml_escape(dev.reference.as_deref().unwrap_or(&dev.file))
         );
         t.push('\n');
     }

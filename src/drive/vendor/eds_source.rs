@@ -48,6 +48,7 @@ impl VendorDevice {
             objects,
             plan: None,
             plan_error: None,
+            reference: None,
         }
     }
 }

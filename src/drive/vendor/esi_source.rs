@@ -159,6 +159,7 @@ impl VendorDevice {
             objects,
             plan: plan.as_ref().ok().cloned(),
             plan_error: plan.err(),
+            reference: None,
         }
     }
 }

@@ -130,7 +130,13 @@ fn vendor_drive(
     cycle: Duration,
 ) -> Result<Esc, LinkError> {
     let other = |m: String| LinkError::Other(format!("axis {axis}, drive '{}': {m}", def.name));
-    let given = std::path::Path::new(esi_path);
+    // `FILE.xml#SEL`: the device (and its modules) the selector names; without one, the
+    // device with the definition's identity, each slot with its default module.
+    let (file_part, sel) = match esi::split_spec(esi_path) {
+        (f, Some(sel)) if !std::path::Path::new(esi_path).exists() => (f, Some(sel)),
+        _ => (esi_path, None),
+    };
+    let given = std::path::Path::new(file_part);
     let beside = std::path::Path::new(&def.file)
         .parent()
         .map(|d| d.join(given))
@@ -140,19 +146,35 @@ fn vendor_drive(
         _ => given.to_path_buf(),
     };
     let file = esi::load(&path).map_err(|e| other(format!("[device] esi: {e}")))?;
-    let device = file
-        .device(id.product_code, id.revision.unwrap_or(u32::MAX))
-        .or_else(|| file.device_by_product(id.product_code))
-        .ok_or_else(|| {
-            other(format!(
-                "[device] esi {}: no device with product code {:#010x}",
-                path.display(),
-                id.product_code
-            ))
-        })?
-        // A modular device with the default module in every slot.
-        .resolve(&[])
-        .map_err(|e| other(format!("[device] esi {}: {e}", path.display())))?;
+    let device = match sel {
+        Some(sel) => {
+            let sel: esi::Selector = sel
+                .parse()
+                .map_err(|e| other(format!("[device] esi {esi_path}: {e}")))?;
+            esi::resolve(&file, Some(&sel))
+                .map_err(|e| other(format!("[device] esi {esi_path}: {e}")))?
+                .device
+        }
+        None => file
+            .device(id.product_code, id.revision.unwrap_or(u32::MAX))
+            .or_else(|| file.device_by_product(id.product_code))
+            .ok_or_else(|| {
+                other(format!(
+                    "[device] esi {}: no device with product code {:#010x}",
+                    path.display(),
+                    id.product_code
+                ))
+            })?
+            // A modular device with the default module in every slot.
+            .resolve(&[])
+            .map_err(|e| other(format!("[device] esi {}: {e}", path.display())))?,
+    };
+    if device.product_code != id.product_code {
+        return Err(other(format!(
+            "[device] esi {esi_path} names product code {:#010x}, [device] product_code is {:#010x}",
+            device.product_code, id.product_code
+        )));
+    }
     let device = &device;
     let mut base = crate::drive::catalogue::builtin("cia402-generic")
         .ok_or_else(|| other("the built-in cia402-generic drive is missing".into()))?;
