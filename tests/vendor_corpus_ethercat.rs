@@ -586,3 +586,110 @@ fn check_file(file: &Path, python: &Path, work: &Path, master: &str, emulator: &
 fn seed004_present() -> bool {
     test_data::seeds_present(TEST_NAME)
 }
+
+/// Modules of a modular device (ETG.2000 `Slots` / `Modules`) as the file writes them: for
+/// every device with slots, (1-based position, [(ModuleIdent, RxPDOs carry 0x607A and TxPDOs
+/// 0x6064)]).
+fn modular_devices(path: &Path) -> Vec<(usize, Vec<(u32, bool)>)> {
+    let raw = std::fs::read(path).expect("read ESI");
+    let text_all = String::from_utf8_lossy(&raw);
+    let doc = roxmltree::Document::parse(text_all.trim_start_matches('\u{feff}')).expect("XML");
+    let root = doc.root_element();
+    let carries = |m: roxmltree::Node, tag: &str, index: u32| {
+        m.children()
+            .filter(|c| c.has_tag_name(tag))
+            .flat_map(|p| p.children().filter(|e| e.has_tag_name("Entry")))
+            .any(|e| esi_number(text(kid(e, "Index"))) == index)
+    };
+    let modules: Vec<(u32, bool)> = root
+        .descendants()
+        .filter(|n| n.has_tag_name("Module"))
+        .filter_map(|m| {
+            let id = kid(m, "Type")?.attribute("ModuleIdent").map(esi_number)?;
+            Some((
+                id,
+                carries(m, "RxPdo", 0x607A) && carries(m, "TxPdo", 0x6064),
+            ))
+        })
+        .collect();
+    root.descendants()
+        .filter(|n| n.has_tag_name("Device") && kid(*n, "Type").is_some())
+        .enumerate()
+        .filter_map(|(k, d)| {
+            let idents: Vec<u32> = d
+                .descendants()
+                .filter(|n| n.has_tag_name("ModuleIdent"))
+                .map(|n| esi_number(text(Some(n))))
+                .collect();
+            (!idents.is_empty()).then(|| {
+                let of_device = modules
+                    .iter()
+                    .filter(|(id, _)| idents.contains(id))
+                    .copied()
+                    .collect();
+                (k + 1, of_device)
+            })
+        })
+        .collect()
+}
+
+/// Every module a modular device's slot takes (`FILE#@N+MODULE`): `drive from-esi` gives a
+/// definition where the module's PDOs carry the target and actual position, else the clear
+/// refusal; with the definition, hello.nc on the in-process emulated bus (which plays the
+/// device with that module, `[device] esi`) prints what `--link sim` prints.
+#[test]
+fn every_module_of_a_modular_device() {
+    let Some(dir) = esi_dir() else {
+        return;
+    };
+    let work = tempfile::tempdir().unwrap();
+    let mut seen = 0;
+    for file in esi_files(&dir) {
+        for (position, modules) in modular_devices(&file) {
+            for (ident, csp) in modules {
+                seen += 1;
+                let spec = format!("{}#@{position}+#x{ident:X}", file.display());
+                let (status, toml, err) = fieldprobe(&["drive", "from-esi", &spec]);
+                if !csp {
+                    assert_eq!(
+                        status.and_then(|s| s.code()),
+                        Some(2),
+                        "{spec}: no position in the module's PDOs: refused\n{toml}{err}"
+                    );
+                    assert!(err.contains("cannot run a CiA 402 axis"), "{spec}: {err}");
+                    continue;
+                }
+                assert!(status.is_some_and(|s| s.success()), "{spec}: {err}");
+                assert!(toml.contains(&format!("+#x{ident:X}\"")), "{spec}: {toml}");
+                let def = work.path().join(format!("m{seen}.toml"));
+                std::fs::write(&def, &toml).unwrap();
+                let machine = work.path().join(format!("m{seen}.machine.toml"));
+                let mut m = String::from("[channel]\n");
+                for axis in ["X", "Y", "Z"] {
+                    m.push_str(&format!(
+                        "[[axis]]\nname = \"{axis}\"\ndrive = \"{}\"\n",
+                        def.display()
+                    ));
+                }
+                std::fs::write(&machine, m).unwrap();
+                let machine = machine.to_str().unwrap();
+                let run = |link: &str| {
+                    fieldprobe(&[
+                        "run",
+                        "examples/nc/hello.nc",
+                        "--machine",
+                        machine,
+                        "--link",
+                        link,
+                    ])
+                };
+                let (s1, want, e1) = run("sim");
+                let (s2, got, e2) = run("ethercat-emu");
+                assert!(s1.is_some_and(|s| s.success()), "{spec} sim: {e1}");
+                assert!(s2.is_some_and(|s| s.success()), "{spec} ethercat-emu: {e2}");
+                assert_eq!(got, want, "{spec}: ethercat-emu vs sim\n{e2}");
+            }
+        }
+    }
+    println!("modules checked: {seen}");
+}

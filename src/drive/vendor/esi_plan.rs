@@ -715,10 +715,7 @@ mod tests {
 
     /// An ESI document: dictionary objects `(index, name, type, bits, mapping)` and PDOs
     /// `(rx, index, fixed, sm, excludes, entries (index, sub, bits))`.
-    fn esi(
-        objects: &[(u16, &str, &str, u32, &str)],
-        pdos: &[TestPdo],
-    ) -> crate::esi::EsiFile {
+    fn esi(objects: &[(u16, &str, &str, u32, &str)], pdos: &[TestPdo]) -> crate::esi::EsiFile {
         let mut x = String::from(
             "<EtherCATInfo><Vendor><Id>#x99</Id></Vendor><Descriptions><Devices><Device>\
              <Type ProductCode=\"#x1\" RevisionNo=\"#x1\">T</Type><Name>T</Name>\
