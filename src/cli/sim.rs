@@ -70,7 +70,6 @@
 use super::{number, EXIT_BAD_INPUT, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::bus::can::{CanBus, CanError};
-use fieldprobe::bus::canopen::eds;
 use fieldprobe::drive::catalogue;
 use fieldprobe::esi::{self, Device, EsiFile};
 use fieldprobe::limits::MAX_SEGMENT_DEVICES;
@@ -684,7 +683,7 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
     })?;
     let eds = match &a.eds {
         None => None,
-        Some(p) => Some(eds::load(p).map_err(|e| anyhow::anyhow!("--eds {}: {e}", p.display()))?),
+        Some(p) => Some(super::canopen_od::load_eds(Some("--eds"), p)?),
     };
     let mut nodes = Vec::new();
     for &id in &ids {

@@ -298,24 +298,9 @@ fn eds_object(e: &eds::Entry, node: u8) -> Result<(ObjectEntry, Option<usize>), 
             Access::Rw
         }
     };
-    let given = e.parameter_value.as_ref().or(e.default.as_ref());
-    let value = match given {
-        None => None,
-        Some(text) => Some(e.value_bytes(node).ok_or_else(|| match e.data_type {
-            T::Other(code) => format!(
-                "line {}: value {:?} of data type {code:#06x} ({code}): the emulated node \
-                 stores no complex or manufacturer-specific data type (CiA 301 codes \
-                 0x0020..=0x0023, 0x0040..=0x025F); use a basic type (0x0001..=0x001B)",
-                text.line, text.raw
-            ),
-            t => format!(
-                "line {}: value {:?} is not a valid {t:?} (data type {:#06x})",
-                text.line,
-                text.raw,
-                t.code()
-            ),
-        })?),
-    };
+    // A value the lenient EDS reader could not read (it warned) is no value: zero / empty,
+    // as for an entry without one.
+    let value = e.value_bytes(node);
     let numeric = match e.data_type {
         T::Boolean => Some(DataType::Bool),
         T::Integer8 => Some(DataType::I8),
@@ -418,8 +403,9 @@ impl EmulatedNode {
     /// * Every EDS entry (every sub-index, compact storage expanded) becomes an object with the
     ///   EDS access (`ro`/`const` → read-only, `wo` → write-only, `rw`/`rwr`/`rww` →
     ///   read-write) and the EDS value evaluated for `id` (`$NODEID`): `ParameterValue` (DCF)
-    ///   if present, else `DefaultValue`, else zero / empty. A value that does not parse for
-    ///   its data type is an error naming the object.
+    ///   if present, else `DefaultValue`, else zero / empty — as the lenient EDS reader reads
+    ///   it ([`eds`]: a value beyond its type saturates or keeps its bit pattern; one that
+    ///   does not read at all, e.g. of a complex data type, counts as none).
     /// * Data types: BOOLEAN, INTEGER8/16/32/64 and UNSIGNED8/16/32/64 are numeric objects
     ///   (a download must have exactly the type's size, else abort 0x0607_0010). Other
     ///   fixed-size types (INTEGER24/40/48/56, UNSIGNED24/40/48/56, REAL32/64, TIME_OF_DAY,

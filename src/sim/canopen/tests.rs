@@ -137,23 +137,33 @@ fn from_eds_keeps_the_drive_model_behind_its_objects() {
 }
 
 #[test]
-fn from_eds_rejects_bad_node_ids_and_values() {
-    let Some(path) = test_data(TECHNOSOFT, "from_eds_rejects_bad_node_ids_and_values") else {
+fn from_eds_rejects_bad_node_ids_and_reads_odd_values() {
+    let Some(path) = test_data(
+        TECHNOSOFT,
+        "from_eds_rejects_bad_node_ids_and_reads_odd_values",
+    ) else {
         return;
     };
     let def = catalogue::load("cia402-generic").unwrap();
     let eds = eds::load(path).unwrap();
     assert!(EmulatedNode::from_eds(0, &def, &eds).is_err());
     assert!(EmulatedNode::from_eds(128, &def, &eds).is_err());
-    let bad = eds::parse(
+    // A default above UNSIGNED32 saturates (a warning of the parse); the node serves it.
+    let odd = eds::parse(
         "[MandatoryObjects]\nSupportedObjects=1\n1=0x1000\n\n[1000]\nParameterName=Device type\n\
          ObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0x1FFFFFFFF\nPDOMapping=0\n",
-        "bad.eds",
+        "odd.eds",
+    )
+    .unwrap();
+    assert!(
+        odd.warnings
+            .iter()
+            .any(|w| w.object == Some((0x1000, 0)) && w.kind == eds::EdsErrorKind::OutOfRange),
+        "{:?}",
+        odd.warnings
     );
-    if let Ok(bad) = bad {
-        let e = EmulatedNode::from_eds(5, &def, &bad).unwrap_err();
-        assert!(e.contains("0x1000"), "{e}");
-    }
+    let node = EmulatedNode::from_eds(5, &def, &odd).unwrap();
+    assert_eq!(node.read_object(0x1000, 0), Ok(vec![0xFF; 4]));
 }
 
 // ------------------------------------------------------------------------------------------
