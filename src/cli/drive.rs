@@ -135,7 +135,8 @@ fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
 fn from_eds(a: FromEdsArgs) -> anyhow::Result<i32> {
     let eds = super::canopen_od::load_eds(None, &a.file)?;
     let dev = VendorDevice::from_eds(&eds);
-    match vendor::generate(&dev, a.output.name.as_deref()) {
+    let pdos = vendor::PdoCapacity::from_eds(&eds);
+    match vendor::generate_in(&dev, a.output.name.as_deref(), Some(&pdos)) {
         // Not a CiA 402 drive at all: say what its device type names (CiA 301 0x1000, bits
         // 0 … 15 the device profile number).
         Err(e @ vendor::VendorError::MissingObjects { .. }) => {
