@@ -1024,3 +1024,23 @@ fn odd_values_are_read_and_many_identical_problems_are_one_warning() {
     );
     assert!(forms[2].contains("`#x` hexadecimal prefix"), "{forms:?}");
 }
+
+#[test]
+fn many_distinct_problems_read_in_linear_time() {
+    // 100 000 lines that are not INI, each different: 100 000 warnings that do not fold. Folding
+    // them pairwise would compare 10^10 times; the reader keys them instead. The bound is wide
+    // for a loaded machine (a linear read takes well under a second).
+    let mut text = String::from(HEAD);
+    for i in 0..100_000 {
+        text.push_str(&format!("not ini {i}\n"));
+    }
+    let t0 = std::time::Instant::now();
+    let e = lenient(&text);
+    assert!(
+        t0.elapsed() < std::time::Duration::from_secs(30),
+        "{:?}",
+        t0.elapsed()
+    );
+    assert_eq!(e.warnings.len(), 100_000);
+    assert!(e.get(0x1000, 0).is_some());
+}

@@ -38,7 +38,7 @@ use std::path::Path;
 // Errors
 
 /// What went wrong, for callers that match on the kind instead of the text.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum EdsErrorKind {
     /// The file could not be read.
     Io,

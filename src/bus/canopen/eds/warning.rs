@@ -1,6 +1,7 @@
 //! Warnings of a lenient read ([`EdsWarning`]): what was odd in the file, where, and what the
 //! reader used instead; identical problems folded into one warning with a count.
 
+use std::collections::HashMap;
 use std::fmt;
 
 use super::{EdsError, EdsErrorKind};
@@ -98,18 +99,6 @@ impl EdsWarning {
     pub fn count(&self) -> usize {
         1 + self.more
     }
-
-    /// Same problem, same replacement, same key: foldable into one warning.
-    fn same_kind(&self, other: &EdsWarning) -> bool {
-        self.kind == other.kind
-            && self.message == other.message
-            && self.used == other.used
-            && match (&self.key, &other.key) {
-                (Some(a), Some(b)) => a.eq_ignore_ascii_case(b),
-                (None, None) => true,
-                _ => false,
-            }
-    }
 }
 
 impl fmt::Display for EdsWarning {
@@ -152,21 +141,34 @@ impl fmt::Display for EdsWarning {
 }
 
 /// Fold warnings with the same problem, replacement and key into the first of them, keeping
-/// the order of first occurrence.
+/// the order of first occurrence (linear in the number of warnings: a file of many distinct
+/// problems does not make this quadratic).
 pub fn fold(warnings: Vec<EdsWarning>) -> Vec<EdsWarning> {
+    type Key = (EdsErrorKind, Option<String>, String, Option<String>);
     let mut out: Vec<EdsWarning> = Vec::new();
+    let mut first: HashMap<Key, usize> = HashMap::new();
     for w in warnings {
-        match out.iter_mut().find(|o| o.same_kind(&w)) {
-            Some(first) => {
-                first.more += 1;
-                if first.others.len() < PLACES_SHOWN {
-                    first.others.push(Place {
+        let key: Key = (
+            w.kind,
+            w.key.as_ref().map(|k| k.to_ascii_lowercase()),
+            w.message.clone(),
+            w.used.clone(),
+        );
+        match first.get(&key) {
+            Some(&i) => {
+                let f = &mut out[i];
+                f.more += 1;
+                if f.others.len() < PLACES_SHOWN {
+                    f.others.push(Place {
                         line: w.line,
                         section: w.section,
                     });
                 }
             }
-            None => out.push(w),
+            None => {
+                first.insert(key, out.len());
+                out.push(w);
+            }
         }
     }
     out
