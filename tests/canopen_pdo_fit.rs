@@ -340,7 +340,7 @@ fn two_entry_mapping_parameters_fit_the_from_eds_definition_and_refuse_the_gener
     let def = generic();
     match CanopenLink::with_nodes(
         nodes(&cut, "ipos-2.eds", &def, &[6]),
-        &[def.clone()],
+        std::slice::from_ref(&def),
         Nanos::from_micros(4000),
     ) {
         Err(LinkError::Refused(m)) => {

@@ -729,6 +729,13 @@ impl CanopenLink {
             .map(|a| load::node_frames(&a.rx, &a.tx))
             .collect();
         link.load = BusLoad::new(&nodes, bitrate, cycle, HEARTBEAT_MS);
+        // The layout fitted into the nodes' PDOs may need more frames than planned (fewer
+        // entries a PDO): the same limit, before any SYNC or PDO.
+        if let Err(refused) = link.load.check() {
+            return Err(LinkError::Other(format!(
+                "{refused} (with the PDOs fitted into what the nodes offer)"
+            )));
+        }
         link.epoch = link.bus.wire_clock().unwrap_or(Nanos::ZERO);
         Ok(link)
     }
