@@ -1138,7 +1138,7 @@ mod parse;
 mod warning;
 
 pub use lenient::ValueRole;
-pub use warning::{EdsWarning, Place};
+pub use warning::{EdsWarning, Place, PLACES_SHOWN};
 
 /// Parser settings.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
