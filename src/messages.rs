@@ -326,6 +326,11 @@ pub mod ids {
     /// mapping); names the node, the drive and the objects (the CANopen counterpart of
     /// 900405).
     pub const CANOPEN_PDO_OBJECTS_MISSING: u32 = 900505;
+    /// Project (error, start-up): the process data of an axis's drive definition do not fit
+    /// the PDOs its CANopen node offers (the RPDOs / TPDOs the node has, the sub-indices of
+    /// their mapping parameters, 8 bytes a frame), asked by SDO upload; names the node, the
+    /// drive, what the node offers and the objects left without a PDO (issue 25).
+    pub const CANOPEN_PDO_CAPACITY: u32 = 900506;
 }
 
 /// A number from a user or a file, for a message: as Rust writes it for ordinary magnitudes,

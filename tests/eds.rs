@@ -531,11 +531,23 @@ fn error_bad_number() {
         err(&text),
         "t.eds:11: [1000] DefaultValue: bad number \"0x60G92\""
     );
-    let e = eds::parse(&text, "t.eds").unwrap_err();
+    // Read leniently: a warning at the value, and no value.
+    let e = eds::parse(&text, "t.eds").unwrap();
+    let w = &e.warnings[0];
     assert_eq!(
-        (e.kind, e.line, e.column),
-        (EdsErrorKind::BadNumber, Some(11), Some(14))
+        (w.kind, w.line, w.column, w.object),
+        (
+            EdsErrorKind::BadNumber,
+            Some(11),
+            Some(14),
+            Some((0x1000, 0))
+        )
     );
+    assert_eq!(
+        w.to_string(),
+        "t.eds:11: [1000] DefaultValue: bad number \"0x60G92\"; no value: the object reads 0 (empty)"
+    );
+    assert_eq!(e.get(0x1000, 0).unwrap().default_value(1), None);
     let text = HEAD.replace("VendorNumber=0x1A3", "VendorNumber=0x1A3_0000_0000");
     assert_eq!(
         err(&text),
@@ -569,10 +581,10 @@ fn error_unknown_access_type() {
         err(&text),
         "t.eds:10: [1000] AccessType: unknown access type \"r\" (allowed: ro, wo, rw, rwr, rww, const)"
     );
-    assert_eq!(
-        eds::parse(&text, "t.eds").unwrap_err().kind,
-        EdsErrorKind::UnknownAccessType
-    );
+    let e = eds::parse(&text, "t.eds").unwrap();
+    assert_eq!(e.warnings[0].kind, EdsErrorKind::UnknownAccessType);
+    assert_eq!(e.warnings[0].used.as_deref(), Some("read as ro"));
+    assert_eq!(e.get(0x1000, 0).unwrap().access, AccessType::ReadOnly);
 }
 
 #[test]
@@ -648,10 +660,13 @@ fn error_sub_number_mismatch() {
         err(&text),
         "t.eds:18: [1018] SubNumber: SubNumber=3 but 2 sub-index sections are present"
     );
+    let e = eds::parse(&text, "t.eds").unwrap();
+    assert_eq!(e.warnings[0].kind, EdsErrorKind::SubNumberMismatch);
     assert_eq!(
-        eds::parse(&text, "t.eds").unwrap_err().kind,
-        EdsErrorKind::SubNumberMismatch
+        e.warnings[0].used.as_deref(),
+        Some("the 2 sub-index sections present are read")
     );
+    assert_eq!(e.subs(0x1018).count(), 2);
 }
 
 #[test]
@@ -670,10 +685,13 @@ fn error_data_type_missing_on_var() {
         err(&text),
         "t.eds:6: [1000] DataType: missing; required for a VAR"
     );
+    let e = eds::parse(&text, "t.eds").unwrap();
+    assert_eq!(e.warnings[0].kind, EdsErrorKind::MissingKey);
     assert_eq!(
-        eds::parse(&text, "t.eds").unwrap_err().kind,
-        EdsErrorKind::MissingKey
+        e.warnings[0].used.as_deref(),
+        Some("the object is left out")
     );
+    assert!(e.get(0x1000, 0).is_none());
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -794,4 +812,235 @@ fn line_deletions_never_panic() {
         }
         let _ = eds::parse(&lines.join("\n"), "lines.eds");
     });
+}
+
+// ------------------------------------------------------------------------------------------------
+// Files as vendors write them (issue 25): read leniently, each oddity a warning saying what is
+// read instead; strict mode refuses at the first. Values by hand from the files / CiA 306.
+
+const YIYOU: &str = "eds/Yiyou-EuServo-V1.4.eds";
+const DEMACLENKO: &str = "eds/Demaclenko-emecdrv5-rev09.eds";
+
+#[test]
+fn yiyou_high_limit_65536_on_unsigned16_reads_as_65535_one_folded_warning() {
+    let Some(text) = read(YIYOU, "yiyou_high_limit_65536_on_unsigned16_reads_as_65535") else {
+        return;
+    };
+    let e = eds::parse(&text, "yiyou.eds").unwrap_or_else(|e| panic!("{e}"));
+    // [2023] line 2062 and [2025] line 2084: DataType=0x0006, HighLimit=65536 (lines 2070, 2092).
+    for index in [0x2023, 0x2025] {
+        let x = e.get(index, 0).unwrap();
+        assert_eq!(x.data_type, DataType::Unsigned16);
+        assert_eq!(x.high_limit_value(1), Some(Value::Unsigned(65535)));
+        assert_eq!(x.low_limit_value(1), Some(Value::Unsigned(0)));
+    }
+    let w: Vec<&eds::EdsWarning> = e
+        .warnings
+        .iter()
+        .filter(|w| w.kind == EdsErrorKind::OutOfRange)
+        .collect();
+    assert_eq!(w.len(), 1, "{:?}", e.warnings);
+    assert_eq!(w[0].count(), 2);
+    assert_eq!(
+        w[0].to_string(),
+        "yiyou.eds:2070: [2023] HighLimit: 65536 is out of range for Unsigned16; read as 65535, \
+         the largest Unsigned16 (and 1 more like it: [2025] line 2092)"
+    );
+    assert_eq!(w[0].object, Some((0x2023, 0)));
+    // [1000] DefaultValue=131474 (decimal) = 0x00020192, CiA 402.
+    assert_eq!(
+        e.get(0x1000, 0).unwrap().default_value(1),
+        Some(Value::Unsigned(0x0002_0192))
+    );
+    let strict = eds::parse_with(&text, "yiyou.eds", ParseOptions { strict: true }).unwrap_err();
+    assert_eq!(
+        strict.to_string(),
+        "yiyou.eds:2070: [2023] HighLimit: 65536 is out of range for Unsigned16"
+    );
+}
+
+#[test]
+fn demaclenko_device_type_is_read_as_written_with_a_warning() {
+    let Some(text) = read(DEMACLENKO, "demaclenko_device_type_is_read_as_written") else {
+        return;
+    };
+    let e = eds::parse(&text, "emec.eds").unwrap_or_else(|e| panic!("{e}"));
+    // [1000] line 103, DefaultValue=0x92020100 (line 108): bits 0 … 15 = 0x0100 = 256.
+    assert_eq!(
+        e.get(0x1000, 0).unwrap().default_value(1),
+        Some(Value::Unsigned(0x9202_0100))
+    );
+    let w = e
+        .warnings
+        .iter()
+        .find(|w| w.kind == EdsErrorKind::DeviceType)
+        .expect("a device type warning");
+    assert_eq!((w.line, w.object), (Some(108), Some((0x1000, 0))));
+    let text = w.to_string();
+    for want in [
+        "device profile 256",
+        "0x92 and 0x01",
+        "byte order looks swapped",
+        "reports 0x92020100",
+    ] {
+        assert!(text.contains(want), "{want:?} in {text}");
+    }
+    // 1 RPDO ([1400]/[1600]) and 4 TPDOs, NrOfRXPDO=1 (line 39).
+    assert_eq!(e.device_info.nr_of_rx_pdo, Some(1));
+    assert!(e.get(0x1401, 1).is_none());
+    assert_eq!(e.subs(0x1600).count(), 9);
+}
+
+#[test]
+fn every_vendor_file_reads_leniently() {
+    let Some(dir) = test_data::test_data(YIYOU, "every_vendor_file_reads_leniently") else {
+        return;
+    };
+    let dir = dir.parent().unwrap();
+    let mut n = 0;
+    for f in std::fs::read_dir(dir).unwrap() {
+        let p = f.unwrap().path();
+        if !p
+            .extension()
+            .is_some_and(|x| x.eq_ignore_ascii_case("eds") || x.eq_ignore_ascii_case("dcf"))
+        {
+            continue;
+        }
+        let e = eds::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+        assert!(!e.objects.is_empty(), "{}", p.display());
+        // Every value of every entry reads in its type (what a node or a master uses).
+        for x in e.objects.values() {
+            if let Some(v) = x.value(1) {
+                x.data_type
+                    .encode(&v)
+                    .unwrap_or_else(|err| panic!("{}: {x:?}: {err}", p.display()));
+            }
+        }
+        n += 1;
+    }
+    assert!(n >= 8, "{n} files in {}", dir.display());
+}
+
+fn lenient(text: &str) -> eds::Eds {
+    eds::parse(text, "t.eds").unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn used(e: &eds::Eds, kind: EdsErrorKind) -> String {
+    let w = e
+        .warnings
+        .iter()
+        .find(|w| w.kind == kind)
+        .unwrap_or_else(|| panic!("no {kind:?} warning in {:?}", e.warnings));
+    w.used.clone().unwrap_or_default()
+}
+
+#[test]
+fn odd_structure_is_read_with_warnings() {
+    // Repeated key: the first counts.
+    let e = lenient(&HEAD.replace("AccessType=ro\n", "AccessType=ro\nAccessType=rw\n"));
+    assert_eq!(e.get(0x1000, 0).unwrap().access, AccessType::ReadOnly);
+    assert_eq!(
+        used(&e, EdsErrorKind::DuplicateKey),
+        "this value is ignored, the first counts"
+    );
+    // Repeated section: ignored.
+    let e = lenient(&format!("{HEAD}[1000]\nParameterName=again\n"));
+    assert_eq!(e.get(0x1000, 0).unwrap().parameter_name, "Device type");
+    // No [MandatoryObjects], no AccessType, an unknown ObjectType, a line without `=`.
+    let text = "[1000]\nParameterName=Device type\nObjectType=0x3\nDataType=0x0007\n\
+                DefaultValue=0x20192\ngarbage\n[1017]\nDataType=0x0007\nAccessType=rw\n\
+                DefaultValue=100\n";
+    let e = lenient(text);
+    let d = e.get(0x1000, 0).unwrap();
+    assert_eq!(
+        (d.object_type, d.access),
+        (ObjectType::Var, AccessType::ReadWrite)
+    );
+    assert_eq!(used(&e, EdsErrorKind::MissingKey), "read as rw");
+    assert_eq!(used(&e, EdsErrorKind::UnknownObjectType), "read as 0x7");
+    assert_eq!(used(&e, EdsErrorKind::Syntax), "the line is ignored");
+    // 0x1017 declared UNSIGNED32: read as CiA 301's UNSIGNED16.
+    assert_eq!(e.get(0x1017, 0).unwrap().data_type, DataType::Unsigned16);
+    assert_eq!(
+        e.get(0x1017, 0).unwrap().default_value(1),
+        Some(Value::Unsigned(100))
+    );
+    // Text with no object section at all is no EDS.
+    let err = eds::parse("[FileInfo]\nFileName=x\n", "t.eds").unwrap_err();
+    assert_eq!(err.kind, EdsErrorKind::MissingSection);
+}
+
+#[test]
+fn odd_values_are_read_and_many_identical_problems_are_one_warning() {
+    let mut text = String::from(HEAD);
+    text.push_str("[OptionalObjects]\nSupportedObjects=40\n");
+    for i in 0..40 {
+        text.push_str(&format!("{}=0x{:04X}\n", i + 1, 0x2000 + i));
+    }
+    for i in 0..40 {
+        text.push_str(&format!(
+            "[{:04X}]\nParameterName=p{i}\nDataType=0x0005\nAccessType=rw\nDefaultValue=0\n\
+             LowLimit=-1\nHighLimit=256\n",
+            0x2000 + i
+        ));
+    }
+    // One more with odd number forms.
+    text = text.replace("SupportedObjects=40", "SupportedObjects=41");
+    text = text.replace("40=0x2027\n", "40=0x2027\n41=0x2100\n");
+    text.push_str(
+        "[2100]\nParameterName=odd\nDataType=0x0007\nAccessType=rw\nDefaultValue=0x 1A3\n\
+         LowLimit=0189\nHighLimit=#xFFFF\n",
+    );
+    let e = lenient(&text);
+    let x = e.get(0x2000, 0).unwrap();
+    assert_eq!(x.low_limit_value(1), Some(Value::Unsigned(0)));
+    assert_eq!(x.high_limit_value(1), Some(Value::Unsigned(255)));
+    let ranges: Vec<&eds::EdsWarning> = e
+        .warnings
+        .iter()
+        .filter(|w| w.kind == EdsErrorKind::OutOfRange)
+        .collect();
+    // 40 LowLimit=-1 and 40 HighLimit=256: two warnings, 40 places each.
+    assert_eq!(ranges.len(), 2, "{ranges:?}");
+    assert!(ranges.iter().all(|w| w.count() == 40));
+    assert!(ranges[0]
+        .to_string()
+        .contains("(and 39 more like it: [2001] line"));
+    let odd = e.get(0x2100, 0).unwrap();
+    assert_eq!(odd.default_value(1), Some(Value::Unsigned(0x1A3)));
+    assert_eq!(odd.low_limit_value(1), Some(Value::Unsigned(189)));
+    assert_eq!(odd.high_limit_value(1), Some(Value::Unsigned(0xFFFF)));
+    let forms: Vec<String> = e
+        .warnings
+        .iter()
+        .filter(|w| w.object == Some((0x2100, 0)))
+        .map(ToString::to_string)
+        .collect();
+    assert_eq!(forms.len(), 3, "{forms:?}");
+    assert!(forms[0].contains("blanks inside the number"), "{forms:?}");
+    assert!(
+        forms[1].contains("leading 0 before a decimal number"),
+        "{forms:?}"
+    );
+    assert!(forms[2].contains("`#x` hexadecimal prefix"), "{forms:?}");
+}
+
+#[test]
+fn many_distinct_problems_read_in_linear_time() {
+    // 100 000 lines that are not INI, each different: 100 000 warnings that do not fold. Folding
+    // them pairwise would compare 10^10 times; the reader keys them instead. The bound is wide
+    // for a loaded machine (a linear read takes well under a second).
+    let mut text = String::from(HEAD);
+    for i in 0..100_000 {
+        text.push_str(&format!("not ini {i}\n"));
+    }
+    let t0 = std::time::Instant::now();
+    let e = lenient(&text);
+    assert!(
+        t0.elapsed() < std::time::Duration::from_secs(30),
+        "{:?}",
+        t0.elapsed()
+    );
+    assert_eq!(e.warnings.len(), 100_000);
+    assert!(e.get(0x1000, 0).is_some());
 }

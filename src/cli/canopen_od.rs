@@ -124,10 +124,25 @@ fn presence_text(p: &Presence) -> String {
     }
 }
 
+/// Load the EDS / DCF of option `option` (`--eds`; `None` for an argument) leniently and print
+/// what the reader read in its own way on stderr, once each, as `warning: FILE:LINE: [SECTION]
+/// KEY: problem; what is read instead` ([`eds::EdsWarning`]; identical problems folded with a
+/// count).
+pub fn load_eds(option: Option<&str>, path: &std::path::Path) -> anyhow::Result<Eds> {
+    let eds = eds::load(path).map_err(|e| match option {
+        Some(o) => anyhow::anyhow!("{o} {}: {e}", path.display()),
+        None => anyhow::anyhow!("{e}"),
+    })?;
+    for w in &eds.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(eds)
+}
+
 /// `fieldprobe sdos --node N`.
 pub fn sdos(bus: &Bus, node: u8, eds_path: Option<&std::path::Path>) -> anyhow::Result<i32> {
     let eds: Option<Eds> = match eds_path {
-        Some(p) => Some(eds::load(p).map_err(|e| anyhow::anyhow!("--eds {}: {e}", p.display()))?),
+        Some(p) => Some(load_eds(Some("--eds"), p)?),
         None => None,
     };
     let mut s = bus.open_can()?;

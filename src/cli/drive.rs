@@ -131,12 +131,37 @@ fn from_esi(a: FromEsiArgs) -> anyhow::Result<i32> {
 }
 
 fn from_eds(a: FromEdsArgs) -> anyhow::Result<i32> {
-    let eds = fieldprobe::bus::canopen::eds::load(&a.file)?;
-    write(&VendorDevice::from_eds(&eds), &a.output)
+    let eds = super::canopen_od::load_eds(None, &a.file)?;
+    let dev = VendorDevice::from_eds(&eds);
+    let pdos = vendor::PdoCapacity::from_eds(&eds);
+    match vendor::generate_in(&dev, a.output.name.as_deref(), Some(&pdos)) {
+        // Not a CiA 402 drive at all: say what its device type names (CiA 301 0x1000, bits
+        // 0 … 15 the device profile number).
+        Err(e @ vendor::VendorError::MissingObjects { .. }) => {
+            let profile = eds
+                .get(0x1000, 0)
+                .and_then(|d| d.value(eds.node_id().unwrap_or(0)))
+                .and_then(|v| v.as_u64());
+            match profile {
+                Some(t) if t & 0xFFFF != 402 => anyhow::bail!(
+                    "{e}; its device type 0x{t:08X} (0x1000) names device profile {} (bits \
+                     0 … 15), not CiA 402 (drives and motion control)",
+                    t & 0xFFFF
+                ),
+                _ => Err(e.into()),
+            }
+        }
+        Err(e) => Err(e.into()),
+        Ok(g) => write_generated(&dev, g, &a.output),
+    }
 }
 
 fn write(dev: &VendorDevice, out: &Output) -> anyhow::Result<i32> {
     let g = vendor::generate(dev, out.name.as_deref())?;
+    write_generated(dev, g, out)
+}
+
+fn write_generated(dev: &VendorDevice, g: vendor::Generated, out: &Output) -> anyhow::Result<i32> {
     for n in &g.notes {
         eprintln!("note: {}: {n}", dev.file);
     }

@@ -37,7 +37,7 @@ macro_rules! outln {
 
 mod areas;
 mod bus;
-mod canopen_od;
+pub(crate) mod canopen_od;
 mod check;
 mod drive;
 mod esi;

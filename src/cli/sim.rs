@@ -72,7 +72,6 @@
 use super::{number, EXIT_BAD_INPUT, EXIT_OK};
 use anyhow::Context;
 use fieldprobe::bus::can::{CanBus, CanError};
-use fieldprobe::bus::canopen::eds;
 use fieldprobe::drive::catalogue;
 use fieldprobe::esi::{Device, EsiFile};
 use fieldprobe::limits::MAX_SEGMENT_DEVICES;
@@ -500,9 +499,10 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
 /// start to [`CanopenSegment::run`], send what it returns; `run` is also called without frames
 /// at least every millisecond, so boot-up and heartbeats go out on time on a quiet bus. Every
 /// SYNC steps the drive models once by the communication cycle period 0x1006 the master wrote
-/// (fieldprobe's master writes the machine cycle), or by [`SYNC_MODEL_CYCLE`] of model time
-/// while 0x1006 is 0 (a master that does not write it; as `sim ethercat` steps once per
-/// process-data frame).
+/// (fieldprobe's master writes the machine cycle), or — while 0x1006 is 0 or the EDS has no
+/// 0x1006 — by the wall-clock time since the previous SYNC, as a real drive moves in real time
+/// (the first SYNC after NMT start by [`SYNC_MODEL_CYCLE`], a gap by at most 1 s:
+/// [`fieldprobe::sim::canopen`] "The drive's clock").
 ///
 /// The nodes keep their own clock like real devices: with 0x1006 ≠ 0 a node whose SYNC stays
 /// away for more than five periods sends EMCY 0x8100 and its drive faults (see
@@ -592,7 +592,9 @@ impl StopSignals {
     }
 }
 
-/// Model time one SYNC advances the drive models by (the EtherCAT emulator's servo cycle).
+/// Model time the first SYNC after NMT start advances the drive models by when 0x1006 is not
+/// set (the EtherCAT emulator's servo cycle); later SYNCs step by the time since the previous
+/// one.
 pub const SYNC_MODEL_CYCLE: Duration = DEFAULT_CYCLE;
 
 /// Longest wait in one receive, so `run` is called at least this often.
@@ -707,7 +709,7 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
     })?;
     let eds = match &a.eds {
         None => None,
-        Some(p) => Some(eds::load(p).map_err(|e| anyhow::anyhow!("--eds {}: {e}", p.display()))?),
+        Some(p) => Some(super::canopen_od::load_eds(Some("--eds"), p)?),
     };
     let mut nodes = Vec::new();
     for &id in &ids {

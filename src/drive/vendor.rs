@@ -275,6 +275,21 @@ fn hex_opt(v: Option<u32>) -> String {
 /// [`VendorError::MissingObjects`] naming every required object that is missing, not mappable
 /// in its direction or of the wrong size.
 pub fn generate(dev: &VendorDevice, name: Option<&str>) -> Result<Generated, VendorError> {
+    generate_in(dev, name, None)
+}
+
+/// [`generate`] for a device whose PDOs `pdos` are known (a CANopen device by its EDS,
+/// `drive from-eds`; issue 25): the entries are fitted into them ([`capacity`]: optional
+/// objects leave where there is no room, 0x6060 may go by SDO) and the file says what the
+/// device offers.
+///
+/// # Errors
+/// As [`generate`]; also when the objects a CSP axis needs find no room in `pdos`.
+pub fn generate_in(
+    dev: &VendorDevice,
+    name: Option<&str>,
+    pdos: Option<&PdoCapacity>,
+) -> Result<Generated, VendorError> {
     let kind = dev.kind;
     if let Some(e) = &dev.plan_error {
         return Err(VendorError::MissingObjects {
@@ -289,7 +304,7 @@ pub fn generate(dev: &VendorDevice, name: Option<&str>) -> Result<Generated, Ven
         mut notes,
     } = match &dev.plan {
         Some(plan) => planned_sections(dev, plan),
-        None => listed_sections(dev)?,
+        None => listed_sections(dev, pdos)?,
     };
     let name = name
         .map(str::to_string)
@@ -332,6 +347,16 @@ pub fn generate(dev: &VendorDevice, name: Option<&str>) -> Result<Generated, Ven
             "PDOMapping=1; AccessType rww / rw / wo out, ro / rwr / rw / const in"
         }
     );
+    if let Some(cap) = pdos {
+        let _ = writeln!(
+            t,
+            "# PDOs 1 … 4 (the predefined connection set the master maps) the file gives the\n\
+             # device: {}, {}; the entries below fit them\n\
+             # (the master asks the node for its PDOs at start-up and fits its mapping then).",
+            cap.describe(true),
+            cap.describe(false)
+        );
+    }
     if !touch_probe {
         let _ = writeln!(
             t,
@@ -688,7 +713,10 @@ fn planned_sections(dev: &VendorDevice, plan: &plan::Plan) -> Sections {
 
 /// The PDO sections from the CiA 402 objects the file marks mappable (EDS, and every ESI
 /// without a [`VendorDevice::plan`]).
-fn listed_sections(dev: &VendorDevice) -> Result<Sections, VendorError> {
+fn listed_sections(
+    dev: &VendorDevice,
+    pdos: Option<&PdoCapacity>,
+) -> Result<Sections, VendorError> {
     let kind = dev.kind;
     let mut t = String::new();
     let mut missing = Vec::new();
@@ -731,7 +759,7 @@ fn listed_sections(dev: &VendorDevice) -> Result<Sections, VendorError> {
         .collect();
     let core_ok = probe_fit[..2].iter().all(|(_, r)| r.is_ok());
     let values_ok = probe_fit[2..].iter().any(|(_, r)| r.is_ok());
-    let touch_probe = core_ok && values_ok;
+    let mut touch_probe = core_ok && values_ok;
     if touch_probe {
         for (w, (_, r)) in PROBE_PDO.iter().zip(&probe_fit) {
             match r {
@@ -744,6 +772,25 @@ fn listed_sections(dev: &VendorDevice) -> Result<Sections, VendorError> {
         Ok(()) => push(&TORQUE_ACTUAL, &mut rx, &mut tx),
         Err(why) => left_out.push((TORQUE_ACTUAL.index, why)),
     }
+    // The device's PDOs (EDS): what has no room leaves.
+    let mut probe_without_room = false;
+    if let Some(cap) = pdos {
+        let size = |i: u16| dev.object(i, 0).map_or(0, |o| o.bits as usize / 8);
+        match capacity::fit(cap, &mut rx, &mut tx, size) {
+            Ok(f) => {
+                probe_without_room = f.probe_off;
+                touch_probe &= !f.probe_off;
+                left_out.extend(f.left_out);
+            }
+            Err(missing) => {
+                return Err(VendorError::MissingObjects {
+                    file: dev.file.clone(),
+                    product: dev.product.clone(),
+                    missing,
+                })
+            }
+        }
+    }
     for (index, why) in &left_out {
         notes.push(format!(
             "0x{index:04X}:00 {} left out: {why}",
@@ -754,7 +801,9 @@ fn listed_sections(dev: &VendorDevice) -> Result<Sections, VendorError> {
         let absent = probe_fit
             .iter()
             .all(|(_, r)| r.as_ref().is_err_and(|e| e == "not in the file"));
-        let why: Vec<String> = if absent {
+        let why: Vec<String> = if probe_without_room {
+            vec!["0x60B8 has no room in the device's RPDOs".into()]
+        } else if absent {
             vec!["none of them in the file".into()]
         } else {
             probe_fit
@@ -849,6 +898,9 @@ fn toml_escape(s: &str) -> String {
     }
     out
 }
+
+pub mod capacity;
+pub use capacity::PdoCapacity;
 
 #[cfg(feature = "ethercat")]
 mod esi_source;

@@ -53,3 +53,23 @@ pub fn seeds_present(test_name: &str) -> bool {
     eprintln!("SKIP {test_name}: {why}");
     false
 }
+
+/// `../shared/test-data/REL` when the folder exists; otherwise as [`test_data`] (SKIP, or a
+/// failure with `FIELDPROBE_REQUIRE_TEST_DATA=1`).
+pub fn test_data_dir(rel: &str, test_name: &str) -> Option<PathBuf> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/test-data")
+        .join(rel);
+    if path.is_dir() {
+        return Some(path);
+    }
+    let why = format!(
+        "{} not present (a plain clone without ../shared/test-data)",
+        path.display()
+    );
+    if std::env::var(REQUIRE_ENV).is_ok_and(|v| v == "1") {
+        panic!("{test_name}: {why}; {REQUIRE_ENV}=1 requires the test data");
+    }
+    eprintln!("SKIP {test_name}: {why}");
+    None
+}

@@ -5,7 +5,14 @@
 //! `(index, sub)`. Values stay as written ([`ValueText`]) and are evaluated on demand, because a
 //! `$NODEID` term needs the node id the caller picks (CiA 306, key `DefaultValue`).
 //!
-//! Errors carry the file, line, section and key: `file:line: [section] key: problem`.
+//! **Files as vendors write them.** The reader is lenient (issue 25): one odd value, a repeated
+//! key, a missing `SubNumber` or an unknown access type is a warning ([`EdsWarning`]: file,
+//! line, object, the problem and what is read instead; identical problems folded into one with
+//! a count), read the way CANopen tools (python-canopen, CANopenNode's editor, CANopen Magic)
+//! read it — never a refusal of the whole file. The rules are in the `parse` (structure) and
+//! `lenient` (values, [`ValueRole`]) submodules' documentation. [`ParseOptions::strict`]
+//! refuses a file at its first problem instead. Errors carry the file, line, section and key:
+//! `file:line: [section] key: problem`.
 //!
 //! Interpretations (CiA 306 v1.3 leaves these open or real files bend the rules):
 //! - Comment lines start with `;` (CiA 306) or `#` (python-canopen's `RawConfigParser` accepts
@@ -17,13 +24,13 @@
 //! - A hexadecimal literal for a signed type may be written as its two's complement
 //!   (`INTEGER16` `0xFFFF` = -1); a `0x` literal for `REAL32`/`REAL64` is the IEEE bit pattern.
 //! - Defects in the object lists (a listed object without a section, a section that no list
-//!   names, a `SupportedObjects` count that does not match the entries) are warnings by default
-//!   and errors with [`ParseOptions::strict`]: `e35.eds` from python-canopen has two of them.
+//!   names, a `SupportedObjects` count that does not match the entries) are warnings too:
+//!   `e35.eds` from python-canopen has two of them.
 //! - `CompactSubObj=n` (CiA 306 compact storage of sub-objects) creates sub 0 (`UNSIGNED8`, `ro`,
 //!   default n, named `NrOfObjects`) and subs 1..=n typed like the object; a sub without an
 //!   entry in `[xxxxName]` is named `<ParameterName><sub>`.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
 
@@ -31,7 +38,7 @@ use std::path::Path;
 // Errors
 
 /// What went wrong, for callers that match on the kind instead of the text.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum EdsErrorKind {
     /// The file could not be read.
     Io,
@@ -59,8 +66,12 @@ pub enum EdsErrorKind {
     UnknownAccessType,
     /// `SubNumber` differs from the number of sub-index sections present.
     SubNumberMismatch,
-    /// An object list is inconsistent with the object sections (a warning unless strict).
+    /// An object list is inconsistent with the object sections.
     ObjectList,
+    /// A value outside the range of its data type.
+    OutOfRange,
+    /// The device type 0x1000 has no value, or names no CiA device profile.
+    DeviceType,
 }
 
 /// A problem in an EDS / DCF file, with its position.
@@ -964,19 +975,24 @@ pub struct Entry {
 }
 
 impl Entry {
-    fn eval(&self, text: &Option<ValueText>, node_id: u8) -> Option<Value> {
+    fn eval(&self, text: &Option<ValueText>, node_id: u8, role: ValueRole) -> Option<Value> {
         let text = text.as_ref()?;
-        self.data_type.value_from_text(&text.raw, node_id).ok()
+        self.data_type
+            .value_from_text_lenient(&text.raw, node_id, role)
+            .ok()
+            .map(|(v, _)| v)
     }
 
-    /// `DefaultValue` evaluated with `node_id` for `$NODEID`; `None` if absent.
+    /// `DefaultValue` evaluated with `node_id` for `$NODEID`; `None` if absent or unreadable.
+    /// A value that does not fit its type is read as the `lenient` module documents (the parse
+    /// warned about it).
     pub fn default_value(&self, node_id: u8) -> Option<Value> {
-        self.eval(&self.default, node_id)
+        self.eval(&self.default, node_id, ValueRole::Value)
     }
 
-    /// `ParameterValue` evaluated with `node_id`; `None` if absent.
+    /// `ParameterValue` evaluated with `node_id`; `None` if absent or unreadable.
     pub fn parameter_value(&self, node_id: u8) -> Option<Value> {
-        self.eval(&self.parameter_value, node_id)
+        self.eval(&self.parameter_value, node_id, ValueRole::Value)
     }
 
     /// The configured value: `ParameterValue` if present, else `DefaultValue`.
@@ -985,14 +1001,16 @@ impl Entry {
             .or_else(|| self.default_value(node_id))
     }
 
-    /// `LowLimit` evaluated with `node_id`.
+    /// `LowLimit` evaluated with `node_id`; one below the type's range reads as the type's
+    /// smallest value.
     pub fn low_limit_value(&self, node_id: u8) -> Option<Value> {
-        self.eval(&self.low_limit, node_id)
+        self.eval(&self.low_limit, node_id, ValueRole::Limit)
     }
 
-    /// `HighLimit` evaluated with `node_id`.
+    /// `HighLimit` evaluated with `node_id`; one above the type's range reads as the type's
+    /// largest value (`HighLimit=65536` on an UNSIGNED16 is 65535).
     pub fn high_limit_value(&self, node_id: u8) -> Option<Value> {
-        self.eval(&self.high_limit, node_id)
+        self.eval(&self.high_limit, node_id, ValueRole::Limit)
     }
 
     /// [`value`](Self::value) encoded little-endian, ready for an object dictionary.
@@ -1061,8 +1079,9 @@ pub struct Eds {
     pub commissioning: Option<DeviceCommissioning>,
     /// Sections this parser does not interpret (`[Tools]`, modular devices …), keys in order.
     pub other_sections: BTreeMap<String, Vec<(String, String)>>,
-    /// Problems tolerated in lenient mode (see [`ParseOptions::strict`]).
-    pub warnings: Vec<EdsError>,
+    /// What the lenient reader read in its own way (see [`ParseOptions::strict`]), identical
+    /// problems folded; the commands that load an EDS print each once on stderr.
+    pub warnings: Vec<EdsWarning>,
 }
 
 impl Eds {
@@ -1111,322 +1130,28 @@ impl Eds {
 }
 
 // ------------------------------------------------------------------------------------------------
-// INI layer
+// Reading
 
-#[derive(Debug)]
-struct Key<'a> {
-    name: &'a str,
-    value: &'a str,
-    line: usize,
-    column: usize,
-}
+mod ini;
+mod lenient;
+mod parse;
+mod warning;
 
-#[derive(Debug)]
-struct Section<'a> {
-    name: &'a str,
-    line: usize,
-    keys: Vec<Key<'a>>,
-    /// Lower-case key name → position in `keys`.
-    by_name: HashMap<String, usize>,
-}
-
-impl<'a> Section<'a> {
-    fn get(&self, name: &str) -> Option<&Key<'a>> {
-        self.by_name
-            .get(&name.to_ascii_lowercase())
-            .and_then(|&i| self.keys.get(i))
-    }
-}
-
-fn lex<'a>(text: &'a str, p: &Parser) -> Result<Vec<Section<'a>>, EdsError> {
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut sections: Vec<Section<'a>> = Vec::new();
-    let mut seen: HashMap<String, usize> = HashMap::new();
-    for (i, raw_line) in text.lines().enumerate() {
-        let line_no = i + 1;
-        let lead = raw_line.len() - raw_line.trim_start().len();
-        let line = raw_line.trim();
-        if line.is_empty() || line.starts_with(';') || line.starts_with('#') {
-            continue;
-        }
-        if let Some(rest) = line.strip_prefix('[') {
-            let Some(name) = rest.strip_suffix(']') else {
-                return Err(p.err(
-                    EdsErrorKind::Syntax,
-                    Some(line_no),
-                    None,
-                    None,
-                    None,
-                    "section header without closing `]`",
-                ));
-            };
-            let name = name.trim();
-            if name.is_empty() || name.contains(['[', ']']) {
-                return Err(p.err(
-                    EdsErrorKind::Syntax,
-                    Some(line_no),
-                    None,
-                    None,
-                    None,
-                    format!("bad section header {line:?}"),
-                ));
-            }
-            let lower = name.to_ascii_lowercase();
-            if let Some(first) = seen.get(&lower) {
-                return Err(p.err(
-                    EdsErrorKind::DuplicateSection,
-                    Some(line_no),
-                    Some(name),
-                    None,
-                    None,
-                    format!("duplicate section (first at line {first})"),
-                ));
-            }
-            seen.insert(lower, line_no);
-            sections.push(Section {
-                name,
-                line: line_no,
-                keys: Vec::new(),
-                by_name: HashMap::new(),
-            });
-            continue;
-        }
-        let Some((key, value)) = line.split_once('=') else {
-            let section = sections.last().map(|s| s.name);
-            return Err(p.err(
-                EdsErrorKind::Syntax,
-                Some(line_no),
-                section,
-                None,
-                None,
-                format!("expected `key=value`, got {line:?}"),
-            ));
-        };
-        let key_name = key.trim();
-        let value_start = lead + key.len() + 1;
-        let mut value = value;
-        // Inline comment: `;` after white space (as python-canopen's RawConfigParser).
-        if let Some(pos) = value.char_indices().find_map(|(i, c)| {
-            (c == ';' && i > 0 && value[..i].ends_with(char::is_whitespace)).then_some(i)
-        }) {
-            value = &value[..pos];
-        }
-        let value_lead = value.len() - value.trim_start().len();
-        let value = value.trim();
-        let column = raw_line
-            .get(..value_start + value_lead)
-            .map_or(1, |s| s.chars().count() + 1);
-        let Some(section) = sections.last_mut() else {
-            return Err(p.err(
-                EdsErrorKind::KeyOutsideSection,
-                Some(line_no),
-                None,
-                Some(key_name),
-                None,
-                "key before the first section header",
-            ));
-        };
-        if key_name.is_empty() {
-            return Err(p.err(
-                EdsErrorKind::Syntax,
-                Some(line_no),
-                Some(section.name),
-                None,
-                None,
-                "empty key name",
-            ));
-        }
-        let lower = key_name.to_ascii_lowercase();
-        if let Some(first) = section.get(&lower) {
-            let first = first.line;
-            return Err(p.err(
-                EdsErrorKind::DuplicateKey,
-                Some(line_no),
-                Some(section.name),
-                Some(key_name),
-                None,
-                format!("duplicate key (first at line {first})"),
-            ));
-        }
-        section.by_name.insert(lower, section.keys.len());
-        section.keys.push(Key {
-            name: key_name,
-            value,
-            line: line_no,
-            column,
-        });
-    }
-    Ok(sections)
-}
-
-// ------------------------------------------------------------------------------------------------
-// Interpretation
+pub use lenient::ValueRole;
+pub use warning::{EdsWarning, Place, PLACES_SHOWN};
 
 /// Parser settings.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ParseOptions {
-    /// Treat object-list defects as errors instead of [`Eds::warnings`].
+    /// Refuse the file at its first problem instead of reading it with [`Eds::warnings`]
+    /// (validating a file one writes; the commands read leniently).
     pub strict: bool,
 }
 
-struct Parser<'f> {
-    file: &'f str,
-    options: ParseOptions,
-    warnings: Vec<EdsError>,
-}
-
-impl Parser<'_> {
-    fn err(
-        &self,
-        kind: EdsErrorKind,
-        line: Option<usize>,
-        section: Option<&str>,
-        key: Option<&str>,
-        column: Option<usize>,
-        message: impl Into<String>,
-    ) -> EdsError {
-        let narrow = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
-        EdsError {
-            file: self.file.to_string(),
-            line: line.map(narrow),
-            column: column.map(narrow),
-            section: section.map(str::to_string),
-            key: key.map(str::to_string),
-            kind,
-            message: message.into(),
-        }
-    }
-
-    fn key_err(
-        &self,
-        kind: EdsErrorKind,
-        s: &Section,
-        k: &Key,
-        message: impl Into<String>,
-    ) -> EdsError {
-        self.err(
-            kind,
-            Some(k.line),
-            Some(s.name),
-            Some(k.name),
-            Some(k.column),
-            message,
-        )
-    }
-
-    /// Records a warning, or fails in strict mode.
-    fn soft(&mut self, e: EdsError) -> Result<(), EdsError> {
-        if self.options.strict {
-            Err(e)
-        } else {
-            self.warnings.push(e);
-            Ok(())
-        }
-    }
-
-    fn number<T: TryFrom<u64>>(&self, s: &Section, k: &Key) -> Result<T, EdsError> {
-        let v = parse_u64(k.value).ok_or_else(|| {
-            self.key_err(
-                EdsErrorKind::BadNumber,
-                s,
-                k,
-                format!("bad number {:?}", k.value),
-            )
-        })?;
-        T::try_from(v).map_err(|_| {
-            self.key_err(
-                EdsErrorKind::BadNumber,
-                s,
-                k,
-                format!("{} is too large (max {})", k.value, type_max::<T>()),
-            )
-        })
-    }
-
-    fn opt_number<T: TryFrom<u64>>(&self, s: &Section, key: &str) -> Result<Option<T>, EdsError> {
-        s.get(key).map(|k| self.number(s, k)).transpose()
-    }
-
-    fn flag(&self, s: &Section, key: &str) -> Result<bool, EdsError> {
-        match s.get(key) {
-            None => Ok(false),
-            Some(k) => match parse_u64(k.value) {
-                Some(0) => Ok(false),
-                Some(1) => Ok(true),
-                Some(_) => Err(self.key_err(
-                    EdsErrorKind::BadValue,
-                    s,
-                    k,
-                    format!("expected 0 or 1, got {:?}", k.value),
-                )),
-                None => Err(self.key_err(
-                    EdsErrorKind::BadNumber,
-                    s,
-                    k,
-                    format!("bad number {:?} (allowed: 0, 1)", k.value),
-                )),
-            },
-        }
-    }
-}
-
-fn type_max<T: TryFrom<u64>>() -> u64 {
-    // Largest of the maxima of u8, u16, u32, u64 that converts to T, for messages.
-    [u8::MAX as u64, u16::MAX as u64, u32::MAX as u64, u64::MAX]
-        .into_iter()
-        .take_while(|&m| T::try_from(m).is_ok())
-        .last()
-        .unwrap_or(0)
-}
-
-fn key_text(s: &Section, key: &str) -> Option<String> {
-    s.get(key).map(|k| k.value.to_string())
-}
-
-/// The kind of an object-related section name.
-enum SectionName {
-    Object(u16),
-    Sub(u16, u8),
-    Names(u16),
-    Values(u16),
-    Denotations(u16),
-    Other,
-}
-
-fn classify(name: &str) -> Result<SectionName, String> {
-    let Some(head) = name.get(..4) else {
-        return Ok(SectionName::Other);
-    };
-    if !head.bytes().all(|b| b.is_ascii_hexdigit()) {
-        return Ok(SectionName::Other);
-    }
-    let index = u16::from_str_radix(head, 16).map_err(|e| e.to_string())?;
-    let tail = &name[4..];
-    if tail.is_empty() {
-        return Ok(SectionName::Object(index));
-    }
-    let lower = tail.to_ascii_lowercase();
-    if let Some(sub) = lower.strip_prefix("sub") {
-        if sub.is_empty() || sub.len() > 2 || !sub.bytes().all(|b| b.is_ascii_hexdigit()) {
-            return Err(format!(
-                "bad sub-index {sub:?} (expected 1 or 2 hex digits)"
-            ));
-        }
-        return Ok(SectionName::Sub(
-            index,
-            u8::from_str_radix(sub, 16).map_err(|e| e.to_string())?,
-        ));
-    }
-    Ok(match lower.as_str() {
-        "name" => SectionName::Names(index),
-        "value" => SectionName::Values(index),
-        "denotation" => SectionName::Denotations(index),
-        _ => SectionName::Other,
-    })
-}
-
-/// Parses EDS or DCF text leniently (object-list defects become [`Eds::warnings`]).
-/// `file` is only used in error messages.
+/// Parses EDS or DCF text leniently: whatever a vendor's file gets wrong is read the way
+/// CANopen tools read it and becomes one of the [`Eds::warnings`] (the `parse` module lists
+/// what is read instead); only text with no object section at all is refused. `file` is only
+/// used in messages.
 pub fn parse(text: &str, file: &str) -> Result<Eds, EdsError> {
     parse_with(text, file, ParseOptions::default())
 }
@@ -1459,666 +1184,5 @@ pub fn load_with(path: impl AsRef<Path>, options: ParseOptions) -> Result<Eds, E
 
 /// [`parse`] with options.
 pub fn parse_with(text: &str, file: &str, options: ParseOptions) -> Result<Eds, EdsError> {
-    let mut p = Parser {
-        file,
-        options,
-        warnings: Vec::new(),
-    };
-    let sections = lex(text, &p)?;
-    let find = |name: &str| sections.iter().find(|s| s.name.eq_ignore_ascii_case(name));
-
-    let mut eds = Eds {
-        file: file.to_string(),
-        file_info: FileInfo::default(),
-        device_info: DeviceInfo::default(),
-        dummy_usage: BTreeMap::new(),
-        comments: Vec::new(),
-        object_lists: ObjectLists::default(),
-        object_headers: BTreeMap::new(),
-        objects: BTreeMap::new(),
-        commissioning: None,
-        other_sections: BTreeMap::new(),
-        warnings: Vec::new(),
-    };
-
-    if let Some(s) = find("FileInfo") {
-        eds.file_info = FileInfo {
-            file_name: key_text(s, "FileName"),
-            file_version: p.opt_number(s, "FileVersion")?,
-            file_revision: p.opt_number(s, "FileRevision")?,
-            eds_version: key_text(s, "EDSVersion"),
-            description: key_text(s, "Description"),
-            creation_time: key_text(s, "CreationTime"),
-            creation_date: key_text(s, "CreationDate"),
-            created_by: key_text(s, "CreatedBy"),
-            modification_time: key_text(s, "ModificationTime"),
-            modification_date: key_text(s, "ModificationDate"),
-            modified_by: key_text(s, "ModifiedBy"),
-        };
-    }
-    if let Some(s) = find("DeviceInfo") {
-        eds.device_info = device_info(&p, s)?;
-    }
-    if let Some(s) = find("DummyUsage") {
-        for k in &s.keys {
-            let Some(n) = k
-                .name
-                .get(5..)
-                .filter(|_| k.name[..5].eq_ignore_ascii_case("dummy"))
-            else {
-                continue;
-            };
-            let Ok(index) = u16::from_str_radix(n, 16) else {
-                continue;
-            };
-            eds.dummy_usage.insert(index, p.flag(s, k.name)?);
-        }
-    }
-    if let Some(s) = find("Comments") {
-        let lines: u32 = p.opt_number(s, "Lines")?.unwrap_or(0);
-        for i in 1..=lines.min(10_000) {
-            eds.comments
-                .push(key_text(s, &format!("Line{i}")).unwrap_or_default());
-        }
-    }
-    for name in ["DeviceComissioning", "DeviceCommissioning"] {
-        if let Some(s) = find(name) {
-            eds.commissioning = Some(DeviceCommissioning {
-                node_id: p.opt_number(s, "NodeID")?,
-                node_name: key_text(s, "NodeName"),
-                baud_rate: p.opt_number(s, "Baudrate")?,
-                net_number: p.opt_number(s, "NetNumber")?,
-                network_name: key_text(s, "NetworkName"),
-                canopen_manager: p.flag(s, "CANopenManager")?,
-                lss_serial_number: p.opt_number(s, "LSS_SerialNumber")?,
-            });
-        }
-    }
-
-    // Object lists.
-    let Some(mandatory) = find("MandatoryObjects") else {
-        return Err(p.err(
-            EdsErrorKind::MissingSection,
-            None,
-            Some("MandatoryObjects"),
-            None,
-            None,
-            "missing section",
-        ));
-    };
-    eds.object_lists.mandatory = object_list(&mut p, mandatory)?;
-    if let Some(s) = find("OptionalObjects") {
-        eds.object_lists.optional = object_list(&mut p, s)?;
-    }
-    if let Some(s) = find("ManufacturerObjects") {
-        eds.object_lists.manufacturer = object_list(&mut p, s)?;
-    }
-
-    // Object sections, then subs (a sub may come before its object in the file).
-    let mut subs: Vec<(u16, u8, &Section)> = Vec::new();
-    let mut extras: Vec<(SectionName, &Section)> = Vec::new();
-    let mut by_index: BTreeMap<u16, &Section> = BTreeMap::new();
-    for s in &sections {
-        let kind = classify(s.name).map_err(|m| {
-            p.err(
-                EdsErrorKind::Syntax,
-                Some(s.line),
-                Some(s.name),
-                None,
-                None,
-                m,
-            )
-        })?;
-        match kind {
-            SectionName::Object(index) => {
-                if let Some(first) = by_index.get(&index) {
-                    return Err(p.err(
-                        EdsErrorKind::DuplicateSection,
-                        Some(s.line),
-                        Some(s.name),
-                        None,
-                        None,
-                        format!("same object as [{}] at line {}", first.name, first.line),
-                    ));
-                }
-                by_index.insert(index, s);
-            }
-            SectionName::Sub(index, sub) => subs.push((index, sub, s)),
-            SectionName::Other => {
-                let known = [
-                    "FileInfo",
-                    "DeviceInfo",
-                    "DummyUsage",
-                    "Comments",
-                    "MandatoryObjects",
-                    "OptionalObjects",
-                    "ManufacturerObjects",
-                    "DeviceComissioning",
-                    "DeviceCommissioning",
-                ];
-                if !known.iter().any(|n| n.eq_ignore_ascii_case(s.name)) {
-                    let keys = s
-                        .keys
-                        .iter()
-                        .map(|k| (k.name.to_string(), k.value.to_string()))
-                        .collect();
-                    eds.other_sections.insert(s.name.to_string(), keys);
-                }
-            }
-            other => extras.push((other, s)),
-        }
-    }
-    for (&index, s) in &by_index {
-        object(&p, &mut eds, index, s)?;
-    }
-    let mut sub_lines: BTreeMap<(u16, u8), (&str, usize)> = BTreeMap::new();
-    for &(index, sub, s) in &subs {
-        let Some(header) = eds.object_headers.get(&index) else {
-            return Err(p.err(
-                EdsErrorKind::MissingSection,
-                Some(s.line),
-                Some(s.name),
-                None,
-                None,
-                format!("sub-index section without its object section [{index:04X}]"),
-            ));
-        };
-        if !header.object_type.has_subs() || header.compact_sub_obj.is_some() {
-            return Err(p.err(
-                EdsErrorKind::BadValue,
-                Some(s.line),
-                Some(s.name),
-                None,
-                None,
-                format!(
-                    "sub-index section for an object that has none (ObjectType {:#x}{})",
-                    header.object_type.code(),
-                    if header.compact_sub_obj.is_some() {
-                        ", CompactSubObj"
-                    } else {
-                        ""
-                    }
-                ),
-            ));
-        }
-        if let Some((name, line)) = sub_lines.insert((index, sub), (s.name, s.line)) {
-            return Err(p.err(
-                EdsErrorKind::DuplicateSection,
-                Some(s.line),
-                Some(s.name),
-                None,
-                None,
-                format!("same sub-index as [{name}] at line {line}"),
-            ));
-        }
-        let entry = entry(&p, s, index, sub, None)?;
-        eds.objects.insert((index, sub), entry);
-    }
-    // SubNumber against the subs present.
-    for (&index, &s) in &by_index {
-        let Some(header) = eds.object_headers.get(&index) else {
-            continue;
-        };
-        let present = eds.subs(index).count();
-        match (
-            header.object_type.has_subs(),
-            header.sub_number,
-            header.compact_sub_obj,
-        ) {
-            (true, None, None) => {
-                return Err(p.err(
-                    EdsErrorKind::MissingKey,
-                    Some(s.line),
-                    Some(s.name),
-                    Some("SubNumber"),
-                    None,
-                    "missing; required for an ARRAY or RECORD without CompactSubObj",
-                ));
-            }
-            (true, Some(n), None) if usize::from(n) != present => {
-                let Some(k) = s.get("SubNumber") else {
-                    continue;
-                };
-                return Err(p.key_err(
-                    EdsErrorKind::SubNumberMismatch,
-                    s,
-                    k,
-                    format!(
-                        "SubNumber={} but {present} sub-index sections are present",
-                        k.value
-                    ),
-                ));
-            }
-            _ => {}
-        }
-    }
-    // [xxxxName] / [xxxxValue] / [xxxxDenotation] of compact objects.
-    for (kind, s) in extras {
-        let (index, what) = match kind {
-            SectionName::Names(i) => (i, "Name"),
-            SectionName::Values(i) => (i, "Value"),
-            SectionName::Denotations(i) => (i, "Denotation"),
-            _ => continue,
-        };
-        let compact = eds
-            .object_headers
-            .get(&index)
-            .and_then(|h| h.compact_sub_obj);
-        let Some(n) = compact else {
-            p.soft(p.err(
-                EdsErrorKind::ObjectList,
-                Some(s.line),
-                Some(s.name),
-                None,
-                None,
-                format!("[{index:04X}{what}] for an object without CompactSubObj; ignored"),
-            ))?;
-            continue;
-        };
-        for k in &s.keys {
-            if k.name.eq_ignore_ascii_case("NrOfEntries") {
-                p.number::<u8>(s, k)?;
-                continue;
-            }
-            let sub: u8 = k
-                .name
-                .parse()
-                .ok()
-                .filter(|&sub| sub >= 1 && sub <= n)
-                .ok_or_else(|| {
-                    p.key_err(
-                        EdsErrorKind::BadValue,
-                        s,
-                        k,
-                        format!("expected a sub-index 1..={n}"),
-                    )
-                })?;
-            let Some(e) = eds.objects.get_mut(&(index, sub)) else {
-                continue;
-            };
-            match what {
-                "Name" => e.parameter_name = k.value.to_string(),
-                "Denotation" => e.denotation = Some(k.value.to_string()),
-                _ => {
-                    check_value(&p, s, k, e.data_type)?;
-                    e.parameter_value = Some(ValueText {
-                        raw: k.value.to_string(),
-                        line: k.line,
-                    });
-                }
-            }
-        }
-    }
-    // Object lists against object sections.
-    let mut listed: BTreeMap<u16, ()> = BTreeMap::new();
-    for (list, name) in [
-        (&eds.object_lists.mandatory, "MandatoryObjects"),
-        (&eds.object_lists.optional, "OptionalObjects"),
-        (&eds.object_lists.manufacturer, "ManufacturerObjects"),
-    ] {
-        let s = find(name);
-        for (i, &index) in list.iter().enumerate() {
-            listed.insert(index, ());
-            if !by_index.contains_key(&index) {
-                let key = (i + 1).to_string();
-                let k = s.and_then(|s| s.get(&key));
-                let e = p.err(
-                    EdsErrorKind::MissingSection,
-                    k.map(|k| k.line),
-                    Some(name),
-                    Some(&key),
-                    k.map(|k| k.column),
-                    format!("object 0x{index:04X} is listed but has no section [{index:04X}]"),
-                );
-                p.soft(e)?;
-            }
-        }
-    }
-    for (&index, s) in &by_index {
-        if !listed.contains_key(&index) && index > 0x0FFF {
-            let e = p.err(
-                EdsErrorKind::ObjectList,
-                Some(s.line),
-                Some(s.name),
-                None,
-                None,
-                "object is in no object list",
-            );
-            p.soft(e)?;
-        }
-    }
-    eds.warnings = p.warnings;
-    Ok(eds)
-}
-
-fn device_info(p: &Parser, s: &Section) -> Result<DeviceInfo, EdsError> {
-    let mut baud_rates = Vec::new();
-    for k in &s.keys {
-        let Some(rate) = k
-            .name
-            .get(9..)
-            .filter(|_| k.name[..9].eq_ignore_ascii_case("BaudRate_"))
-        else {
-            continue;
-        };
-        let Ok(rate) = rate.parse::<u32>() else {
-            continue;
-        };
-        if p.flag(s, k.name)? {
-            baud_rates.push(rate);
-        }
-    }
-    baud_rates.sort_unstable();
-    Ok(DeviceInfo {
-        vendor_name: key_text(s, "VendorName"),
-        vendor_number: p.opt_number(s, "VendorNumber")?,
-        product_name: key_text(s, "ProductName"),
-        product_number: p.opt_number(s, "ProductNumber")?,
-        revision_number: p.opt_number(s, "RevisionNumber")?,
-        order_code: key_text(s, "OrderCode"),
-        baud_rates,
-        simple_boot_up_master: p.flag(s, "SimpleBootUpMaster")?,
-        simple_boot_up_slave: p.flag(s, "SimpleBootUpSlave")?,
-        granularity: p.opt_number(s, "Granularity")?,
-        dynamic_channels_supported: p.opt_number(s, "DynamicChannelsSupported")?,
-        group_messaging: p.flag(s, "GroupMessaging")?,
-        nr_of_rx_pdo: p.opt_number(s, "NrOfRXPDO")?,
-        nr_of_tx_pdo: p.opt_number(s, "NrOfTXPDO")?,
-        lss_supported: p.flag(s, "LSS_Supported")?,
-        compact_pdo: p.opt_number(s, "CompactPDO")?,
-    })
-}
-
-fn object_list(p: &mut Parser, s: &Section) -> Result<Vec<u16>, EdsError> {
-    let count = match s.get("SupportedObjects") {
-        Some(k) => p.number::<u16>(s, k)?,
-        None => {
-            return Err(p.err(
-                EdsErrorKind::MissingKey,
-                Some(s.line),
-                Some(s.name),
-                Some("SupportedObjects"),
-                None,
-                "missing",
-            ));
-        }
-    };
-    let mut out = Vec::new();
-    for i in 1..=count {
-        match s.get(&i.to_string()) {
-            Some(k) => out.push(p.number::<u16>(s, k)?),
-            None => {
-                let e = p.err(
-                    EdsErrorKind::ObjectList,
-                    Some(s.line),
-                    Some(s.name),
-                    Some(&i.to_string()),
-                    None,
-                    format!("missing; SupportedObjects={count}"),
-                );
-                p.soft(e)?;
-            }
-        }
-    }
-    for k in &s.keys {
-        let in_range = k.name.parse::<u16>().is_ok_and(|n| n >= 1 && n <= count);
-        if !in_range && !k.name.eq_ignore_ascii_case("SupportedObjects") {
-            let e = p.key_err(
-                EdsErrorKind::ObjectList,
-                s,
-                k,
-                format!("unexpected key; SupportedObjects={count}"),
-            );
-            p.soft(e)?;
-        }
-    }
-    Ok(out)
-}
-
-fn object_type(p: &Parser, s: &Section) -> Result<ObjectType, EdsError> {
-    let Some(k) = s.get("ObjectType") else {
-        return Ok(ObjectType::Var);
-    };
-    let code: u8 = p.number(s, k)?;
-    ObjectType::from_code(code).ok_or_else(|| {
-        p.key_err(
-            EdsErrorKind::UnknownObjectType,
-            s,
-            k,
-            format!(
-                "unknown object type {} (allowed: {})",
-                k.value,
-                ObjectType::ALLOWED
-            ),
-        )
-    })
-}
-
-fn object(p: &Parser, eds: &mut Eds, index: u16, s: &Section) -> Result<(), EdsError> {
-    let object_type = object_type(p, s)?;
-    let sub_number: Option<u8> = p.opt_number(s, "SubNumber")?;
-    let compact_sub_obj: Option<u8> = p.opt_number(s, "CompactSubObj")?;
-    let header = ObjectHeader {
-        index,
-        parameter_name: key_text(s, "ParameterName").unwrap_or_default(),
-        object_type,
-        sub_number,
-        compact_sub_obj,
-        obj_flags: p.opt_number(s, "ObjFlags")?,
-        line: s.line,
-    };
-    if let (Some(n), Some(k)) = (compact_sub_obj, s.get("CompactSubObj")) {
-        if object_type != ObjectType::Array {
-            return Err(p.key_err(
-                EdsErrorKind::BadValue,
-                s,
-                k,
-                "CompactSubObj is only allowed on an ARRAY (ObjectType=0x8)",
-            ));
-        }
-        if let Some(sn) = s.get("SubNumber") {
-            return Err(p.key_err(
-                EdsErrorKind::BadValue,
-                s,
-                sn,
-                "SubNumber and CompactSubObj exclude each other",
-            ));
-        }
-        let count = Entry {
-            index,
-            sub: 0,
-            parameter_name: "NrOfObjects".into(),
-            object_type: ObjectType::Var,
-            data_type: DataType::Unsigned8,
-            access: AccessType::ReadOnly,
-            default: Some(ValueText {
-                raw: n.to_string(),
-                line: k.line,
-            }),
-            low_limit: None,
-            high_limit: None,
-            pdo_mapping: false,
-            parameter_value: None,
-            denotation: None,
-            obj_flags: None,
-            line: s.line,
-        };
-        eds.objects.insert((index, 0), count);
-        for sub in 1..=n {
-            let name = format!("{}{sub}", header.parameter_name);
-            let e = entry(p, s, index, sub, Some(name))?;
-            eds.objects.insert((index, sub), e);
-        }
-    } else if matches!(
-        object_type,
-        ObjectType::Var | ObjectType::DefType | ObjectType::Domain
-    ) {
-        let e = entry(p, s, index, 0, None)?;
-        eds.objects.insert((index, 0), e);
-    }
-    eds.object_headers.insert(index, header);
-    Ok(())
-}
-
-fn check_value(p: &Parser, s: &Section, k: &Key, data_type: DataType) -> Result<(), EdsError> {
-    if matches!(data_type, DataType::Other(_)) {
-        return Ok(());
-    }
-    // $NODEID expressions must fit for every node id 1..=127.
-    for node in [1u8, 127] {
-        if let Err(e) = data_type.value_from_text(k.value, node) {
-            let kind = match e {
-                ValueError::Syntax(_)
-                    if data_type.is_integer()
-                        || matches!(data_type, DataType::Real32 | DataType::Real64) =>
-                {
-                    EdsErrorKind::BadNumber
-                }
-                _ => EdsErrorKind::BadValue,
-            };
-            let mut message = e.to_string();
-            if let Ok(expr) = IntExpr::parse(k.value) {
-                if expr.uses_node_id() {
-                    message = format!("{message} (with $NODEID={node})");
-                }
-            }
-            return Err(p.key_err(kind, s, k, message));
-        }
-    }
-    Ok(())
-}
-
-/// Communication objects whose data type CiA 301 fixes (§7.5.2): a master and the emulated
-/// node read them with that type, so an EDS declaring another type is refused.
-const FIXED_TYPES: &[(u16, u8, DataType, &str)] = &[
-    (0x1000, 0, DataType::Unsigned32, "device type"),
-    (0x1001, 0, DataType::Unsigned8, "error register"),
-    (0x1017, 0, DataType::Unsigned16, "producer heartbeat time"),
-];
-
-/// Builds the entry of a VAR section, a sub-index section or (with `compact_name`) a compact sub.
-fn entry(
-    p: &Parser,
-    s: &Section,
-    index: u16,
-    sub: u8,
-    compact_name: Option<String>,
-) -> Result<Entry, EdsError> {
-    let object_type = if compact_name.is_some() {
-        ObjectType::Var
-    } else {
-        object_type(p, s)?
-    };
-    let kind_word = if sub == 0 && compact_name.is_none() {
-        "a VAR"
-    } else {
-        "a sub-index"
-    };
-    let data_type = match s.get("DataType") {
-        Some(k) => {
-            let code: u16 = p.number(s, k)?;
-            DataType::from_code(code).ok_or_else(|| {
-                p.key_err(
-                    EdsErrorKind::UnknownDataType,
-                    s,
-                    k,
-                    format!(
-                        "unknown data type code {} (CiA 301 data type table)",
-                        k.value
-                    ),
-                )
-            })?
-        }
-        None if object_type == ObjectType::Domain => DataType::Domain,
-        None => {
-            return Err(p.err(
-                EdsErrorKind::MissingKey,
-                Some(s.line),
-                Some(s.name),
-                Some("DataType"),
-                None,
-                format!("missing; required for {kind_word}"),
-            ));
-        }
-    };
-    if let Some(&(_, _, expected, what)) = FIXED_TYPES
-        .iter()
-        .find(|(i, j, _, _)| (*i, *j) == (index, sub))
-    {
-        if data_type != expected {
-            let found = format!("{:#06x} ({data_type:?})", data_type.code());
-            let message = format!(
-                "object {index:#06x}:{sub:02x} ({what}) must have data type {:#06x} \
-                 ({expected:?}, CiA 301), found {found}",
-                expected.code()
-            );
-            return Err(match s.get("DataType") {
-                Some(k) => p.key_err(EdsErrorKind::BadValue, s, k, message),
-                None => p.err(
-                    EdsErrorKind::BadValue,
-                    Some(s.line),
-                    Some(s.name),
-                    Some("DataType"),
-                    None,
-                    message,
-                ),
-            });
-        }
-    }
-    let access = match s.get("AccessType") {
-        Some(k) => AccessType::parse(k.value).ok_or_else(|| {
-            p.key_err(
-                EdsErrorKind::UnknownAccessType,
-                s,
-                k,
-                format!(
-                    "unknown access type {:?} (allowed: {})",
-                    k.value,
-                    AccessType::ALLOWED
-                ),
-            )
-        })?,
-        None => {
-            return Err(p.err(
-                EdsErrorKind::MissingKey,
-                Some(s.line),
-                Some(s.name),
-                Some("AccessType"),
-                None,
-                format!(
-                    "missing; required for {kind_word} (allowed: {})",
-                    AccessType::ALLOWED
-                ),
-            ));
-        }
-    };
-    let value = |key: &str| -> Result<Option<ValueText>, EdsError> {
-        match s.get(key) {
-            Some(k) if !k.value.is_empty() => {
-                check_value(p, s, k, data_type)?;
-                Ok(Some(ValueText {
-                    raw: k.value.to_string(),
-                    line: k.line,
-                }))
-            }
-            _ => Ok(None),
-        }
-    };
-    Ok(Entry {
-        index,
-        sub,
-        parameter_name: compact_name
-            .unwrap_or_else(|| key_text(s, "ParameterName").unwrap_or_default()),
-        object_type,
-        data_type,
-        access,
-        default: value("DefaultValue")?,
-        low_limit: value("LowLimit")?,
-        high_limit: value("HighLimit")?,
-        pdo_mapping: p.flag(s, "PDOMapping")?,
-        parameter_value: value("ParameterValue")?,
-        denotation: key_text(s, "Denotation"),
-        obj_flags: p.opt_number(s, "ObjFlags")?,
-        line: s.line,
-    })
+    parse::run(text, file, options)
 }

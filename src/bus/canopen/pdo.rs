@@ -31,6 +31,9 @@
 use crate::bus::can::{CanFrame, FrameError};
 use crate::drive::pdo::PdoLayout;
 
+mod fit;
+pub use fit::{plan_layout_in, PdoSlots, Unfit, MAX_ENTRIES};
+
 /// Receive (master → node) or transmit (node → master) PDO.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Direction {
@@ -236,19 +239,23 @@ pub fn pack_layout(layout: &PdoLayout, direction: Direction, node: u8) -> Result
         direction,
         node,
         bins.into_iter().map(|b| (Trigger::Cyclic, b)).collect(),
+        &[0, 1, 2, 3],
     ))
 }
 
-/// PDO *k* of `node` for the *k*-th bin of entries of `layout`, packed back to back.
+/// The PDO numbered `numbers[j]` (0-based; PDO *j* where `numbers` is shorter) of `node` for
+/// the *j*-th bin of entries of `layout`, packed back to back.
 fn build(
     layout: &PdoLayout,
     direction: Direction,
     node: u8,
     bins: Vec<(Trigger, Vec<usize>)>,
+    numbers: &[u8],
 ) -> Vec<Pdo> {
     bins.into_iter()
         .enumerate()
-        .map(|(k, (trigger, b))| {
+        .map(|(j, (trigger, b))| {
+            let k = numbers.get(j).copied().map_or(j, usize::from);
             let mut off = 0;
             let mapped = b
                 .into_iter()
@@ -292,15 +299,20 @@ fn on_change_class(direction: Direction, index: u16) -> Option<Option<u8>> {
 
 /// First fit, largest first: the entries `items` of `layout` in bins of ≤ 8 bytes, each bin in
 /// layout order, the bins ordered by their first entry.
-fn first_fit(layout: &PdoLayout, mut items: Vec<usize>) -> Vec<Vec<usize>> {
-    let size = |i: usize| layout.entries()[i].ty.size();
+fn first_fit(layout: &PdoLayout, items: Vec<usize>) -> Vec<Vec<usize>> {
+    first_fit_by(layout, items, usize::MAX)
+}
+
+/// [`first_fit`] with at most `max_entries` entries a bin (a node's mapping parameter with
+/// that many sub-indices, [`PdoSlots`]).
+fn first_fit_by(layout: &PdoLayout, mut items: Vec<usize>, max_entries: usize) -> Vec<Vec<usize>> {
+    let size = |i: usize| layout.entries().get(i).map_or(0, |e| e.ty.size());
     items.sort_by_key(|&i| std::cmp::Reverse(size(i)));
     let mut bins: Vec<Vec<usize>> = Vec::new();
     for i in items {
-        match bins
-            .iter_mut()
-            .find(|b| b.iter().map(|&j| size(j)).sum::<usize>() + size(i) <= 8)
-        {
+        match bins.iter_mut().find(|b| {
+            b.len() < max_entries && b.iter().map(|&j| size(j)).sum::<usize>() + size(i) <= 8
+        }) {
             Some(b) => b.push(i),
             None => bins.push(vec![i]),
         }
@@ -314,39 +326,10 @@ fn first_fit(layout: &PdoLayout, mut items: Vec<usize>) -> Vec<Vec<usize>> {
 
 /// The master's PDO layout of a drive's process data (module documentation, "The master's
 /// layout"): cyclic and on-change classes packed apart, on-change TPDOs first; falls back to
-/// [`pack_layout`] when that needs more than [`MAX_PDOS`] PDOs. Errors say why it does not fit.
+/// everything cyclic ([`pack_layout`]) when that needs more than [`MAX_PDOS`] PDOs. Errors say
+/// why it does not fit. [`plan_layout_in`] with [`PdoSlots::FULL`].
 pub fn plan_layout(layout: &PdoLayout, direction: Direction, node: u8) -> Result<Vec<Pdo>, String> {
-    let mut classes: Vec<(Trigger, Vec<usize>)> = Vec::new();
-    let mut cyclic = Vec::new();
-    for (i, e) in layout.entries().iter().enumerate() {
-        match on_change_class(direction, e.index) {
-            None => cyclic.push(i),
-            Some(probe) => {
-                let t = Trigger::OnChange { probe };
-                match classes.iter_mut().find(|(c, _)| *c == t) {
-                    Some((_, v)) => v.push(i),
-                    None => classes.push((t, vec![i])),
-                }
-            }
-        }
-    }
-    // On-change TPDOs first (lowest COB-IDs), probe 1 before probe 2; RPDOs cyclic first.
-    classes.sort_by_key(|(t, _)| match t {
-        Trigger::OnChange { probe: Some(p) } => *p,
-        _ => u8::MAX,
-    });
-    match direction {
-        Direction::Tx => classes.push((Trigger::Cyclic, cyclic)),
-        Direction::Rx => classes.insert(0, (Trigger::Cyclic, cyclic)),
-    }
-    let bins: Vec<(Trigger, Vec<usize>)> = classes
-        .into_iter()
-        .flat_map(|(t, items)| first_fit(layout, items).into_iter().map(move |b| (t, b)))
-        .collect();
-    if bins.len() > MAX_PDOS {
-        return pack_layout(layout, direction, node);
-    }
-    Ok(build(layout, direction, node, bins))
+    plan_layout_in(layout, direction, node, &PdoSlots::FULL).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -52,3 +52,26 @@ impl VendorDevice {
         }
     }
 }
+
+impl super::PdoCapacity {
+    /// The PDOs the EDS `eds` gives its device (CiA 306 / CiA 301): RPDO k + 1 / TPDO k + 1
+    /// for each communication parameter 0x1400 + k / 0x1800 + k of the file (k < 4, the
+    /// predefined connection set fieldprobe's master uses), with as many entries as its
+    /// mapping parameter 0x1600 + k / 0x1A00 + k has sub-indices ≥ 1 (at most 8 counted).
+    /// `[DeviceInfo] NrOfRXPDO` / `NrOfTXPDO` are not used: the objects are what a node has.
+    pub fn from_eds(eds: &Eds) -> super::PdoCapacity {
+        let side = |comm: u16, map: u16| -> Vec<u8> {
+            (0..4u16)
+                .filter(|k| eds.subs(comm + k).next().is_some())
+                .map(|k| {
+                    let n = eds.subs(map + k).filter(|e| e.sub >= 1).count();
+                    u8::try_from(n.min(8)).unwrap_or(8)
+                })
+                .collect()
+        };
+        super::PdoCapacity {
+            rx: side(0x1400, 0x1600),
+            tx: side(0x1800, 0x1A00),
+        }
+    }
+}

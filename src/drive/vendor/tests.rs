@@ -143,3 +143,73 @@ fn names_are_slugs() {
     );
     assert_eq!(drive_name("", "\"\n"), "vendor-drive");
 }
+
+#[test]
+fn the_pdos_of_an_eds_device_leave_out_what_has_no_room() {
+    let mut objects = minimal();
+    objects.extend([
+        obj(0x60F4, DataType::I32, false, true),
+        obj(0x6077, DataType::I16, false, true),
+        obj(0x60B8, DataType::U16, true, false),
+        obj(0x60B9, DataType::U16, false, true),
+        obj(0x60BA, DataType::I32, false, true),
+    ]);
+    let dev = device(objects);
+    // One RPDO of 8 entries: 0x6040 + 0x607A + 0x60B8 = 8 bytes, the touch probe stays
+    // (0x6060 by SDO).
+    let cap = PdoCapacity {
+        rx: vec![8],
+        tx: vec![8, 8],
+    };
+    let g = generate_in(&dev, None, Some(&cap)).unwrap();
+    let def = catalogue::parse(&g.toml, "t").unwrap();
+    assert!(g.touch_probe && def.rxpdo.contains(0x60B8, 0));
+    assert!(
+        g.toml
+            .contains("1 RPDO (8 entries), 2 TPDOs (8, 8 entries)"),
+        "{}",
+        g.toml
+    );
+    // Inputs 2 + 4 + 4 + 1 + 2 + 4 + 2 = 19 bytes in two 8-byte TPDOs: 0x6077 goes (17),
+    // then 0x60F4 (13: 0x6064 + 0x60BA, 0x6041 + 0x60B9 + 0x6061); the latch stays.
+    assert!(!def.txpdo.contains(0x6077, 0) && !def.txpdo.contains(0x60F4, 0));
+    assert!(def.txpdo.contains(0x60B9, 0) && def.txpdo.contains(0x60BA, 0));
+    assert!(
+        g.notes
+            .iter()
+            .any(|n| n.contains("0x6077:00") && n.contains("no room")),
+        "{:?}",
+        g.notes
+    );
+    // Two RPDOs of one entry: no room for 0x60B8, the touch probe goes with its inputs.
+    let cap = PdoCapacity {
+        rx: vec![1, 1],
+        tx: vec![8; 4],
+    };
+    let g = generate_in(&dev, None, Some(&cap)).unwrap();
+    let def = catalogue::parse(&g.toml, "t").unwrap();
+    assert!(!g.touch_probe && !def.has_drive_latch());
+    assert!(!def.txpdo.contains(0x60B9, 0) && !g.toml.contains("[probe]"));
+    assert!(
+        g.notes
+            .iter()
+            .any(|n| n.contains("no touch probe") && n.contains("no room")),
+        "{:?}",
+        g.notes
+    );
+    // One RPDO of one entry: controlword and target position find no room.
+    let cap = PdoCapacity {
+        rx: vec![1],
+        tx: vec![8; 4],
+    };
+    let Err(VendorError::MissingObjects { missing, .. }) = generate_in(&dev, None, Some(&cap))
+    else {
+        panic!("refused");
+    };
+    assert!(
+        missing[0].contains("0x6040:00, 0x607A:00: no room"),
+        "{missing:?}"
+    );
+    // Without PDOs given: as generate.
+    assert_eq!(generate_in(&dev, None, None), generate(&dev, None));
+}

@@ -18,9 +18,29 @@
 //!   needs both), the axis runs with that reduced definition and so has no drive latch, and
 //!   warning [`ids::CANOPEN_NO_DRIVE_LATCH`] says so (seed 004 §7 lists what measures without
 //!   one: PLC sampling, PLC_TIMESTAMP with a timestamp input terminal, an external latch).
+//!
+//! # The node's PDOs (issue 25)
+//!
+//! The master also asks the node how many PDOs it has and how many entries each takes
+//! ([`PdoSlots`]: SDO uploads of the communication parameters 0x1400 + k / 0x1800 + k sub 1
+//! and of the mapping parameters' sub-indices; abort 0x0602_0000 / 0x0609_0011 = not there —
+//! the master has only the bus, not the EDS) and fits its layout into them ([`plan`]):
+//! fewer entries per PDO, several PDOs where the node has them, one RPDO for everything
+//! cyclic where it has one. A CAN frame carries 8 bytes: where the set-points do not fit, the
+//! mode of operation 0x6060 — which need not be cyclic, CSP is set once — leaves the RPDOs and
+//! the master writes it (8) by SDO in PRE-OPERATIONAL, as it does for any definition that does
+//! not map it (CiA 402 §6.2 needs 0x6060 = 8 for CSP either way). What still does not fit is
+//! error [`ids::CANOPEN_PDO_CAPACITY`] naming node, drive, what the node offers and the objects
+//! left without a PDO.
+//!
+//! A refusal while the mapping is written says whose fault it is ([`Refusal`]): abort
+//! 0x0609_0011 on mapping sub-index *j* — the mapping parameter has no sub-index *j*, it takes
+//! *j* − 1 entries (the master fits again with that); 0x0604_0041 — the object cannot be mapped;
+//! 0x0602_0000 — the object is not in the dictionary.
 
 use std::sync::Arc;
 
+use crate::bus::canopen::pdo::{plan_layout_in, Direction, Pdo, PdoSlots};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::{is_touch_probe, DataType};
 use crate::link::LinkError;
@@ -73,7 +93,8 @@ impl Offer {
 }
 
 /// Is `code`, the answer to writing mapping entry `value` (index << 16 | sub << 8 | bits), the
-/// node refusing that object in a PDO? The object and the reason.
+/// node refusing that object in a PDO? The object and the reason. (0x0609_0011 is about the
+/// mapping parameter's sub-index, not the object: [`refusal`].)
 pub fn is_mapping_refusal(code: u32, value: u32, rx: bool) -> Option<Lacking> {
     let (index, sub) = ((value >> 16) as u16, (value >> 8) as u8);
     let why = match code {
@@ -81,12 +102,139 @@ pub fn is_mapping_refusal(code: u32, value: u32, rx: bool) -> Option<Lacking> {
             "not mappable into {} (SDO abort {code:#010x})",
             if rx { "an RPDO" } else { "a TPDO" }
         ),
-        NO_OBJECT | NO_SUB_INDEX => {
-            format!("not in its object dictionary (SDO abort {code:#010x})")
-        }
+        NO_OBJECT => format!("not in its object dictionary (SDO abort {code:#010x})"),
         _ => return None,
     };
     Some(Lacking { index, sub, why })
+}
+
+/// Why the node refused a write of its PDO mapping (module documentation).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Refusal {
+    /// The object of the entry: not mappable or not there ([`is_mapping_refusal`]).
+    Object(Lacking),
+    /// The mapping parameter of PDO `pdo` (0-based) of `direction` has no sub-index `sub`
+    /// (abort 0x0609_0011): it takes `sub` − 1 entries.
+    NoSubIndex {
+        /// RPDO or TPDO.
+        direction: Direction,
+        /// PDO number, 0-based.
+        pdo: u8,
+        /// The sub-index refused.
+        sub: u8,
+    },
+}
+
+/// The refusal `code` of writing `value` to mapping parameter `index` (0x1600 … 0x17FF,
+/// 0x1A00 … 0x1BFF) sub-index `sub` ≥ 1, if it is one the master fits around.
+pub fn refusal(code: u32, index: u16, sub: u8, value: u32) -> Option<Refusal> {
+    let rx = index < 0x1800;
+    if code == NO_SUB_INDEX {
+        let (direction, base) = if rx {
+            (Direction::Rx, 0x1600)
+        } else {
+            (Direction::Tx, 0x1A00)
+        };
+        return Some(Refusal::NoSubIndex {
+            direction,
+            pdo: u8::try_from(index.checked_sub(base)?).ok()?,
+            sub,
+        });
+    }
+    is_mapping_refusal(code, value, rx).map(Refusal::Object)
+}
+
+/// The PDOs of one node, per direction ([`PdoSlots`], asked by SDO at start-up).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NodePdos {
+    /// RPDOs.
+    pub rx: PdoSlots,
+    /// TPDOs.
+    pub tx: PdoSlots,
+}
+
+impl NodePdos {
+    /// The slots of `direction`.
+    pub fn of(&mut self, direction: Direction) -> &mut PdoSlots {
+        match direction {
+            Direction::Rx => &mut self.rx,
+            Direction::Tx => &mut self.tx,
+        }
+    }
+}
+
+/// The answer to an SDO upload while asking a node for its PDOs: present (the data or a
+/// refusal other than "not there"), or not there (abort 0x0602_0000 / 0x0609_0011).
+pub fn is_there(answer: &Result<Vec<u8>, u32>) -> bool {
+    !matches!(answer, Err(c) if *c == NO_OBJECT || *c == NO_SUB_INDEX)
+}
+
+/// The master's PDOs of a definition fitted into the node's PDOs ([`plan`]).
+#[derive(Debug, Clone)]
+pub struct Planned {
+    /// The definition mapped: `def`, or `def` without 0x6060 when the master writes it by SDO
+    /// instead.
+    pub def: Arc<DriveDefinition>,
+    /// RPDOs.
+    pub rx: Vec<Pdo>,
+    /// TPDOs.
+    pub tx: Vec<Pdo>,
+    /// 0x6060 is in no RPDO: the master writes it by SDO in PRE-OPERATIONAL.
+    pub mode_by_sdo: bool,
+}
+
+/// Fit `def`'s process data into the PDOs `pdos` of node `node` (module documentation): the
+/// PDOs, or error [`ids::CANOPEN_PDO_CAPACITY`].
+pub fn plan(def: &Arc<DriveDefinition>, node: u8, pdos: &NodePdos) -> Result<Planned, LinkError> {
+    const MODE: (u16, u8) = (0x6060, 0);
+    let mut def = def.clone();
+    let rx = match plan_layout_in(&def.rxpdo, Direction::Rx, node, &pdos.rx) {
+        Ok(rx) => rx,
+        Err(first) if def.rxpdo.contains(MODE.0, MODE.1) => {
+            let mut without = (*def).clone();
+            without.rxpdo = def.rxpdo.without(|i, s| (i, s) == MODE);
+            without.rxpdo_defaults.retain(|d| (d.index, d.sub) != MODE);
+            match plan_layout_in(&without.rxpdo, Direction::Rx, node, &pdos.rx) {
+                Ok(rx) => {
+                    tracing::info!(target: "fieldprobe::link::canopen", node,
+                        "node {node}: {first}; 0x6060:00 modes of operation leaves the RPDOs \
+                         and is written by SDO");
+                    def = Arc::new(without);
+                    rx
+                }
+                Err(e) => {
+                    return Err(capacity_error(
+                        node,
+                        &def,
+                        &format!(
+                            "{e}, even with 0x6060:00 modes of operation out of the RPDOs \
+                             (written by SDO)"
+                        ),
+                    ))
+                }
+            }
+        }
+        Err(e) => return Err(capacity_error(node, &def, &e.to_string())),
+    };
+    let tx = plan_layout_in(&def.txpdo, Direction::Tx, node, &pdos.tx)
+        .map_err(|e| capacity_error(node, &def, &e.to_string()))?;
+    let mode_by_sdo = !def.rxpdo.contains(MODE.0, MODE.1);
+    Ok(Planned {
+        def,
+        rx,
+        tx,
+        mode_by_sdo,
+    })
+}
+
+fn capacity_error(node: u8, def: &DriveDefinition, why: &str) -> LinkError {
+    LinkError::Refused(CncMessage::error(
+        ids::CANOPEN_PDO_CAPACITY,
+        format!(
+            "node {node}: the process data of drive '{}' ({}) do not fit the node's PDOs: {why}",
+            def.name, def.file
+        ),
+    ))
 }
 
 /// The definition to map for node `node` whose drive definition is `def`, given what the node
@@ -252,6 +400,84 @@ mod tests {
             m.text
         );
         assert!(!m.text.contains("0x60BA"), "{}", m.text);
+    }
+
+    #[test]
+    fn a_refused_mapping_sub_index_is_the_capacity_not_the_object() {
+        // Writing 0x607A into 0x1600:02 refused with 0x06090011: 0x1600 has no sub-index 2.
+        assert_eq!(
+            refusal(0x0609_0011, 0x1600, 2, 0x607A_0020),
+            Some(Refusal::NoSubIndex {
+                direction: Direction::Rx,
+                pdo: 0,
+                sub: 2
+            })
+        );
+        assert_eq!(
+            refusal(0x0609_0011, 0x1A03, 5, 0x6077_0010),
+            Some(Refusal::NoSubIndex {
+                direction: Direction::Tx,
+                pdo: 3,
+                sub: 5
+            })
+        );
+        // 0x06040041: the object 0x607A cannot be mapped.
+        let Some(Refusal::Object(l)) = refusal(0x0604_0041, 0x1600, 2, 0x607A_0020) else {
+            panic!("object refusal");
+        };
+        assert_eq!((l.index, l.sub), (0x607A, 0));
+        assert!(l
+            .why
+            .contains("not mappable into an RPDO (SDO abort 0x06040041)"));
+        assert_eq!(refusal(0x0800_0000, 0x1600, 2, 0x607A_0020), None);
+    }
+
+    fn slots(rx: [u8; 4], tx: [u8; 4]) -> NodePdos {
+        NodePdos {
+            rx: PdoSlots { entries: rx },
+            tx: PdoSlots { entries: tx },
+        }
+    }
+
+    #[test]
+    fn one_rpdo_with_the_touch_probe_sends_the_mode_of_operation_by_sdo() {
+        // The generic drive: 0x6040 2 + 0x607A 4 + 0x60B8 2 = 8 bytes, 0x6060 1 more.
+        let def = generic();
+        let p = plan(&def, 2, &slots([8, 0, 0, 0], [8; 4])).unwrap();
+        assert!(p.mode_by_sdo);
+        assert_eq!(p.rx.len(), 1);
+        let rx: Vec<u16> = p.rx[0].mapped.iter().map(|m| m.index).collect();
+        assert_eq!(rx, [0x6040, 0x607A, 0x60B8]);
+        assert!(!p.def.rxpdo.contains(0x6060, 0));
+        // With the full connection set nothing moves.
+        let p = plan(&def, 2, &slots([8; 4], [8; 4])).unwrap();
+        assert!(!p.mode_by_sdo && Arc::ptr_eq(&p.def, &def));
+    }
+
+    #[test]
+    fn what_does_not_fit_is_900506_naming_node_drive_and_objects() {
+        let def = generic();
+        let Err(LinkError::Refused(m)) = plan(&def, 4, &slots([2, 0, 0, 0], [8; 4])) else {
+            panic!("2 entries cannot carry 0x6040, 0x607A and 0x60B8");
+        };
+        assert_eq!(m.id, 900506);
+        for want in [
+            "node 4",
+            "'cia402-generic'",
+            "1 RPDO (0x1600: 2 entries)",
+            "no PDO is left for 0x60B8:00 (2 bytes)",
+            "even with 0x6060:00 modes of operation out of the RPDOs",
+        ] {
+            assert!(m.text.contains(want), "{want:?} in {}", m.text);
+        }
+        let Err(LinkError::Refused(m)) = plan(&def, 4, &slots([8; 4], [1, 1, 0, 0])) else {
+            panic!("2 TPDOs of 1 entry cannot carry the generic drive's inputs");
+        };
+        assert!(
+            m.text.contains("2 TPDOs (0x1A00 … 0x1A01: 1, 1 entries)"),
+            "{}",
+            m.text
+        );
     }
 
     #[test]

@@ -9,9 +9,12 @@
 //!
 //! The bus load of one cycle at the bus's bit rate ([`load`]): above 100 % the link refuses to
 //! start before anything is sent. Then NMT reset communication → boot-up of every axis node
-//! (bounded wait) → per node: SDO reads of 0x1000 and 0x1018 (identity), the drive file's
-//! process data in the master's layout ([`plan_layout`]: ≤ 4 RPDOs / TPDOs of ≤ 8 bytes, cyclic
-//! and on-change PDOs) written by the CiA 301 remap procedure, unused PDOs disabled, producer
+//! (bounded wait) → per node: SDO reads of 0x1000 and 0x1018 (identity), the objects and PDOs
+//! the node offers ([`fit`]), the drive file's process data in the master's layout fitted into
+//! them ([`plan_layout`] / [`crate::bus::canopen::pdo::plan_layout_in`]: ≤ 4 RPDOs / TPDOs of
+//! ≤ 8 bytes and as many entries as the node's mapping parameters take, cyclic and on-change
+//! PDOs) written by the CiA 301 remap procedure, the node's unused PDOs disabled, 0x6060 = 8
+//! by SDO when no RPDO carries it, producer
 //! heartbeat 0x1017 set, 0x1006 communication cycle period (µs = machine cycle) and 0x1007
 //! synchronous window length ([`paced::sync_window`]: half the cycle, or the cycle's frames if
 //! longer), the event-timer of every cyclic RPDO (sub-index 5: the node's deadline monitoring,
@@ -58,6 +61,7 @@ pub mod load;
 pub mod paced;
 pub mod pdo_map;
 mod session;
+mod startup;
 pub mod wire;
 
 pub use session::{CanSession, NodeInfo};
@@ -72,7 +76,7 @@ use crate::bus::can::{
     Bitrate, CanBus, CanError, CanFrame, CandumpWriter, SocketCanBus, UdpConfig, UdpMulticastBus,
 };
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
-use crate::bus::canopen::pdo::{plan_layout, Direction, Pdo, Trigger, MAX_PDOS};
+use crate::bus::canopen::pdo::{plan_layout, Direction, Pdo, Trigger};
 use crate::bus::canopen::sdo::{SdoClient, SdoError};
 use crate::bus::capture::CaptureClock;
 use crate::drive::catalogue::DriveDefinition;
@@ -725,6 +729,13 @@ impl CanopenLink {
             .map(|a| load::node_frames(&a.rx, &a.tx))
             .collect();
         link.load = BusLoad::new(&nodes, bitrate, cycle, HEARTBEAT_MS);
+        // The layout fitted into the nodes' PDOs may need more frames than planned (fewer
+        // entries a PDO): the same limit, before any SYNC or PDO.
+        if let Err(refused) = link.load.check() {
+            return Err(LinkError::Other(format!(
+                "{refused} (with the PDOs fitted into what the nodes offer)"
+            )));
+        }
         link.epoch = link.bus.wire_clock().unwrap_or(Nanos::ZERO);
         Ok(link)
     }
@@ -883,108 +894,6 @@ impl CanopenLink {
             a.last_heartbeat = Some(hb_start);
         }
         Ok(())
-    }
-
-    /// Start-up, axis `i`: ask its node for every object of the drive definition's PDO
-    /// mapping, fit the definition to what the node offers and write the mapping ([`fit`]);
-    /// an object the node refuses in the mapping is left out (touch probe) or refuses the
-    /// start-up (anything else), and the mapping is written again from the start.
-    fn fit_and_map(&mut self, i: usize) -> Result<(), LinkError> {
-        let node = self.axes[i].node;
-        let configured = self.axes[i].def.clone();
-        let mut lacking = Vec::new();
-        for e in configured
-            .rxpdo
-            .entries()
-            .iter()
-            .chain(configured.txpdo.entries())
-        {
-            if lacking
-                .iter()
-                .any(|l: &fit::Lacking| (l.index, l.sub) == (e.index, e.sub))
-            {
-                continue;
-            }
-            let answer = match self.sdo_transfer(i, e.index, e.sub, None) {
-                Ok(data) => fit::Offer::from_upload(Ok(&data), e.ty),
-                Err(LinkError::Abort { code, .. }) => fit::Offer::from_upload(Err(code), e.ty),
-                Err(other) => return Err(other),
-            };
-            if let fit::Offer::Lacking(why) = answer {
-                lacking.push(fit::Lacking {
-                    index: e.index,
-                    sub: e.sub,
-                    why,
-                });
-            }
-        }
-        loop {
-            let (def, warning) = fit::fit(&configured, node, &lacking)?;
-            let (rx, tx) = plan_node(&def, node)?;
-            let a = &mut self.axes[i];
-            a.rx_sent = vec![None; rx.len()];
-            a.tx_held = vec![None; tx.len()];
-            a.rx = rx;
-            a.tx = tx;
-            a.def = def;
-            a.warning = warning;
-            match self.write_mapping(i)? {
-                None => return Ok(()),
-                Some(refused) => {
-                    if lacking
-                        .iter()
-                        .any(|l| (l.index, l.sub) == (refused.index, refused.sub))
-                    {
-                        // Refused although not mapped: cannot happen with a consistent node.
-                        return Err(other(format!(
-                            "node {node}: start-up: the node refuses {:#06X}:{:02X} in its PDO                              mapping ({}), which the master left out",
-                            refused.index, refused.sub, refused.why
-                        )));
-                    }
-                    lacking.push(refused);
-                }
-            }
-        }
-    }
-
-    /// Write axis `i`'s planned PDOs by the CiA 301 remap procedure and disable the unused
-    /// ones; `Some(object)` when the node refused a mapping entry as not mappable / absent
-    /// ([`fit::is_mapping_refusal`]).
-    fn write_mapping(&mut self, i: usize) -> Result<Option<fit::Lacking>, LinkError> {
-        let node = self.axes[i].node;
-        let mut writes = Vec::new();
-        for dir in [Direction::Rx, Direction::Tx] {
-            let pdos = match dir {
-                Direction::Rx => self.axes[i].rx.clone(),
-                Direction::Tx => self.axes[i].tx.clone(),
-            };
-            for p in &pdos {
-                writes.extend(p.remap_writes());
-            }
-            for k in pdos.len()..MAX_PDOS {
-                let cob = u32::from(dir.default_cob(k as u8, node)) | 0x8000_0000;
-                writes.push((dir.comm_index(k as u8), 1, cob.to_le_bytes().to_vec()));
-            }
-        }
-        for (index, sub, data) in writes {
-            match self.sdo_transfer(i, index, sub, Some(&data)) {
-                Ok(_) => {}
-                Err(e @ LinkError::Abort { code, .. })
-                    if sub >= 1
-                        && ((0x1600..=0x17FF).contains(&index)
-                            || (0x1A00..=0x1BFF).contains(&index)) =>
-                {
-                    let value = decode_le(&data, false) as u32;
-                    let rx = index < 0x1800;
-                    return match fit::is_mapping_refusal(code, value, rx) {
-                        Some(l) => Ok(Some(l)),
-                        None => Err(e),
-                    };
-                }
-                Err(e) => return Err(e),
-            }
-        }
-        Ok(None)
     }
 
     /// Start-up: 0x1006 communication cycle period and 0x1007 synchronous window length

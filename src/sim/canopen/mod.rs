@@ -45,8 +45,22 @@
 //! steps every operational node's model once with its RPDO image (one [`World::step`], the
 //! same step [`SimLink`](crate::link::sim::SimLink) makes). So a master that sends its RPDOs,
 //! then SYNC, then reads the TPDOs sees the actual values one cycle after they were sampled,
-//! as over `--link sim` and EtherCAT. One step covers 0x1006 (when the master wrote it) or the
-//! segment's cycle.
+//! as over `--link sim` and EtherCAT.
+//!
+//! # The drive's clock (issue 25)
+//!
+//! A real drive moves in real time, whatever its SYNC period object says. One SYNC steps the
+//! drive models ([`CanopenSegment::sync_step`]):
+//! * by **0x1006** communication cycle period when an operational node has it (≠ 0): the
+//!   period the master wrote (fieldprobe's master writes the machine cycle);
+//! * else by the **time elapsed on the nodes' own clock since the previous SYNC** — the node
+//!   of an EDS without 0x1006 (maxon EPOS4, Faulhaber MCBL …), or whose master left it 0,
+//!   interpolates each set-point over the real SYNC interval. Bounds: the first SYNC after
+//!   NMT start has no previous one and steps by the segment's cycle (`sim canopen`: 1 ms;
+//!   the drive is not enabled yet then); a gap longer than [`MAX_SYNC_STEP`] (1 s, a stalled
+//!   master) steps by that. The clock is the `model_time` of [`CanopenSegment::receive`]: the
+//!   wall clock in `sim canopen`, the SYNC producer's grid on `canopen-emu`, where the elapsed
+//!   time is exactly the machine cycle, so that link stays deterministic.
 //!
 //! # SYNC timing (CiA 301 0x1006, 0x1007)
 //!
@@ -298,24 +312,9 @@ fn eds_object(e: &eds::Entry, node: u8) -> Result<(ObjectEntry, Option<usize>), 
             Access::Rw
         }
     };
-    let given = e.parameter_value.as_ref().or(e.default.as_ref());
-    let value = match given {
-        None => None,
-        Some(text) => Some(e.value_bytes(node).ok_or_else(|| match e.data_type {
-            T::Other(code) => format!(
-                "line {}: value {:?} of data type {code:#06x} ({code}): the emulated node \
-                 stores no complex or manufacturer-specific data type (CiA 301 codes \
-                 0x0020..=0x0023, 0x0040..=0x025F); use a basic type (0x0001..=0x001B)",
-                text.line, text.raw
-            ),
-            t => format!(
-                "line {}: value {:?} is not a valid {t:?} (data type {:#06x})",
-                text.line,
-                text.raw,
-                t.code()
-            ),
-        })?),
-    };
+    // A value the lenient EDS reader could not read (it warned) is no value: zero / empty,
+    // as for an entry without one.
+    let value = e.value_bytes(node);
     let numeric = match e.data_type {
         T::Boolean => Some(DataType::Bool),
         T::Integer8 => Some(DataType::I8),
@@ -418,8 +417,9 @@ impl EmulatedNode {
     /// * Every EDS entry (every sub-index, compact storage expanded) becomes an object with the
     ///   EDS access (`ro`/`const` → read-only, `wo` → write-only, `rw`/`rwr`/`rww` →
     ///   read-write) and the EDS value evaluated for `id` (`$NODEID`): `ParameterValue` (DCF)
-    ///   if present, else `DefaultValue`, else zero / empty. A value that does not parse for
-    ///   its data type is an error naming the object.
+    ///   if present, else `DefaultValue`, else zero / empty — as the lenient EDS reader reads
+    ///   it ([`eds`]: a value beyond its type saturates or keeps its bit pattern; one that
+    ///   does not read at all, e.g. of a complex data type, counts as none).
     /// * Data types: BOOLEAN, INTEGER8/16/32/64 and UNSIGNED8/16/32/64 are numeric objects
     ///   (a download must have exactly the type's size, else abort 0x0607_0010). Other
     ///   fixed-size types (INTEGER24/40/48/56, UNSIGNED24/40/48/56, REAL32/64, TIME_OF_DAY,
@@ -1160,6 +1160,13 @@ impl EmulatedNode {
     }
 }
 
+/// Longest step one SYNC advances the drive models by when no 0x1006 is set: the time since
+/// the previous SYNC, but at most this (module documentation, "The drive's clock"). 1 s covers
+/// the slowest cycle a CiA 301 bus carries for a few drives (10 kbit/s: three generic drives
+/// need 260 ms, eight 690 ms below 70 % load); a longer gap is a stalled master, whose last
+/// set-point the drive holds.
+pub const MAX_SYNC_STEP: Nanos = Nanos(1_000_000_000);
+
 /// The emulated nodes of one bus and their world.
 #[derive(Debug)]
 pub struct CanopenSegment {
@@ -1168,6 +1175,8 @@ pub struct CanopenSegment {
     cycle: Nanos,
     /// The models' ports during a world step (kept: no allocation per SYNC).
     ports: PortBuffer,
+    /// The model time of the last SYNC step, and the step it made.
+    last_step: Option<(Nanos, Nanos)>,
 }
 
 impl CanopenSegment {
@@ -1178,6 +1187,7 @@ impl CanopenSegment {
             world: World::new(crate::sim::plant::Plant::new()),
             cycle,
             ports: PortBuffer::default(),
+            last_step: None,
         }
     }
 
@@ -1234,13 +1244,19 @@ impl CanopenSegment {
         send: &mut dyn FnMut(CanFrame),
     ) {
         if !f.extended && !f.rtr && !f.error && f.id == u32::from(nmt::SYNC_COB) {
+            // The first SYNC since an operational node started (its SYNC history is reset by
+            // every NMT state change).
+            let first = !self
+                .nodes
+                .iter()
+                .any(|n| n.state == NmtState::Operational && n.last_sync.is_some());
             for n in &mut self.nodes {
                 n.syncs += u64::from(n.state == NmtState::Operational);
                 n.on_sync(at);
                 n.send_tpdos(at);
                 n.send_outgoing(send);
             }
-            self.step_models(model_time);
+            self.step_models(model_time, first);
         } else {
             for n in &mut self.nodes {
                 n.handle(f, at);
@@ -1265,15 +1281,11 @@ impl CanopenSegment {
     /// previous SYNC): every model steps once with the RPDOs received before this SYNC (CiA 301
     /// synchronous PDOs: received data take effect at the next SYNC, transmitted data are
     /// sampled at the SYNC). A master that sends its RPDOs, then SYNC, then reads the TPDOs
-    /// thus sees the actual values one cycle after they were sampled, as on a real bus.
-    fn step_models(&mut self, now: Nanos) {
-        // The period the master configured (0x1006), else the segment's cycle.
-        let cycle = self
-            .nodes
-            .iter()
-            .filter(|n| n.state == NmtState::Operational)
-            .find_map(EmulatedNode::cycle_period_us)
-            .map_or(self.cycle, |us| Nanos::from_micros(u64::from(us)));
+    /// thus sees the actual values one cycle after they were sampled, as on a real bus. The
+    /// step is [`sync_step`](Self::sync_step)'s.
+    fn step_models(&mut self, now: Nanos, first: bool) {
+        let cycle = self.sync_step(now, first);
+        self.last_step = Some((now, cycle));
         let ports = self.nodes.iter_mut().map(|n| Port {
             model: n.od.model_mut(),
             outputs: &n.outputs,
@@ -1281,6 +1293,30 @@ impl CanopenSegment {
         });
         let world = &mut self.world;
         self.ports.with(ports, |p| world.step(now, cycle, p));
+    }
+
+    /// How far a SYNC at model time `now` steps the drive models (module documentation,
+    /// "The drive's clock"): 0x1006 when an operational node has it set (≠ 0); else the time
+    /// since the previous SYNC on the nodes' clock, at most [`MAX_SYNC_STEP`]; the segment's
+    /// cycle for the first SYNC after NMT start (`first`), when there is no previous one.
+    pub fn sync_step(&self, now: Nanos, first: bool) -> Nanos {
+        let configured = self
+            .nodes
+            .iter()
+            .filter(|n| n.state == NmtState::Operational)
+            .find_map(EmulatedNode::cycle_period_us);
+        match (configured, self.last_step) {
+            (Some(us), _) => Nanos::from_micros(u64::from(us)),
+            (None, Some((prev, _))) if !first => {
+                Nanos(now.0.saturating_sub(prev.0).min(MAX_SYNC_STEP.0))
+            }
+            _ => self.cycle,
+        }
+    }
+
+    /// The step the last SYNC advanced the drive models by ([`sync_step`](Self::sync_step)).
+    pub fn last_sync_step(&self) -> Option<Nanos> {
+        self.last_step.map(|(_, step)| step)
     }
 }
 
