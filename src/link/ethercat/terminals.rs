@@ -38,8 +38,11 @@ pub struct TerminalSpec {
     pub name: String,
     /// Where its ESI came from (`fieldprobe-el5101`, or the file).
     pub source: String,
-    /// The ESI file; the terminal is its first device.
+    /// The ESI file.
     pub esi: Arc<EsiFile>,
+    /// The terminal: the file's device the reference selects (`FILE.xml#SEL`, the syntax of
+    /// [`esi::select`](crate::esi::select)), with its modules resolved.
+    pub device: Device,
     /// Where it stands in the ring: after this many of the machine's axes (their drives);
     /// `usize::MAX` (the default of [`Self::resolve`]): after all of them.
     pub after_axes: usize,
@@ -47,11 +50,18 @@ pub struct TerminalSpec {
 
 impl TerminalSpec {
     /// The terminal `name` with the ESI `reference`: an embedded name ([`EMBEDDED_ESI`]) or an
-    /// ESI file, relative to `base` (the machine file's directory) unless absolute.
+    /// ESI file, relative to `base` (the machine file's directory) unless absolute, optionally
+    /// with a device selector (`FILE.xml#SEL`: type name, product code and revision, `@N`,
+    /// `+MODULE`s); a file with several devices needs one.
     ///
     /// # Errors
     /// A file that cannot be read or parsed, or one without a device, in words naming both.
     pub fn resolve(name: &str, reference: &str, base: Option<&Path>) -> Result<Self, String> {
+        let whole = reference;
+        let (reference, selector) = match esi::split_spec(whole) {
+            (file, Some(sel)) if !Path::new(whole).exists() => (file, Some(sel)),
+            _ => (whole, None),
+        };
         let key = reference
             .strip_prefix("esi/")
             .unwrap_or(reference)
@@ -79,17 +89,25 @@ impl TerminalSpec {
                 "terminal {name}: esi \"{reference}\" describes no device"
             ));
         }
+        let sel: Option<esi::Selector> = selector
+            .map(|s| s.parse())
+            .transpose()
+            .map_err(|e| format!("terminal {name}: esi \"{whole}\": {e}"))?;
+        let device = esi::resolve(&esi, sel.as_ref())
+            .map_err(|e| format!("terminal {name}: esi \"{whole}\": {e}"))?
+            .device;
         Ok(TerminalSpec {
             name: name.to_string(),
-            source: reference.to_string(),
+            source: whole.to_string(),
             esi,
+            device,
             after_axes: usize::MAX,
         })
     }
 
-    /// The ESI device (the file's first).
+    /// The ESI device the reference selects.
     pub fn device(&self) -> Option<&Device> {
-        self.esi.devices.first()
+        Some(&self.device)
     }
 
     /// (vendor id, product code) the SubDevice on the bus must have.
