@@ -226,6 +226,20 @@ pub fn match_ring(
 mod tests {
     use super::*;
 
+    /// `FILE.xml#SEL` picks the terminal's device; a selector matching nothing names the file's
+    /// devices.
+    #[test]
+    fn a_selector_picks_the_device() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let t = TerminalSpec::resolve("E", "esi/fieldprobe-el5101.xml#@1", Some(dir)).unwrap();
+        assert_eq!(t.type_name(), "FP-EL5101");
+        let by_name =
+            TerminalSpec::resolve("E", "esi/fieldprobe-el5101.xml#FP-EL5101", Some(dir)).unwrap();
+        assert_eq!(by_name.identity(), t.identity());
+        let e = TerminalSpec::resolve("E", "esi/fieldprobe-el5101.xml#@2", Some(dir)).unwrap_err();
+        assert!(e.contains("terminal E") && e.contains("@1"), "{e}");
+    }
+
     #[test]
     fn embedded_names_resolve_and_files_are_named_in_errors() {
         for r in [
