@@ -693,3 +693,57 @@ fn every_module_of_a_modular_device() {
     }
     println!("modules checked: {seen}");
 }
+
+/// Every CiA 402 device of every file that has a touch probe (not only the one on Z of the veth
+/// segment): with its `drive from-esi` definition on Z, meas1 with the drive latch on the
+/// in-process emulated bus (which plays the device from its ESI, `[device] esi`) prints the
+/// values of seed 004 §5.
+#[test]
+fn every_touch_probe_device_measures_meas1() {
+    let Some(dir) = esi_dir() else {
+        return;
+    };
+    if !seed004_present() {
+        return;
+    }
+    let work = tempfile::tempdir().unwrap();
+    let want = seed004::seed_stdout_lines("meas1");
+    let mut measured = Vec::new();
+    for file in esi_files(&dir) {
+        for d in file_devices(&file)
+            .into_iter()
+            .filter(|d| d.cia402() && d.touch_probe)
+        {
+            let spec = format!("{}#@{}", file.display(), d.position);
+            let (status, toml, err) = fieldprobe(&["drive", "from-esi", &spec]);
+            assert!(status.is_some_and(|s| s.success()), "{spec}: {err}");
+            assert!(
+                toml.contains("\n[probe]\n"),
+                "{spec}: a touch probe\n{toml}"
+            );
+            let def = work.path().join(format!("tp{}.toml", measured.len()));
+            std::fs::write(&def, &toml).unwrap();
+            let z = format!("Z.drive={}", def.display());
+            let (status, out, err) = fieldprobe(&[
+                "run",
+                "examples/nc/seed004/meas1.nc",
+                "--probe-at",
+                "Z=100",
+                "--set",
+                &z,
+                "--link",
+                "ethercat-emu",
+            ]);
+            assert!(status.is_some_and(|s| s.success()), "{spec}: {out}{err}");
+            assert_eq!(
+                out.lines().collect::<Vec<_>>(),
+                want,
+                "{spec} ({} rev {:#x}): meas1 with its drive latch\n{err}",
+                d.type_name,
+                d.revision
+            );
+            measured.push(format!("{} rev {:#x}", d.type_name, d.revision));
+        }
+    }
+    println!("meas1 with the drive latch of: {}", measured.join(", "));
+}

@@ -85,7 +85,7 @@ pub struct VendorDevice {
     /// Objects of the dictionary this module reads ([`OBJECTS_READ`]), those present.
     pub objects: Vec<VendorObject>,
     /// Roles and PDOs chosen from the device's own PDO descriptions (an ESI device:
-    /// [`esi_plan::plan`]); `None`: the CiA 402 objects the file marks mappable are mapped into
+    /// `esi_plan::plan`); `None`: the CiA 402 objects the file marks mappable are mapped into
     /// the first PDO of each direction.
     pub plan: Option<plan::Plan>,
     /// Why no plan could be made (the required roles the device cannot carry).

@@ -1,6 +1,6 @@
 //! A vendor device's CiA 402 roles and the PDOs that carry them, as a drive definition states
 //! them (`[roles]`, `[rxpdo]` / `[txpdo]` with `pdos`, `fixed`, `defaults`): the result of
-//! [`super::esi_plan::plan`] for an ESI device, written by [`super::generate`].
+//! `esi_plan::plan` for an ESI device, written by [`super::generate`].
 
 use super::super::pdo::{self, EntrySpec, Role};
 
@@ -17,7 +17,7 @@ pub struct Part {
     pub at: u16,
 }
 
-/// One way the device offers a CiA 402 role ([`role_sources`]).
+/// One way the device offers a CiA 402 role (`esi_plan::role_sources` finds them in an ESI).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RoleSource {
     /// The CiA 402 object (0x6040 …).

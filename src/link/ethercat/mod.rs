@@ -338,6 +338,7 @@ impl EthercatLink {
             // cycle and refuse a cycle time the wire cannot carry, before any device is in
             // SAFE-OP.
             let addresses: Vec<u16> = pdi.iter(md).map(|sd| sd.configured_address()).collect();
+            enable_sized_sync_managers(md, &addresses).await?;
             let pdi_len: usize = pdi
                 .iter(md)
                 .map(|sd| {
@@ -1389,6 +1390,36 @@ async fn assign_devices(
         })
         .collect();
     Ok((axes, terminals, bus))
+}
+
+/// Enable every process-data sync manager that has a length but is not enabled. ethercrab
+/// 0.7.1 enables a sync manager only where the SII says `Enable` (`write_sm_config`); an ESI
+/// may declare its process-data sync managers disabled with size 0 for the configurator to size
+/// and enable once PDOs are assigned (Bohign CL86EC: `Sm DefaultSize="0" Enable="0"`), as
+/// TwinCAT and SOEM do — left disabled, such a device refuses SAFE-OP (invalid output / input
+/// configuration). Mailbox sync managers (mode bits 10b) are left as they are.
+async fn enable_sized_sync_managers(
+    md: &MainDevice<'static>,
+    addresses: &[u16],
+) -> Result<(), LinkError> {
+    for &a in addresses {
+        let regs = ethercrab::Command::fprd(a, 0x0800)
+            .receive::<[u8; 64]>(md)
+            .await
+            .map_err(ec_err("SM registers"))?;
+        for n in 0..8usize {
+            let r = &regs[8 * n..8 * n + 8];
+            let len = u16::from_le_bytes([r[2], r[3]]);
+            let mailbox = r[4] & 0x03 == 0x02;
+            if len > 0 && !mailbox && r[6] & 0x01 == 0 {
+                ethercrab::Command::fpwr(a, 0x0806 + 8 * n as u16)
+                    .send(md, r[6] | 0x01)
+                    .await
+                    .map_err(ec_err("SM enable"))?;
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Configure the PDOs of an axis in PRE-OP (CiA 301 / ETG.1000.6 §5.6.7.4 procedure):

@@ -41,7 +41,7 @@ pub struct TerminalSpec {
     /// The ESI file.
     pub esi: Arc<EsiFile>,
     /// The terminal: the file's device the reference selects (`FILE.xml#SEL`, the syntax of
-    /// [`esi::select`](crate::esi::select)), with its modules resolved.
+    /// [`esi::select`]), with its modules resolved.
     pub device: Device,
     /// Where it stands in the ring: after this many of the machine's axes (their drives);
     /// `usize::MAX` (the default of [`Self::resolve`]): after all of them.
