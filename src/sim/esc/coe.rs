@@ -728,43 +728,100 @@ impl CoeServer {
         Ok(out)
     }
 
+    /// Complete-access download to `index` from `sub` (ETG.1000.6 §5.6.2.1.2, "complete
+    /// access"): from sub-index 0 the data is sub-index 0 as 16 bits (its value n, padding)
+    /// followed by sub-indices 1 … n; from sub-index 1, sub-indices 1 … in order, as many as
+    /// the data holds. Read-only entries are skipped. The value n is what TwinCAT and SOEM write
+    /// to set a PDO assignment (0x1C12 / 0x1C13) or mapping in one request: it is applied the
+    /// CiA 301 way — sub-index 0 = 0, the entries, sub-index 0 = n — each step under the PDO
+    /// rules of an emulated vendor device, so the request is accepted or refused exactly as the
+    /// single writes would be; on a refusal the object's old entries are put back.
     fn write_complete(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), u32> {
         if sub > 1 {
             return Err(abort::UNSUPPORTED_ACCESS);
         }
         self.find(index, sub)?;
-        let subs = self.subs_of(index, sub);
-        // Lengths first: every entry must be fixed-size (byte strings only as the last entry).
-        let mut parts = Vec::new();
-        let mut pos = 0usize;
-        for (k, &i) in subs.iter().enumerate() {
+        let subs = self.subs_of(index, 0);
+        let has_sub0 = subs.first().is_some_and(|&i| self.entries[i].sub == 0);
+        let (count, mut pos) = if sub == 0 {
+            if !has_sub0 {
+                return Err(abort::UNSUPPORTED_ACCESS);
+            }
+            let n = *data.first().ok_or(abort::LENGTH)?;
+            if data.len() < 2 {
+                return Err(abort::LENGTH);
+            }
+            (Some(n), 2usize)
+        } else {
+            (None, 0usize)
+        };
+        // The entries the data holds, with their bytes.
+        let mut parts: Vec<(usize, &[u8])> = Vec::new();
+        let entries: Vec<usize> = subs
+            .iter()
+            .copied()
+            .filter(|&i| self.entries[i].sub >= 1)
+            .collect();
+        for (k, &i) in entries.iter().enumerate() {
+            if count.is_some_and(|n| self.entries[i].sub > n) || pos >= data.len() {
+                break;
+            }
             let e = &self.entries[i];
-            let n = match (e.sub, e.ty.size()) {
-                (0, _) => 2,
-                (_, Some(n)) => n,
-                (_, None) if k + 1 == subs.len() => data.len().saturating_sub(pos),
-                _ => return Err(abort::UNSUPPORTED_ACCESS),
+            let n = match e.ty.size() {
+                Some(n) => n,
+                None if k + 1 == entries.len() => data.len() - pos,
+                None => return Err(abort::UNSUPPORTED_ACCESS),
             };
             let part = data.get(pos..pos + n).ok_or(abort::LENGTH)?;
             parts.push((i, part));
             pos += n;
         }
-        if pos != data.len() {
+        if pos != data.len() || count.is_some_and(|n| usize::from(n) != parts.len()) {
             return Err(abort::LENGTH);
         }
-        for (i, part) in parts {
-            if self.entries[i].sub == 0 {
-                // sub 0 (number of entries) is accepted unchanged only
-                let cur = self.read_entry(i)?;
-                if cur.first() != part.first() {
-                    return Err(abort::VALUE_RANGE);
+        let Some(n) = count else {
+            for (i, part) in parts {
+                if self.entries[i].access != Access::Ro {
+                    self.write_entry(i, part)?;
                 }
-                continue;
             }
-            if self.entries[i].access == Access::Ro {
-                continue; // CA write skips read-only entries
+            return Ok(());
+        };
+        let sub0 = subs[0];
+        if self.entries[sub0].access == Access::Ro {
+            // A fixed object: accepted when it says what the object holds already.
+            for (i, part) in &parts {
+                if self.read_entry(*i)? != *part {
+                    return Err(abort::READ_ONLY);
+                }
             }
-            self.write_entry(i, part)?;
+            return if self.read_entry(sub0)?.first() == Some(&n) {
+                Ok(())
+            } else {
+                Err(abort::READ_ONLY)
+            };
+        }
+        let old: Vec<(usize, Vec<u8>)> = subs
+            .iter()
+            .map(|&i| Ok((i, self.read_entry(i)?)))
+            .collect::<Result<_, u32>>()?;
+        let apply = |this: &mut Self| -> Result<(), u32> {
+            this.write_entry(sub0, &[0])?;
+            for (i, part) in &parts {
+                if this.entries[*i].access != Access::Ro {
+                    this.write_entry(*i, part)?;
+                }
+            }
+            this.write_entry(sub0, &[n])
+        };
+        if let Err(code) = apply(self) {
+            // Put the old content back, without the rules (it was the device's own).
+            for (i, d) in old {
+                if self.entries[i].data.is_some() {
+                    store(&mut self.entries[i].data, &d);
+                }
+            }
+            return Err(code);
         }
         Ok(())
     }

@@ -4,10 +4,13 @@
 //!
 //! The socket is the master's ([`RawPort`], `crate::bus::ethercat::raw`: an AF_PACKET/SOCK_RAW
 //! socket bound to the interface, protocol ETH_P_ALL); frames whose EtherType is not 0x88A4 are
-//! ignored, and so are frames whose source MAC already has the U/L bit set — our own replies,
-//! which an ETH_P_ALL socket sees as outgoing traffic, or frames processed by another segment.
-//! Every other frame goes through [`Segment::process_frame`] and is sent back on the same
-//! interface.
+//! ignored, and so are our own replies, which an ETH_P_ALL socket sees again as outgoing
+//! traffic: they are told apart by their bytes ([`SentFrames`], the last frames sent), not by
+//! the source MAC — a real ESC processes an EtherCAT frame whatever its source MAC (a master's
+//! may have the locally administered bit set: KickCAT's fixed address, every veth address) and
+//! *sets* that bit in the frame it returns (ETG.1000.4; Beckhoff ESC datasheet, frame
+//! processing), which is how a master tells its returned frames from its sent ones. Every other
+//! frame goes through [`Segment::process_frame`] and is sent back on the same interface.
 //!
 //! # Time
 //!
@@ -83,7 +86,7 @@ pub trait FrameIo {
 pub struct ServeStats {
     /// EtherCAT frames processed and answered.
     pub answered: u64,
-    /// EtherCAT frames skipped because the source MAC already had the U/L bit set.
+    /// EtherCAT frames skipped because they are our own replies seen again (outgoing).
     pub skipped_processed: u64,
     /// Frames with another EtherType.
     pub skipped_other: u64,
@@ -91,10 +94,45 @@ pub struct ServeStats {
     pub invalid: u64,
 }
 
-/// `true` if the source MAC has the locally-administered (U/L) bit set, i.e. the frame has
-/// already passed a (emulated) first device.
-fn already_processed(frame: &[u8]) -> bool {
-    frame.len() > 6 && frame[6] & 0x02 != 0
+/// How many of the last frames sent [`SentFrames`] remembers: more than the frames that can be
+/// in flight between a send and the socket seeing it again (one per received frame, answered
+/// in order).
+const SENT_REMEMBERED: usize = 16;
+
+/// The last frames the serve loop sent, to recognise them when the ETH_P_ALL socket sees them
+/// again as outgoing traffic (a packet socket's own sends come back to it; AF_PACKET's packet
+/// type would tell, but the socket layer does not report it). The buffers are kept, so
+/// remembering allocates nothing once they have grown.
+#[derive(Debug, Default)]
+pub struct SentFrames {
+    frames: Vec<Vec<u8>>,
+    used: [bool; SENT_REMEMBERED],
+    next: usize,
+}
+
+impl SentFrames {
+    /// Remember `frame` as sent.
+    pub fn remember(&mut self, frame: &[u8]) {
+        if self.frames.len() < SENT_REMEMBERED {
+            self.frames.resize_with(SENT_REMEMBERED, Vec::new);
+        }
+        let b = &mut self.frames[self.next];
+        b.clear();
+        b.extend_from_slice(frame);
+        self.used[self.next] = true;
+        self.next = (self.next + 1) % SENT_REMEMBERED;
+    }
+
+    /// Is `frame` one we sent (and not yet recognised)? Each sent frame is recognised once.
+    pub fn take(&mut self, frame: &[u8]) -> bool {
+        for (k, b) in self.frames.iter().enumerate() {
+            if self.used[k] && b.as_slice() == frame {
+                self.used[k] = false;
+                return true;
+            }
+        }
+        false
+    }
 }
 
 /// Serving a segment: the emulator's side of the master's [`RawPort`] (the port and its
@@ -224,9 +262,9 @@ impl FrameIo for QueuedIo<'_> {
 /// `deadline_ns`: wait for a frame or the segment's next deadline
 /// ([`Segment::poll_timeout`], at most [`POLL_INTERVAL`]), run what is due
 /// ([`Segment::handle_timeout`]), process an EtherCAT frame at the clock's `now` and send it
-/// back. Frames of other EtherTypes, frames whose source MAC already has the U/L bit set and
-/// frames the segment rejects are not answered (counted in [`ServeStats`]). `on_event` gets the
-/// segment's events.
+/// back. Frames of other EtherTypes, our own replies seen again ([`SentFrames`]) and frames the
+/// segment rejects are not answered (counted in [`ServeStats`]). `on_event` gets the segment's
+/// events.
 pub fn serve_loop(
     io: &mut impl FrameIo,
     clock: &impl Clock,
@@ -237,6 +275,7 @@ pub fn serve_loop(
 ) -> Result<ServeStats, RawError> {
     let poll_ns = u64::try_from(POLL_INTERVAL.as_nanos()).unwrap_or(u64::MAX);
     let mut stats = ServeStats::default();
+    let mut sent = SentFrames::default();
     loop {
         let now = clock.now_ns();
         if stop.load(Ordering::Relaxed) || deadline_ns.is_some_and(|d| now >= d) {
@@ -260,7 +299,7 @@ pub fn serve_loop(
             stats.skipped_other += 1;
             continue;
         }
-        if already_processed(&frame) {
+        if sent.take(&frame) {
             stats.skipped_processed += 1;
             continue;
         }
@@ -273,6 +312,7 @@ pub fn serve_loop(
                 continue;
             }
         }
+        sent.remember(&frame);
         io.send(&frame)?;
         stats.answered += 1;
         for e in segment.take_events() {
@@ -302,9 +342,14 @@ mod tests {
         f.extend_from_slice(&[0x10; 6]);
         f.extend_from_slice(&[0x88, 0xA4, 0, 0]);
         assert!(is_ethercat(&f));
-        assert!(!already_processed(&f));
+        // A master's frame with the locally administered bit set is an EtherCAT frame like any.
         f[6] |= 0x02;
-        assert!(already_processed(&f));
+        assert!(is_ethercat(&f));
+        let mut sent = SentFrames::default();
+        assert!(!sent.take(&f));
+        sent.remember(&f);
+        assert!(sent.take(&f), "our own frame, seen again");
+        assert!(!sent.take(&f), "recognised once");
         f[12] = 0x08;
         f[13] = 0x00;
         assert!(!is_ethercat(&f));
