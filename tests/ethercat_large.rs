@@ -523,10 +523,11 @@ fn a_cycle_time_the_wire_cannot_carry_is_refused() {
 /// watchdog whenever a frame waited for a descheduled process (seen in 5 of 8 runs at a load
 /// average of 6); the clock behaviour itself is covered by `tests/ethercat_iface_run.rs` and
 /// `tests/ethercat_rt.rs`. The master still runs its paced 1 ms cycle with the link's
-/// real-interface timeouts. One failure the environment alone causes — a reply later than the
-/// 30 ms PDU timeout during the start-up's ten thousand frames, or the master itself
-/// descheduled for longer than the devices' watchdog (error 900012 "the master missed") — is
-/// retried once, said on stderr; every other failure, and a second one, fails the test.
+/// real-interface timeouts. A reply later than 20 ms during the start-up's ten thousand frames
+/// is the link's own business since issue 26 (the frame is sent again, up to ten times). One
+/// failure the environment alone causes — the master itself descheduled for longer than the
+/// devices' watchdog (error 900012 "the master missed") — is retried once, said on stderr; every
+/// other failure, and a second one, fails the test.
 #[test]
 fn meas1_on_32_axes_and_64_terminals_over_a_veth_pair_prints_the_seed_values() {
     const NAME: &str = "meas1_on_32_axes_and_64_terminals_over_a_veth_pair_prints_the_seed_values";
@@ -553,8 +554,7 @@ fn meas1_on_32_axes_and_64_terminals_over_a_veth_pair_prints_the_seed_values() {
         ) else {
             return;
         };
-        let environment = (code == Some(2) && stderr.contains("EtherCAT init: timeout: PDU"))
-            || (code == Some(1) && stderr.contains("error 900012: the master missed"));
+        let environment = code == Some(1) && stderr.contains("error 900012: the master missed");
         if code != Some(0) && environment && attempt == 1 {
             eprintln!("RETRY {NAME}: the environment delayed the run:\n{stderr}");
             continue;

@@ -145,17 +145,26 @@ fn ethercat_iface_sends_frames_on_a_veth_pair() {
     let e = open_err_with_pcap("ethercat:v0", Some(&pcap));
     let after = unix_ns();
     // Nobody answers: the master's start-up (ethercrab init_single_group) fails on the wire,
-    // after the socket opened.
-    assert!(e.contains("EtherCAT init"), "{e}");
+    // after the socket opened and its first frame was sent ten times (issue 26).
+    assert!(e.contains("no EtherCAT device answered on v0"), "{e}");
     assert!(!e.contains("feature") && !e.contains("no such"), "{e}");
     let mut frames = 0;
-    while let Some(f) = peer.try_receive() {
+    // `try_receive` gives `None` for a frame of another type too (the kernel's IPv6 neighbour
+    // discovery on a new veth): read what came within a bounded time.
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    while std::time::Instant::now() < until && frames < 10 {
+        let Some(f) = peer.try_receive() else {
+            continue;
+        };
         // EtherType 0x88A4, EtherCAT header type 1 (datagrams), ETG.1000.4 §5.2.
         assert_eq!(&f[12..14], &[0x88, 0xA4]);
         assert_eq!(f[15] >> 4, 1, "EtherCAT header {:02x}{:02x}", f[14], f[15]);
         frames += 1;
     }
-    assert!(frames >= 1, "no EtherCAT frame reached v1 ({e})");
+    assert!(
+        frames >= 10,
+        "{frames} EtherCAT frames reached v1, not its ten tries ({e})"
+    );
     // The `--pcap` capture of a real link is stamped with the wall clock (issue 18): the
     // first record of the classic pcap file (ns magic 0xa1b23c4d, little-endian; record
     // header ts_sec, ts_nsec after the 24-byte global header) lies within the open.

@@ -394,16 +394,19 @@ impl Bus {
             terminals,
             emulated_extra: Vec::new(),
         };
-        Session::open(&wire, &spec).map_err(|e| match &self.link {
-            // The first frame of the bus initialisation (a broadcast read every SubDevice
-            // answers) did not come back: nothing on that wire answered.
-            BusLink::Ethercat(iface) if e.to_string().starts_with("EtherCAT init: timeout") => {
-                anyhow::anyhow!(
-                    "--link {}: no EtherCAT device answered on {iface} ({e}); check that a \
-                     device is connected to {iface} and powered",
-                    self.text
-                )
-            }
+        Session::open(&wire, &spec).map_err(|e| match (&self.link, &e) {
+            // Nothing on that wire answered the bus initialisation's first frame (a broadcast
+            // read every SubDevice answers), however often it was sent.
+            (
+                BusLink::Ethercat(iface),
+                LinkError::NoAnswer {
+                    answered_before: false,
+                    ..
+                },
+            ) => anyhow::anyhow!(
+                "--link {}: {e}; check that a device is connected to {iface} and powered",
+                self.text
+            ),
             _ => self.link_error(e),
         })
     }

@@ -4,7 +4,7 @@
 //! ```text
 //! fieldprobe sim ethercat --iface IF --device FILE.xml[#SEL][:COUNT]... [--drive POS=DRIVE]...
 //!                         [--probe-at POS=MM]... [--probe-input POS:CH]... [--lockstep]
-//!                         [--seconds N]
+//!                         [--lose-frames N|A..B|A..[,...]] [--seconds N]
 //!                         [--rt-priority N] [--cpu N] [--mlock]
 //! ```
 //! Builds a segment from the ESI files (in the order given; `:COUNT` repeats a device; `#SEL`
@@ -146,6 +146,12 @@ struct EthercatArgs {
     /// on the clock. For tests whose master does not keep a cycle.
     #[arg(long)]
     lockstep: bool,
+    /// Fault knob: lose the frames with these numbers (0 = the first frame received;
+    /// comma-separated; `A..B` from A to before B, `A..` every frame from A on) as a noisy or
+    /// pulled cable does — the frame is not processed and never comes back, so the master must
+    /// send it again or report it lost.
+    #[arg(long = "lose-frames", value_name = "N|A..B|A..[,...]")]
+    lose_frames: Option<String>,
     /// Stop after this many seconds (default: run until killed).
     #[arg(long, value_name = "N", allow_hyphen_values = true)]
     seconds: Option<String>,
@@ -436,6 +442,22 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
     } else {
         Stepping::OwnClock
     });
+    for item in a.lose_frames.iter().flat_map(|l| l.split(',')) {
+        let frame = |n: &str| {
+            number::int_in(n.trim(), 0, i128::from(u32::MAX), "a frame number")
+                .map(|i| i.value as u64)
+                .map_err(|expected| number::NumberError {
+                    what: "--lose-frames".to_string(),
+                    text: item.to_string(),
+                    expected,
+                })
+        };
+        match item.split_once("..") {
+            None => segment.drop_frame_at(frame(item)?),
+            Some((from, "")) => segment.drop_frames_in(frame(from)?..u64::MAX),
+            Some((from, to)) => segment.drop_frames_in(frame(from)?..frame(to)?),
+        }
+    }
     eprintln!(
         "fieldprobe sim ethercat: {} device(s) on {}, {}",
         segment.len(),

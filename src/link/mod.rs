@@ -104,6 +104,17 @@ pub enum LinkError {
     /// cycle time the EtherCAT wire cannot carry).
     #[error("{0}")]
     Refused(crate::messages::CncMessage),
+    /// A frame on a network interface was not answered after every try (the wire end repeats
+    /// frames, `link::ethercat::retry`): nothing on the wire answered at all
+    /// (`answered_before` false: no device connected or powered), or devices that had answered
+    /// stopped.
+    #[error("{text}")]
+    NoAnswer {
+        /// What was sent, how often, for how long, and who had answered before.
+        text: String,
+        /// Something on the wire had answered before.
+        answered_before: bool,
+    },
     /// Anything else (setup, configuration).
     #[error("{0}")]
     Other(String),

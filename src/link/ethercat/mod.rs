@@ -63,6 +63,7 @@ pub mod dictionary;
 #[cfg(feature = "sim")]
 mod emulated;
 pub mod pdo_fit;
+pub mod retry;
 pub mod terminals;
 mod wire;
 
@@ -395,7 +396,8 @@ impl EthercatLink {
                 Group::NoDc(g.into_op(md).await.map_err(ec_err("OP"))?)
             };
             Ok::<_, LinkError>((group, axes, terminals, bus, map, plan))
-        })?;
+        })
+        .map_err(|e| wire_end.explain(e))?;
         // The DC devices whose clocks follow the reference (ethercrab takes the first DC device
         // as the reference clock; its own 0x092C is never updated by the FRMW it sources).
         let dc_devices = match &group {
@@ -1050,7 +1052,8 @@ impl Session {
                 });
             }
             Ok::<_, LinkError>(out)
-        })?;
+        })
+        .map_err(|e| wire_end.explain(e))?;
         Ok(Session {
             md,
             wire: wire_end,

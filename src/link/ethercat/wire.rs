@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use ethercrab::{MainDevice, MainDeviceConfig, PduRx, PduTx, Timeouts};
 
 use super::datagrams::DatagramLog;
+use super::retry::{GaveUp, InFlight};
 use super::{EthercatSpec, Storage, Wire};
 use crate::bus::capture::CaptureClock;
 use crate::bus::ethercat::mailbox::MailboxError;
@@ -99,6 +100,11 @@ pub(super) struct WireEnd {
     pub(super) log: DatagramLog,
     /// The buffer of the frame being sent.
     buf: Vec<u8>,
+    /// Interface: the frames sent whose replies are not in yet, repeated and given up by
+    /// [`retry`](super::retry)'s policies.
+    inflight: InFlight,
+    /// Interface: the frame the current [`drive`] call gave up on.
+    gave_up: Option<GaveUp>,
 }
 
 impl WireEnd {
@@ -196,9 +202,45 @@ impl WireEnd {
                 continue;
             }
             if let Some(port) = self.port.as_mut() {
+                self.inflight.sent(&buf, Instant::now());
                 let _ = port.send(&buf);
             }
             self.buf = buf;
+        }
+    }
+
+    /// Interface: send again what is due ([`InFlight::due`]); a frame out of tries ends the
+    /// current [`drive`] call (kept in `gave_up` for the error message).
+    fn retry_due(&mut self) {
+        let Some(port) = self.port.as_mut() else {
+            return;
+        };
+        let tap = &mut self.tap;
+        let log = &mut self.log;
+        if let Some(g) = self.inflight.due(Instant::now(), |frame| {
+            tracing::debug!(target: "fieldprobe::link::ethercat", len = frame.len(),
+                "no reply in time: frame sent again");
+            if let Some(tap) = tap.as_mut() {
+                tap.record(frame, None);
+            }
+            log.record(frame, false);
+            let _ = port.send(frame);
+        }) {
+            tracing::debug!(target: "fieldprobe::link::ethercat", "{g}");
+            self.gave_up = Some(g);
+            self.lost = true;
+        }
+    }
+
+    /// `e` from a [`drive`] call, or [`LinkError::NoAnswer`] if the call ended because the
+    /// wire end gave up a frame (the root cause, whatever the master made of it).
+    pub(super) fn explain(&mut self, e: LinkError) -> LinkError {
+        match self.gave_up.take() {
+            Some(g) => LinkError::NoAnswer {
+                text: g.text(self.port.as_ref().map(RawPort::iface)),
+                answered_before: g.replies_before > 0,
+            },
+            None => e,
         }
     }
 
@@ -213,8 +255,12 @@ impl WireEnd {
             if let Some(tap) = self.tap.as_mut() {
                 tap.record(&frame, None);
             }
-            self.log.record(&frame, true);
-            let _ = self.rx.receive_frame(&frame);
+            // Only the reply to a frame in flight goes to the master: not our own frame seen
+            // again, nor the late twin of a repeated one (ethercrab reuses indices).
+            if self.inflight.received(&frame) {
+                self.log.record(&frame, true);
+                let _ = self.rx.receive_frame(&frame);
+            }
         }
     }
 }
@@ -248,28 +294,36 @@ const EMULATED_ETHERCRAB_TIMEOUT: Duration = Duration::MAX;
 /// of its frames (or it exceeded [`EMULATED_FRAMES_PER_CALL`]), the in-process, virtual-time
 /// counterpart of ethercrab's PDU timeout.
 pub(super) trait LostOnWire {
-    fn lost_on_wire() -> Self;
+    /// `gave_up`: on an interface, the frame given up after its tries; `None`: the emulated
+    /// wire lost it.
+    fn lost_on_wire(gave_up: Option<&GaveUp>) -> Self;
 }
 
 impl<T> LostOnWire for Result<T, ethercrab::error::Error> {
-    fn lost_on_wire() -> Self {
-        Err(ethercrab::error::Error::ReceiveFrame)
+    fn lost_on_wire(gave_up: Option<&GaveUp>) -> Self {
+        Err(match gave_up {
+            // As ethercrab's own PDU timeout said before the wire end repeated frames.
+            Some(_) => ethercrab::error::Error::Timeout(ethercrab::error::TimeoutError::Pdu),
+            None => ethercrab::error::Error::ReceiveFrame,
+        })
     }
 }
 
 impl<T> LostOnWire for Result<T, MailboxError> {
-    fn lost_on_wire() -> Self {
-        Err(MailboxError::Datagram(
-            "frame lost on the emulated wire".into(),
-        ))
+    fn lost_on_wire(gave_up: Option<&GaveUp>) -> Self {
+        Err(MailboxError::Datagram(match gave_up {
+            Some(g) => g.to_string(),
+            None => "frame lost on the emulated wire".into(),
+        }))
     }
 }
 
 impl<T> LostOnWire for Result<T, LinkError> {
-    fn lost_on_wire() -> Self {
-        Err(LinkError::Other(
-            "EtherCAT: a frame was lost on the emulated wire".into(),
-        ))
+    fn lost_on_wire(gave_up: Option<&GaveUp>) -> Self {
+        Err(LinkError::Other(match gave_up {
+            Some(g) => format!("EtherCAT: {g}"),
+            None => "EtherCAT: a frame was lost on the emulated wire".into(),
+        }))
     }
 }
 
@@ -280,15 +334,20 @@ impl<T> LostOnWire for Result<T, LinkError> {
 pub(super) fn drive<T: LostOnWire>(wire: &mut WireEnd, fut: impl Future<Output = T>) -> T {
     wire.lost = false;
     wire.frames = 0;
+    wire.gave_up = None;
     let pump = std::future::poll_fn(|cx| {
         wire.tx.replace_waker(cx.waker());
         wire.pump();
         if wire.lost || wire.frames > EMULATED_FRAMES_PER_CALL {
             tracing::debug!(target: "fieldprobe::link::ethercat", frames = wire.frames,
-                "emulated wire: frame lost or no progress; the master operation ends");
-            return Poll::Ready(T::lost_on_wire());
+                "frame lost or no progress; the master operation ends");
+            return Poll::Ready(T::lost_on_wire(wire.gave_up.as_ref()));
         }
         wire.receive();
+        wire.retry_due();
+        if wire.lost {
+            return Poll::Ready(T::lost_on_wire(wire.gave_up.as_ref()));
+        }
         if wire.port.is_some() {
             // Nothing wakes us when a frame arrives on the socket: the receive above waited
             // for it; poll the master again.
@@ -296,7 +355,10 @@ pub(super) fn drive<T: LostOnWire>(wire: &mut WireEnd, fut: impl Future<Output =
         }
         Poll::<T>::Pending
     });
-    futures_lite::future::block_on(futures_lite::future::or(fut, pump))
+    let out = futures_lite::future::block_on(futures_lite::future::or(fut, pump));
+    // Whatever the master still had in flight ended with its future.
+    wire.inflight.clear();
+    out
 }
 
 /// Leak a PDU storage and a MainDevice for `wire` (emulated segment per `spec`).
@@ -348,6 +410,8 @@ pub(super) fn connect(
         epoch_ns: 0,
         log: DatagramLog::default(),
         buf: Vec::with_capacity(crate::bus::ethercat::wire::MAX_ETHERNET_FRAME),
+        inflight: InFlight::new(super::MAX_FRAMES),
+        gave_up: None,
     };
     let timeouts = if emulated {
         Timeouts {
@@ -360,7 +424,9 @@ pub(super) fn connect(
         }
     } else {
         Timeouts {
-            pdu: Duration::from_millis(30),
+            // A backstop only: the wire end repeats and gives up a frame itself
+            // ([`super::retry`]: 30 ms for process data, 10 × 20 ms for the rest).
+            pdu: Duration::from_secs(1),
             state_transition: Duration::from_secs(5),
             mailbox_response: Duration::from_secs(2),
             // One SII (EEPROM) word read, busy bit polled over the wire: ethercrab's 10 ms is

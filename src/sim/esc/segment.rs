@@ -114,6 +114,8 @@ pub struct Segment {
     events: VecDeque<SegmentEvent>,
     events_dropped: u64,
     drop_frames: std::collections::BTreeSet<u64>,
+    /// Ranges of frame numbers dropped ([`Self::drop_frames_in`]).
+    drop_ranges: Vec<std::ops::Range<u64>>,
     miscount: std::collections::BTreeSet<u64>,
     offered: u64,
     /// The hosted models' ports during a world step (kept: no allocation per step).
@@ -146,6 +148,7 @@ impl Segment {
             events: VecDeque::new(),
             events_dropped: 0,
             drop_frames: std::collections::BTreeSet::new(),
+            drop_ranges: Vec::new(),
             miscount: std::collections::BTreeSet::new(),
             offered: 0,
             ports: PortBuffer::default(),
@@ -220,6 +223,12 @@ impl Segment {
     /// broken cable would: it is not processed and never comes back. May be called for several.
     pub fn drop_frame_at(&mut self, n: u64) {
         self.drop_frames.insert(n);
+    }
+
+    /// Drop the frames numbered in `range` (0-based, as [`Self::drop_frame_at`]); `n..u64::MAX`:
+    /// a device that answered and then went silent (a pulled cable, a power loss).
+    pub fn drop_frames_in(&mut self, range: std::ops::Range<u64>) {
+        self.drop_ranges.push(range);
     }
 
     /// SYNC0 at `now`: one [`World::step`] of every hosted drive model over `[now − cycle, now]`
@@ -339,7 +348,7 @@ impl Segment {
     pub fn process_frame(&mut self, frame: &mut [u8], now_ns: u64) -> Result<bool, WireError> {
         let n = self.offered;
         self.offered += 1;
-        if self.drop_frames.contains(&n) {
+        if self.drop_frames.contains(&n) || self.drop_ranges.iter().any(|r| r.contains(&n)) {
             return Ok(false);
         }
         // Own clock: what fell due before the frame arrived happens first.
