@@ -14,7 +14,8 @@
 //! node on `canopen-emu`), each checked by an SDO upload of sub-index 0, plus an SDO scan of
 //! the CiA 301 communication area and the CiA 402 objects fieldprobe knows
 //! ([`fieldprobe::bus::canopen::dictionary`]); every line says where it came from. Exit 0; 1
-//! when the device refuses the service; 2 on bad input or a bus error.
+//! when the device refuses the service, or fails to describe some objects or entries (the
+//! others are listed, each failure named on stderr); 2 on bad input or a bus error.
 
 use super::bus::refused;
 use super::sdo::{target, SdoTo, Target};
@@ -46,11 +47,11 @@ pub fn run(a: SdosArgs) -> anyhow::Result<i32> {
             let mut s = bus.open()?;
             let res = s.sdo_dictionary(d);
             super::finish_capture(s.finish_capture());
-            let objects = match res {
+            let dictionary = match res {
                 Ok(o) => o,
                 Err(e) => return refused(e),
             };
-            for o in objects {
+            for o in dictionary.objects {
                 outln!("SDO {:#06x}, \"{}\"", o.object.index, o.object.name);
                 for e in o.entries {
                     outln!(
@@ -64,7 +65,23 @@ pub fn run(a: SdosArgs) -> anyhow::Result<i32> {
                     );
                 }
             }
-            Ok(EXIT_OK)
+            // One object or entry the device did not describe does not end the listing; each
+            // is named, and the exit code says the listing is incomplete.
+            for f in &dictionary.failed {
+                let what = match f.sub {
+                    None => format!("object {:#06x}", f.index),
+                    Some(sub) => format!("entry {:#06x}:{sub:02x}", f.index),
+                };
+                eprintln!(
+                    "fieldprobe: sdos --device {d}: {what} not described ({}); the other objects are listed",
+                    f.error
+                );
+            }
+            Ok(if dictionary.failed.is_empty() {
+                EXIT_OK
+            } else {
+                super::EXIT_CNC_ERROR
+            })
         }
         Target::Node(n) => super::canopen_od::sdos(&bus, n, a.eds.as_deref()),
     }

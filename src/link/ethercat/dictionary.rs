@@ -9,6 +9,40 @@ use crate::bus::ethercat::mailbox::{CoeClient, MailboxError};
 use crate::bus::ethercat::sdo_info::{list_type, EntryDescription, ObjectCode, ObjectDescription};
 use crate::link::LinkError;
 
+/// The dictionary a device describes over SDO Information, and what it failed to describe.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Dictionary {
+    /// The objects described, in the order of the OD list.
+    pub objects: Vec<DictionaryObject>,
+    /// The objects and entries whose description came back as an error or malformed; the
+    /// listing went on with the next one.
+    pub failed: Vec<DictionaryFailure>,
+}
+
+/// An object (`sub` `None`) or entry of the OD list the device did not describe.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DictionaryFailure {
+    /// Object index.
+    pub index: u16,
+    /// Sub-index of an entry; `None`: the object's own description.
+    pub sub: Option<u8>,
+    /// What came back.
+    pub error: String,
+}
+
+/// The device answered, wrongly or with an error, so the mailbox is still in step and the
+/// listing can go on; a timeout or a lost datagram ends it (the device may be gone, and each
+/// further request would wait as long).
+fn answered(e: &MailboxError) -> bool {
+    matches!(
+        e,
+        MailboxError::SdoInfo { .. }
+            | MailboxError::Protocol(_)
+            | MailboxError::Abort { .. }
+            | MailboxError::MailboxErrorReply(_)
+    )
+}
+
 /// One object of a device's dictionary: its description and the descriptions of its entries
 /// (sub-indices the device refuses to describe are left out).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -139,16 +173,32 @@ impl Session {
     /// The dictionary of the SubDevice at `position` through SDO Information: Get OD List
     /// (all objects), then each object's description and its entries' descriptions
     /// (sub-index 0 … the object's highest). An entry the device refuses (SDO Info Error) is
-    /// left out; an object it refuses to describe ends the listing with the error, as does a
-    /// device without the service ([`MailboxError::NoSdoInfo`]).
-    pub fn sdo_dictionary(&mut self, position: usize) -> Result<Vec<DictionaryObject>, LinkError> {
+    /// left out. An object or entry whose description comes back as an error or malformed is
+    /// named in [`Dictionary::failed`] and the listing goes on; a device without the service
+    /// ([`MailboxError::NoSdoInfo`]), a failed OD list, a timeout or a lost frame end it with
+    /// the error.
+    pub fn sdo_dictionary(&mut self, position: usize) -> Result<Dictionary, LinkError> {
         let mut c = self.coe(position)?;
         let md = self.md;
         let r = drive(&mut self.wire, async {
             let list = c.od_list(md, list_type::ALL).await?;
-            let mut out = Vec::with_capacity(list.len());
+            let mut out = Dictionary {
+                objects: Vec::with_capacity(list.len()),
+                failed: Vec::new(),
+            };
             for index in list {
-                let object = c.object_description(md, index).await?;
+                let object = match c.object_description(md, index).await {
+                    Ok(o) => o,
+                    Err(e) if answered(&e) => {
+                        out.failed.push(DictionaryFailure {
+                            index,
+                            sub: None,
+                            error: e.to_string(),
+                        });
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                };
                 let last = match object.object_code {
                     ObjectCode::Var => 0,
                     _ => object.max_sub,
@@ -157,11 +207,17 @@ impl Session {
                 for sub in 0..=last {
                     match c.entry_description(md, index, sub).await {
                         Ok(e) => entries.push(e),
+                        // A sub-index the device does not describe (a RECORD with gaps).
                         Err(MailboxError::SdoInfo { .. }) => {}
+                        Err(e) if answered(&e) => out.failed.push(DictionaryFailure {
+                            index,
+                            sub: Some(sub),
+                            error: e.to_string(),
+                        }),
                         Err(e) => return Err(e),
                     }
                 }
-                out.push(DictionaryObject { object, entries });
+                out.objects.push(DictionaryObject { object, entries });
             }
             Ok::<_, MailboxError>(out)
         });
@@ -302,5 +358,69 @@ impl Session {
             Ok::<_, MailboxError>((sms, pdos))
         });
         r.map_err(|e| self.named(position, e))
+    }
+}
+
+#[cfg(all(test, feature = "sim"))]
+mod tests {
+    use super::super::{EthercatSpec, Wire};
+    use super::*;
+    use crate::sim::esc::sdo_info::DescriptionFault;
+
+    #[test]
+    fn one_object_the_device_cannot_describe_does_not_end_the_listing() {
+        // Issue 26: `sdos` aborted the whole listing on one bad SDO Information reply.
+        let spec = EthercatSpec {
+            drives: vec![std::sync::Arc::new(
+                crate::drive::catalogue::load("cia402-generic").expect("built-in drive"),
+            )],
+            ..EthercatSpec::default()
+        };
+        let mut s = Session::open(&Wire::Emulated, &spec).expect("emulated segment");
+        let position = 1; // coupler, servo
+        let whole = s.sdo_dictionary(position).expect("dictionary");
+        assert!(whole.failed.is_empty(), "{:?}", whole.failed);
+        let listed: Vec<u16> = whole.objects.iter().map(|o| o.object.index).collect();
+        assert!(
+            listed.contains(&0x6040) && listed.contains(&0x1018),
+            "{listed:x?}"
+        );
+        let coe = s
+            .wire
+            .segment_mut()
+            .and_then(|seg| seg.esc_mut(position))
+            .and_then(|esc| esc.app_mut().coe_mut())
+            .expect("the servo's CoE server");
+        let mut d = coe.descriptions().clone();
+        // One object refused though listed, one answered with another object's description.
+        d.set_fault(0x6040, DescriptionFault::Refused(0x0800_0000));
+        d.set_fault(0x1018, DescriptionFault::OtherObject(0x1000));
+        coe.set_descriptions(d);
+        let broken = s.sdo_dictionary(position).expect("listing goes on");
+        let failed: Vec<(u16, Option<u8>)> =
+            broken.failed.iter().map(|f| (f.index, f.sub)).collect();
+        assert_eq!(
+            failed,
+            vec![(0x1018, None), (0x6040, None)],
+            "{:?}",
+            broken.failed
+        );
+        assert!(
+            broken.failed[0].error.contains("describes object 0x1000"),
+            "{:?}",
+            broken.failed
+        );
+        assert!(
+            broken.failed[1].error.contains("0x08000000"),
+            "{:?}",
+            broken.failed
+        );
+        // Every other object exactly as before.
+        let rest: Vec<&DictionaryObject> = whole
+            .objects
+            .iter()
+            .filter(|o| ![0x6040, 0x1018].contains(&o.object.index))
+            .collect();
+        assert_eq!(broken.objects.iter().collect::<Vec<_>>(), rest);
     }
 }

@@ -69,6 +69,12 @@ pub trait EscApplication: Send {
         None
     }
 
+    /// The CoE server answering the mailbox, if the application has one (its dictionary and
+    /// SDO information; fault knobs such as [`super::sdo_info::OdDescriptions::set_fault`]).
+    fn coe_mut(&mut self) -> Option<&mut super::coe::CoeServer> {
+        None
+    }
+
     /// The model with its process images (model layout) for one synchronous step of the
     /// segment's [`World`](crate::sim::world::World) (SYNC0). `None` if there is no model.
     fn port(&mut self) -> Option<Port<'_>> {

@@ -1057,6 +1057,10 @@ pub fn abort_body(index: u16, sub: u8, code: u32) -> Vec<u8> {
 }
 
 impl EscApplication for CoeServer {
+    fn coe_mut(&mut self) -> Option<&mut CoeServer> {
+        Some(self)
+    }
+
     fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
         self.handle(data)
     }

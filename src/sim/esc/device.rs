@@ -425,6 +425,13 @@ fn plan_from_objects(
 }
 
 impl EscApplication for ServoApp {
+    fn coe_mut(&mut self) -> Option<&mut CoeServer> {
+        match &mut self.server {
+            MailboxServer::Coe(c) => Some(c),
+            _ => None,
+        }
+    }
+
     fn mailbox_received(&mut self, data: &[u8]) -> Option<Vec<u8>> {
         match &mut self.server {
             MailboxServer::Coe(c) => c.handle(data),

@@ -46,6 +46,17 @@ const UNKNOWN: u32 = 0x0504_0001;
 pub struct OdDescriptions {
     objects: BTreeMap<u16, ObjectDescription>,
     entries: BTreeMap<(u16, u8), EntryDescription>,
+    faults: BTreeMap<u16, DescriptionFault>,
+}
+
+/// Fault knob ([`OdDescriptions::set_fault`]): how a device with broken SDO information
+/// firmware answers Get Object Description of one object it lists.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DescriptionFault {
+    /// An SDO Info Error with this abort code.
+    Refused(u32),
+    /// The description of this other object (a stale or mis-indexed answer).
+    OtherObject(u16),
 }
 
 /// CiA 301 data type index of a server entry type.
@@ -346,6 +357,12 @@ impl OdDescriptions {
         })
     }
 
+    /// Fault knob: answer Get Object Description of `index` as `fault` says (the object stays
+    /// in the OD list).
+    pub fn set_fault(&mut self, index: u16, fault: DescriptionFault) {
+        self.faults.insert(index, fault);
+    }
+
     /// Answer one SDO information request (`req`: the bytes after the CoE header) with the CoE
     /// bodies of the response, fragmented so each fragment's data is at most `max_data` bytes
     /// (read mailbox − mailbox header − CoE header − SDO information header). Unknown opcodes,
@@ -374,7 +391,12 @@ impl OdDescriptions {
                 let Some(index) = u16_at(0) else {
                     return error(UNKNOWN);
                 };
-                match self.objects.get(&index) {
+                let shown = match self.faults.get(&index) {
+                    Some(DescriptionFault::Refused(code)) => return error(*code),
+                    Some(DescriptionFault::OtherObject(other)) => *other,
+                    None => index,
+                };
+                match self.objects.get(&shown) {
                     Some(o) => fragments(
                         SdoInfoOpcode::GetObjectDescriptionResponse,
                         &o.encode(),
