@@ -292,3 +292,36 @@ fn after_a_run_over_canopen_udp_a_second_master_finds_the_nodes_pre_operational_
         Some(format!("DONE {}", log.len()).as_str())
     );
 }
+
+#[test]
+fn every_drive_family_ends_a_run_with_its_power_stage_off_without_a_warning() {
+    // Issue 27, item 5: warning 900017 ended every run on SERCOS, Lightbus and encoder-terminal
+    // drives — their "ready, torque off" (SERCOS S-0-0135 bits 15/14 = 10) was taken for a
+    // CiA 402 SWITCHED ON, a state the end of a run never waits in. Each family on every link
+    // that plays it: the run completes (exit 0) and says nothing of its power stage.
+    let runs: &[(&str, &[&str])] = &[
+        ("sercos-ax5000", &["sim", "ethercat-emu"]),
+        ("ax2000-lightbus", &["sim"]),
+        ("el5101-terminal", &["sim", "ethercat-emu"]),
+        ("kl5101-terminal", &["sim"]),
+        ("profidrive-t105", &["sim"]),
+        ("cia402-generic", &["sim", "ethercat-emu"]),
+    ];
+    for (drive, links) in runs {
+        for link in *links {
+            let o = fieldprobe(&[
+                "run",
+                "examples/nc/seed004/meas1.nc",
+                "--probe-at",
+                "Z=100",
+                "--set",
+                &format!("Z.drive={drive}"),
+                "--link",
+                link,
+            ]);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(0), "{drive} on {link}: {err}");
+            assert!(!err.contains("900017"), "{drive} on {link}: {err}");
+        }
+    }
+}

@@ -135,6 +135,11 @@ impl Axis {
         self.referenced = referenced;
     }
 
+    /// The drive's power stage is off in `state`, as its family's profile defines it.
+    pub fn power_stage_off(&self, state: crate::drive::PowerState) -> bool {
+        self.adapter.power_stage_off(state)
+    }
+
     /// Decode this cycle's input image.
     pub fn read(&mut self, now: Nanos, inputs: &[u8]) -> Result<&DriveFeedback, AxisError> {
         let fb = self

@@ -5,27 +5,16 @@
 //! i.e. OFF1).
 
 use super::Channel;
-use crate::drive::PowerState;
 use crate::link::ProcessImage;
 use crate::units::Nanos;
-
-/// The power stage is off in this state (nothing holds the axis but its brake or friction).
-pub fn power_stage_off(state: PowerState) -> bool {
-    matches!(
-        state,
-        PowerState::NotReadyToSwitchOn
-            | PowerState::SwitchOnDisabled
-            | PowerState::ReadyToSwitchOn
-            | PowerState::Fault
-    )
-}
 
 impl Channel {
     /// One cycle of the power-off at the end of a run, in place of [`Channel::cycle`]:
     /// `images` came from this cycle's exchange; every axis reads its inputs and writes
     /// "disable" (no fault reset) into its outputs, which go out with the next exchange; the
     /// set-points stay where they are. Returns the axes whose drive does not report its power
-    /// stage off yet ([`power_stage_off`]; an axis whose inputs cannot be read counts as not
+    /// stage off yet (as its family's profile defines it,
+    /// [`crate::drive::DriveAdapter::power_stage_off`]; an axis whose inputs cannot be read counts as not
     /// off). An empty list: every drive is disabled.
     ///
     /// The channel does not interpolate meanwhile. A later [`Channel::program_start`] enables
@@ -39,9 +28,13 @@ impl Channel {
                 on.push(a.name().to_string());
                 continue;
             };
-            let off = a
-                .read(now, &img.inputs)
-                .is_ok_and(|fb| power_stage_off(fb.state));
+            let off = match a.read(now, &img.inputs) {
+                Ok(fb) => {
+                    let state = fb.state;
+                    a.power_stage_off(state)
+                }
+                Err(_) => false,
+            };
             if !off {
                 on.push(a.name().to_string());
             }

@@ -511,6 +511,10 @@ impl LightbusAdapter {
 }
 
 impl DriveAdapter for LightbusAdapter {
+    fn power_stage_off(&self, state: PowerState) -> bool {
+        super::torque_off(state)
+    }
+
     fn output_len(&self) -> usize {
         telegram::COMMAND_LEN
     }

@@ -48,6 +48,32 @@ pub enum PowerState {
     Unknown(u16),
 }
 
+/// CiA 402 §6.2: the power stage is off in NOT READY TO SWITCH ON, SWITCH ON DISABLED, READY
+/// TO SWITCH ON (where "shutdown" 0x0006 leads) and FAULT; in SWITCHED ON the amplifier is
+/// switched on, in OPERATION ENABLED, QUICK STOP ACTIVE and FAULT REACTION ACTIVE it drives.
+pub fn cia402_power_stage_off(state: PowerState) -> bool {
+    matches!(
+        state,
+        PowerState::NotReadyToSwitchOn
+            | PowerState::SwitchOnDisabled
+            | PowerState::ReadyToSwitchOn
+            | PowerState::Fault
+    )
+}
+
+/// The families whose "ready" state maps onto [`PowerState::SwitchedOn`] but holds no torque
+/// (SERCOS S-0-0135 bits 15/14 = 10 "ready, main power on, torque off"; the Lightbus AX2000's
+/// and the encoder terminals' ready without enable): the power stage is off in every state but
+/// the ones that drive the motor.
+pub fn torque_off(state: PowerState) -> bool {
+    !matches!(
+        state,
+        PowerState::OperationEnabled
+            | PowerState::QuickStopActive
+            | PowerState::FaultReactionActive
+    )
+}
+
 /// What the axis layer asks of the drive in one cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct DriveCommand {
@@ -275,6 +301,13 @@ pub trait DriveAdapter: Send + fmt::Debug {
     /// Disarm the latch unit; pending events are dropped.
     fn disarm_probe(&mut self) {}
 
+    /// The power stage is off in `state`, as this family's profile defines it (the end of a
+    /// run disables every drive and waits for this). Default: CiA 402
+    /// ([`cia402_power_stage_off`]).
+    fn power_stage_off(&self, state: PowerState) -> bool {
+        cia402_power_stage_off(state)
+    }
+
     /// State of the latch unit.
     fn probe_state(&self) -> ProbeState {
         ProbeState::Idle
@@ -365,5 +398,30 @@ pub fn commissioning_check(
             Ok(cfg) => terminal::check_axis_params(cfg.variant, axis),
             Err(e) => vec![e.to_string()],
         },
+    }
+}
+
+#[cfg(test)]
+mod power_stage_tests {
+    use super::*;
+
+    #[test]
+    fn each_family_reads_its_power_stage_as_its_profile_defines() {
+        // SERCOS S-0-0135 bits 15/14: 10 ready, main power on, torque off; 11 drive enabled.
+        let sercos = |bits: u16| torque_off(sercos::SercosAdapter::power_state(bits << 14));
+        assert!(sercos(0b00) && sercos(0b01) && sercos(0b10));
+        assert!(!sercos(0b11));
+        // CiA 402: SWITCHED ON has the amplifier on; shutdown leads to READY TO SWITCH ON.
+        assert!(!cia402_power_stage_off(PowerState::SwitchedOn));
+        assert!(cia402_power_stage_off(PowerState::ReadyToSwitchOn));
+        assert!(!cia402_power_stage_off(PowerState::QuickStopActive));
+        // Lightbus: ready without enable holds no torque; a quick stop still brakes.
+        assert!(torque_off(lightbus::decode_status(
+            lightbus::telegram::SW_READY
+        )));
+        assert!(!torque_off(lightbus::decode_status(
+            lightbus::telegram::SW_READY | lightbus::telegram::SW_ENABLED
+        )));
+        assert!(!torque_off(PowerState::QuickStopActive));
     }
 }

@@ -563,6 +563,10 @@ impl SercosAdapter {
 }
 
 impl DriveAdapter for SercosAdapter {
+    fn power_stage_off(&self, state: PowerState) -> bool {
+        super::torque_off(state)
+    }
+
     fn output_len(&self) -> usize {
         self.telegram.mdt.len()
     }

@@ -448,6 +448,10 @@ impl TerminalAdapter {
 }
 
 impl DriveAdapter for TerminalAdapter {
+    fn power_stage_off(&self, state: PowerState) -> bool {
+        super::torque_off(state)
+    }
+
     fn set_feedback_delay(&mut self, cycles: u32) {
         self.delay = cycles;
         self.sent.set_delay(cycles);
