@@ -245,6 +245,12 @@ fn inner(python: &Path) {
         upload["bytes"],
         fieldprobe::sim::esc::coe::EMULATOR_NOTICE.len()
     );
+    // SOEM uploaded the PDO assignment and the first TxPDO mapping with complete access, found
+    // the ESI's defaults and downloaded them back (interop.py checks the bytes).
+    let ca = &result_step(&result, "complete_access")["objects"];
+    for idx in ["0x1C12", "0x1C13", "0x1A00"] {
+        assert!(ca[idx].is_string(), "no complete access of {idx}: {ca}");
+    }
     let map = result_step(&result, "config_map");
     let sizes: Vec<(u64, u64)> = map["sizes"]
         .as_array()
