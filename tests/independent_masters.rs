@@ -73,6 +73,10 @@ struct Device {
     touch_probe: bool,
     /// The dictionary has 0x6072 (max torque).
     max_torque_object: bool,
+    /// A process-data sync manager whose `ControlByte` has the mailbox operation mode (bits
+    /// 1:0 = 10, one-buffer mode; AX2000-B110's Inputs 0x22): ebpfcat 1.0.0 tells sync managers
+    /// apart by that byte alone (`Terminal.parse_sync_managers`) and takes it for a mailbox.
+    one_buffer_process_data: bool,
 }
 
 impl Device {
@@ -198,6 +202,13 @@ fn file_devices(path: &Path, with_selector: bool) -> Vec<(Device, Vec<u32>)> {
                 rx_pdos,
                 tx_pdos,
                 max_torque_object: object(0x6072).is_some(),
+                one_buffer_process_data: d.children().any(|sm| {
+                    sm.has_tag_name("Sm")
+                        && matches!(text(Some(sm)), "Inputs" | "Outputs")
+                        && sm
+                            .attribute("ControlByte")
+                            .is_some_and(|c| esi_number(c) & 0x03 == 0x02)
+                }),
                 touch_probe: object(0x60B8).is_some()
                     && object(0x60B9).is_some()
                     && object(0x60BA).is_some(),
@@ -344,6 +355,7 @@ fn inner(python: &Path) {
             "drive": d.drive(), "touch_probe": d.touch_probe && d.drive(),
             "pdo_elements": !(d.rx_pdos.is_empty() && d.tx_pdos.is_empty()),
             "max_torque_object": d.max_torque_object,
+            "one_buffer_process_data": d.one_buffer_process_data,
             "probe_inc": probe_inc, "start_inc": increments(RAMP_MM.0),
             "end_inc": increments(RAMP_MM.1),
         })).collect::<Vec<_>>(),
@@ -364,28 +376,69 @@ fn inner(python: &Path) {
     let (emu, log) = start(&emu_args);
     let t_ready = t0.elapsed();
 
-    // KickCAT.
-    let (k, status) = run_master(
-        python,
-        "tests/masters/kickcat_drive.py",
-        &spec,
-        "KICKCAT_RESULT ",
-    );
-    assert_eq!(
-        k["ok"],
-        true,
-        "kickcat ({status}): {}\n{}",
-        k["error"],
-        k["trace"].as_str().unwrap_or("")
-    );
-    check_kickcat(&k, &seg, probe_inc);
+    // `FIELDPROBE_MASTERS=kickcat` (or `ebpfcat`) runs one master only, to debug it.
+    let only = std::env::var("FIELDPROBE_MASTERS").unwrap_or_default();
+    let wanted = |m: &str| only.is_empty() || only.split(',').any(|o| o == m);
+
+    // KickCAT. A run that failed because KickCAT gave up on a late frame (a RuntimeError from
+    // its C++ core, not a failed check) is repeated once: see LINK_TIMEOUT_S in the script.
+    let mut k = Value::Null;
+    if wanted("kickcat") {
+        for attempt in 0..2 {
+            let (r, status) = run_master(
+                python,
+                "tests/masters/kickcat_drive.py",
+                &spec,
+                "KICKCAT_RESULT ",
+            );
+            k = r;
+            let late = k["error"]
+                .as_str()
+                .is_some_and(|e| e.starts_with("RuntimeError"));
+            if k["ok"] == true || !late || attempt == 1 {
+                assert_eq!(
+                    k["ok"],
+                    true,
+                    "kickcat ({status}): {}\n{}",
+                    k["error"],
+                    k["trace"].as_str().unwrap_or("")
+                );
+                break;
+            }
+            println!(
+                "KickCAT gave up on a late frame ({}), run again",
+                k["error"]
+            );
+        }
+        check_kickcat(&k, &seg, probe_inc);
+    }
     let t_kickcat = t0.elapsed();
+
+    // ebpfcat, plain-Python path (see `tests/masters/ebpfcat_drive.py` for why not XDP).
+    if wanted("ebpfcat") {
+        let (e, status) = run_master(
+            python,
+            "tests/masters/ebpfcat_drive.py",
+            &spec,
+            "EBPFCAT_RESULT ",
+        );
+        assert_eq!(
+            e["ok"],
+            true,
+            "ebpfcat ({status}): {}\n{}",
+            e["error"],
+            e["trace"].as_str().unwrap_or("")
+        );
+        check_ebpfcat(&e, &seg, probe_inc);
+    }
+    let t_ebpfcat = t0.elapsed();
 
     drop(emu);
     let log = log.join().unwrap_or_default();
     println!("emulator log: {log:#?}");
     println!(
-        "emulator ready after {t_ready:?}; KickCAT done after {t_kickcat:?}; {} cycles",
+        "emulator ready after {t_ready:?}; KickCAT done after {t_kickcat:?} ({} cycles); \
+         ebpfcat done after {t_ebpfcat:?}",
         k["cycles"]
     );
     println!("INNER OK");
@@ -458,6 +511,57 @@ fn check_kickcat(k: &Value, seg: &[Device], probe_inc: i64) {
             "KICKCAT ring {p}: 0x60B9 {} 0x60BA {got} via {} (surface {probe_inc})",
             l["status"], l["via"]
         );
+    }
+}
+
+/// ebpfcat's record: the scan, SDO on every CoE device, the CSP ramp and the latches.
+fn check_ebpfcat(e: &Value, seg: &[Device], probe_inc: i64) {
+    assert_eq!(step(e, "scan")[0]["devices"], seg.len());
+    // bpf(BPF_MAP_CREATE) in the unprivileged user namespace: EPERM (1) is why the XDP path is
+    // not run; anything else is recorded.
+    println!("EBPFCAT bpf() errno in the namespace: {}", e["bpf_errno"]);
+    let sdo = step(e, "sdo");
+    let reachable = seg
+        .iter()
+        .filter(|d| d.coe && !d.one_buffer_process_data)
+        .count();
+    assert_eq!(sdo.len(), reachable);
+    for (p, d) in seg.iter().enumerate() {
+        if d.coe && d.one_buffer_process_data {
+            println!("EBPFCAT ring {p}: mailbox not used (one-buffer process-data SM, see Device)");
+        }
+    }
+    for s in &sdo {
+        let d = &seg[s["pos"].as_u64().expect("pos") as usize];
+        assert_eq!(
+            s["identity"],
+            json!([d.vendor, d.product, d.revision]),
+            "{s}"
+        );
+        if let Some(n) = &d.device_name {
+            assert_eq!(s["device_name"], n.as_str(), "{s}");
+        }
+    }
+    let csp = &step(e, "csp")[0]["actual"];
+    for (p, d) in seg.iter().enumerate() {
+        if d.drive() {
+            let a = csp[p.to_string()].as_i64().expect("actual");
+            assert!(
+                (a - increments(RAMP_MM.1)).abs() <= 1,
+                "ring {p}: 0x6064 {a}"
+            );
+        }
+    }
+    let latches = &step(e, "touch_probe")[0]["latches"];
+    for (p, d) in seg.iter().enumerate() {
+        if d.drive() && d.touch_probe {
+            let got = latches[p.to_string()]["tp1_pos"].as_i64().expect("latch");
+            assert!(
+                (got - probe_inc).abs() <= 1,
+                "ring {p}: 0x60BA {got}, surface {probe_inc}"
+            );
+            println!("EBPFCAT ring {p}: 0x60BA {got} (surface {probe_inc})");
+        }
     }
 }
 

@@ -73,6 +73,14 @@ def bpf_probe():
 FMT = {8: "b", 16: "h", 32: "i"}
 
 
+async def io(what, coro, timeout=5.0):
+    """An ebpfcat request, bounded (ebpfcat polls the mailbox without a time limit)."""
+    try:
+        return await asyncio.wait_for(coro, timeout)
+    except asyncio.TimeoutError:
+        raise CheckFailed(f"{what}: no answer within {timeout} s") from None
+
+
 def layout(entries):
     out, bit = {}, 0
     for i, s, n in entries:
@@ -89,12 +97,14 @@ def drive_terminal(e):
     for name, index, lay, sm in (
             ("controlword", 0x6040, rx, SyncManager.OUT), ("target", 0x607A, rx, SyncManager.OUT),
             ("mode", 0x6060, rx, SyncManager.OUT), ("tp_function", 0x60B8, rx, SyncManager.OUT),
+            ("max_torque", 0x6072, rx, SyncManager.OUT),
             ("statusword", 0x6041, tx, SyncManager.IN), ("actual", 0x6064, tx, SyncManager.IN),
             ("tp_status", 0x60B9, tx, SyncManager.IN), ("tp1_pos", 0x60BA, tx, SyncManager.IN)):
         if index in lay:
             off, bits = lay[index]
             attrs[name] = PacketDesc(sm, off, FMT[bits].upper() if name in (
-                "controlword", "statusword", "tp_function", "tp_status") else FMT[bits])
+                "controlword", "statusword", "tp_function", "tp_status", "max_torque")
+                else FMT[bits])
     return type(f"Drive{e['pos']}", (EBPFTerminal,), attrs)
 
 
@@ -104,6 +114,9 @@ class Axis(Device):
     target = TerminalVar()
     statusword = TerminalVar()
     actual = TerminalVar()
+    mode = TerminalVar()
+    max_torque = TerminalVar()
+    tp_function = TerminalVar()
 
     def __init__(self, terminal, e, step_inc):
         super().__init__()
@@ -113,6 +126,19 @@ class Axis(Device):
         self.target = terminal.target
         self.statusword = terminal.statusword
         self.actual = terminal.actual
+        # Where the process image carries them, 0x6060 (CSP = 8) and 0x6072 (max torque,
+        # MyActuator maps it) come from the outputs, not from the SDO writes before.
+        self.has_mode = hasattr(type(terminal), "mode")
+        self.has_torque = hasattr(type(terminal), "max_torque")
+        if self.has_mode:
+            self.mode = terminal.mode
+        if self.has_torque:
+            self.max_torque = terminal.max_torque
+        # 0x60B8 = 0x0011 (TP1 enabled, first event, TP1 input, rising edge) in the outputs
+        # where it is mapped (else written by SDO before the cycle starts).
+        self.has_tp = e["touch_probe"] and hasattr(type(terminal), "tp_function")
+        if self.has_tp:
+            self.tp_function = terminal.tp_function
         self.phase = "enable"
         self.cw = 6
         self.goal = None
@@ -146,6 +172,12 @@ class Axis(Device):
                         self.done.set_result(pos)
         self.controlword = self.cw
         self.target = self.t
+        if self.has_mode:
+            self.mode = 8
+        if self.has_torque:
+            self.max_torque = 3000
+        if self.has_tp:
+            self.tp_function = 0x0011
 
     def get_terminals(self):
         return {self.terminal: True}
@@ -164,39 +196,50 @@ async def run(iface, spec):
     for e in devices:
         cls = drive_terminal(e) if e["drive"] else Terminal
         t = cls(ec)
-        await t.initialize(-e["pos"], 1000 + e["pos"])
+        await io(f"device {e['pos']}: initialize(-e['pos'], 1000 + e['pos'])", t.initialize(-e["pos"], 1000 + e["pos"]))
+        if not e["drive"] and e["coe"] and not e["one_buffer_process_data"]:
+            # A plain Terminal stays in INIT after initialize(); the mailbox works from PRE-OP
+            # (ETG.1000.6: the mailbox sync managers are enabled in INIT -> PRE-OP).
+            await io(f"device {e['pos']}: PRE-OP", t.to_operational(MachineState.PRE_OPERATIONAL))
         terminals.append(t)
 
     for e, t in zip(devices, terminals):
-        if not e["coe"]:
+        if not e["coe"] or e["one_buffer_process_data"]:
+            # ebpfcat 1.0.0 defect: Terminal.parse_sync_managers tells the sync managers apart by
+            # the operation mode of their control byte alone, so a process-data SM in one-buffer
+            # (mailbox) mode, which the AX2000-B110 ESI declares for its inputs (ControlByte
+            # 0x22), is taken for the read mailbox and ebpfcat polls the wrong memory forever.
             continue
         rec = {"pos": e["pos"]}
-        ident = tuple(struct.unpack("<I", (await t.sdo_read(0x1018, k))[:4])[0] for k in (1, 2, 3))
+        ident = []
+        for k in (1, 2, 3):
+            ident.append(struct.unpack("<I", (await io(f"device {e['pos']}: sdo_read(0x1018, k)", t.sdo_read(0x1018, k)))[:4])[0])
+        ident = tuple(ident)
         check(ident == (e["vendor"], e["product"], e["revision"]),
               f"device {e['pos']}: 0x1018 {ident}")
         rec["identity"] = list(ident)
         if e["device_name"] is not None:
-            name = (await t.sdo_read(0x1008, 0)).rstrip(b"\0").decode("latin-1")
+            name = (await io(f"device {e['pos']}: sdo_read(0x1008, 0)", t.sdo_read(0x1008, 0))).rstrip(b"\0").decode("latin-1")
             check(name == e["device_name"], f"device {e['pos']}: 0x1008 {name!r}, ESI {e['device_name']!r}")
             rec["device_name"] = name
         if e["drive"]:
-            await t.sdo_write(struct.pack("<b", 8), 0x6060, 0)
-            back = struct.unpack("<b", (await t.sdo_read(0x6060, 0))[:1])[0]
+            await io(f"device {e['pos']}: sdo_write(struct.pack('<b', 8), 0x6060, 0)", t.sdo_write(struct.pack("<b", 8), 0x6060, 0))
+            back = struct.unpack("<b", (await io(f"device {e['pos']}: sdo_read(0x6060, 0)", t.sdo_read(0x6060, 0)))[:1])[0]
             check(back == 8, f"device {e['pos']}: 0x6060 read back {back}")
         if e["complete_access"]:
             for assign, pdos in ((0x1C12, e["rx_pdos"]), (0x1C13, e["tx_pdos"])):
-                img = await t.sdo_read(assign)  # CA from sub-index 1: the entries only
+                img = await io(f"device {e['pos']}: sdo_read(assign)", t.sdo_read(assign))  # CA from sub-index 1: the entries only
                 got = [v for (v,) in struct.iter_unpack("<H", img[: 2 * len(pdos)])]
                 check(got == pdos, f"device {e['pos']}: CA {assign:#06x} = {img.hex()}, ESI {pdos}")
                 try:
-                    await t.sdo_write(img, assign)  # CA download from sub-index 1
+                    await io(f"device {e['pos']}: sdo_write(img, assign)", t.sdo_write(img, assign))  # CA download from sub-index 1
                 except EtherCatError as err:  # ebpfcat 1.0.0: sub-index compared with None
                     rec[f"ca_write_{assign:04x}_raised"] = str(err)
-                again = await t.sdo_read(assign)
+                again = await io(f"device {e['pos']}: sdo_read(assign)", t.sdo_read(assign))
                 check(again == img, f"device {e['pos']}: after CA download {assign:#06x}: {again.hex()}")
                 rec[f"ca_{assign:04x}"] = img.hex()
         if e["sdo_info"] and "0x6041" in e["object_names"]:
-            oe = await t.read_object_entry(0x6041, 0)
+            oe = await io(f"device {e['pos']}: read_object_entry(0x6041, 0)", t.read_object_entry(0x6041, 0))
             rec["sdo_info_6041"] = oe.name
             check(oe.bitLength == 16, f"device {e['pos']}: 0x6041 entry of {oe.bitLength} bits")
         step("sdo", **rec)
@@ -205,12 +248,16 @@ async def run(iface, spec):
     axes = [Axis(t, e, spec["step_inc"]) for e, t in drives]
     for e, t in drives:  # CSP before the cycle starts; the touch probe by SDO
         if e["touch_probe"]:
-            await t.sdo_write(struct.pack("<H", 0x0011), 0x60B8, 0)
+            await io(f"device {e['pos']}: sdo_write(struct.pack('<H', 0x0011), 0x60B8, 0)", t.sdo_write(struct.pack("<H", 0x0011), 0x60B8, 0))
     sg = SyncGroup(ec, axes)
     sg.cycletime = 0.002
     task = sg.start()
     try:
         finals = await asyncio.wait_for(asyncio.gather(*[a.done for a in axes]), 30)
+    except asyncio.TimeoutError:
+        why = repr(task.exception()) if task.done() else "sync group running"
+        raise CheckFailed(f"CSP ramp not done in 30 s ({why}): " + ", ".join(
+            f"{a.e['pos']}: {a.phase} cw {a.cw} target {a.t}" for a in axes)) from None
     finally:
         task.cancel()
         try:
@@ -224,8 +271,8 @@ async def run(iface, spec):
     for e, t in drives:
         if not e["touch_probe"]:
             continue
-        st = struct.unpack("<H", (await t.sdo_read(0x60B9, 0))[:2])[0]
-        pos = struct.unpack("<i", (await t.sdo_read(0x60BA, 0))[:4])[0]
+        st = struct.unpack("<H", (await io(f"device {e['pos']}: sdo_read(0x60B9, 0)", t.sdo_read(0x60B9, 0)))[:2])[0]
+        pos = struct.unpack("<i", (await io(f"device {e['pos']}: sdo_read(0x60BA, 0)", t.sdo_read(0x60BA, 0)))[:4])[0]
         check(st & 0x03 == 0x03, f"device {e['pos']}: 0x60B9 {st:#06x}")
         latches[e["pos"]] = {"status": st, "tp1_pos": pos, "surface": e["probe_inc"]}
     step("touch_probe", latches=latches)
