@@ -3,7 +3,8 @@
 # installed from PyPI:
 #   * kickcat 2.5 — Python bindings of KickCAT, a C++ EtherCAT master (binary wheels);
 #   * ebpfcat 1.0.0 — a pure-Python EtherCAT master whose fast process-data path is an XDP/eBPF
-#     program (pure Python; the eBPF part needs the bpf() system call, see the test).
+#     program (pure Python; the eBPF part needs the bpf() system call, see the test);
+#   * pysoem 1.1.13 — Cython bindings of SOEM (as scripts/pysoem-venv.sh; binary wheels).
 #
 #   scripts/masters-venv.sh [VENV_DIR]        # default: $MASTERS_VENV or target/masters-venv
 #
@@ -12,7 +13,7 @@
 # running as root, as scripts/pysoem-venv.sh does.
 #
 # Environment: PYTHON (interpreter to base the venv on, default python3), KICKCAT_VERSION (2.5),
-# EBPFCAT_VERSION (1.0.0).
+# EBPFCAT_VERSION (1.0.0), PYSOEM_VERSION (1.1.13).
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
@@ -20,21 +21,23 @@ VENV="${1:-${MASTERS_VENV:-target/masters-venv}}"
 PYTHON="${PYTHON:-python3}"
 KICKCAT_VERSION="${KICKCAT_VERSION:-2.5}"
 EBPFCAT_VERSION="${EBPFCAT_VERSION:-1.0.0}"
+PYSOEM_VERSION="${PYSOEM_VERSION:-1.1.13}"
 
 say() { echo "masters-venv: $*" >&2; }
 
 have_all() {
     [ -x "$VENV/bin/python" ] &&
-        "$VENV/bin/python" - "$KICKCAT_VERSION" "$EBPFCAT_VERSION" >/dev/null 2>&1 <<'PY'
+        "$VENV/bin/python" - "$KICKCAT_VERSION" "$EBPFCAT_VERSION" "$PYSOEM_VERSION" >/dev/null 2>&1 <<'PY'
 import sys
 from importlib.metadata import version
-import kickcat, ebpfcat.ethercat  # noqa: F401  (importable, not only installed)
-sys.exit(0 if (version("kickcat"), version("ebpfcat")) == (sys.argv[1], sys.argv[2]) else 1)
+import kickcat, ebpfcat.ethercat, pysoem  # noqa: F401  (importable, not only installed)
+want = tuple(sys.argv[1:4])
+sys.exit(0 if (version("kickcat"), version("ebpfcat"), version("pysoem")) == want else 1)
 PY
 }
 
 if have_all; then
-    say "$VENV already has kickcat $KICKCAT_VERSION and ebpfcat $EBPFCAT_VERSION, nothing to do"
+    say "$VENV already has kickcat $KICKCAT_VERSION, ebpfcat $EBPFCAT_VERSION, pysoem $PYSOEM_VERSION"
     exit 0
 fi
 
@@ -55,10 +58,10 @@ if [ ! -x "$VENV/bin/python" ]; then
     "$PYTHON" -m venv "$VENV"
 fi
 
-say "pip install kickcat==$KICKCAT_VERSION ebpfcat==$EBPFCAT_VERSION"
-"$VENV/bin/python" -m pip install --disable-pip-version-check --no-input -q \
-    "kickcat==$KICKCAT_VERSION" "ebpfcat==$EBPFCAT_VERSION" >&2 ||
-    { say "FAILED: pip could not install kickcat==$KICKCAT_VERSION ebpfcat==$EBPFCAT_VERSION (PyPI unreachable?)"; exit 1; }
+PKGS=("kickcat==$KICKCAT_VERSION" "ebpfcat==$EBPFCAT_VERSION" "pysoem==$PYSOEM_VERSION")
+say "pip install ${PKGS[*]}"
+"$VENV/bin/python" -m pip install --disable-pip-version-check --no-input -q "${PKGS[@]}" >&2 ||
+    { say "FAILED: pip could not install ${PKGS[*]} (PyPI unreachable, or no wheel and no compiler)"; exit 1; }
 
 have_all || { say "FAILED: installed but not importable from $VENV"; exit 1; }
-say "ok: $("$VENV/bin/python" -c 'from importlib.metadata import version as v; print("kickcat", v("kickcat"), "ebpfcat", v("ebpfcat"))')"
+say "ok: $("$VENV/bin/python" -c 'from importlib.metadata import version as v; print(*(f"{p} {v(p)}" for p in ("kickcat", "ebpfcat", "pysoem")))')"
