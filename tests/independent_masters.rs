@@ -1,10 +1,22 @@
 //! Independent EtherCAT masters from PyPI against `fieldprobe sim ethercat` over a veth pair
-//! (issue 26 item 3): KickCAT (`kickcat` 2.5, the C++ master's Python bindings) drives one
-//! emulated segment holding our coupler and servo (`esi/`) and one CiA 402 device of every
-//! vendor ESI file in `../shared/test-data/esi` that has one; ebpfcat is tried on the same
-//! segment (see [`ebpfcat_reason`]). SOEM (pysoem) has its own tests:
-//! `tests/pysoem_interop.rs` (our segment, complete access included) and
-//! `tests/vendor_ethercat.rs` / `tests/vendor_corpus_ethercat.rs` (vendor devices).
+//! (issue 26 item 3): KickCAT (`kickcat` 2.5, the C++ master's Python bindings), SOEM (`pysoem`
+//! 1.1.13) and ebpfcat (1.0.0, its plain-Python path: the XDP path needs bpf(), refused in the
+//! test's user namespace, see [`check_ebpfcat`]) each drive one emulated segment holding our
+//! coupler, servo and encoder terminal (`esi/`) and one CiA 402 device of every vendor ESI file
+//! in `../shared/test-data/esi` that has one (the first whose default mapping a master can move
+//! with, else the first). Scripts: `tests/masters/*_drive.py`. SOEM's deeper run on our own
+//! segment is `tests/pysoem_interop.rs`.
+//!
+//! Per master: scan (count, identities), SDO read / write (0x1008 = the ESI default, an
+//! expedited 0x6060 write read back), complete access up and down of 0x1C12 / 0x1C13 where the
+//! ESI declares it, SDO Information, the image sizes, OP (with DC and SYNC0 on every drive for
+//! SOEM; KickCAT 2.5's bindings and ebpfcat's plain path set up no DC), the CiA 402 enable and a
+//! CSP ramp through the process image on every drive, and on every drive with a touch probe
+//! 0x60B8 = 0x0011, the ramp across the probe surface, 0x60B9 bits 0/1 and 0x60BA = the
+//! surface (`--probe-at POS=MM`) in increments computed here. Not moved (scan and SDO only):
+//! devices whose default PDOs carry no 0x6040 / 0x607A / 0x6041 / 0x6064 (AX2000-B110, the
+//! modular EJ7211 whose servo objects are 0x7010 ff., Eyou whose ESI has no default PDO
+//! elements).
 //!
 //! What a master must find is computed here from the ESI XML with roxmltree (independently of
 //! `fieldprobe::esi`): identities, default PDO assignment and mapping, the names SDO
@@ -15,8 +27,9 @@
 //!
 //! Steps: `scripts/masters-venv.sh` builds the venv (a failure is a test failure: CI has PyPI);
 //! the test re-executes itself in a fresh unprivileged user + network namespace
-//! (`unshare -rn`), makes the veth pair v0/v1, starts one emulator on v1 and runs the masters
-//! on v0 one after the other. Only a machine without user namespaces or veth SKIPs. Every wait
+//! (`unshare -rn`), makes the veth pair v0/v1 and runs the masters on v0 one after the other,
+//! each against a freshly started emulator on v1. `FIELDPROBE_MASTERS=kickcat,pysoem,ebpfcat`
+//! picks masters (default: all). Only a machine without user namespaces or veth SKIPs. Every wait
 //! is bounded; the emulator is killed and the pair deleted on the way out.
 
 use std::{
