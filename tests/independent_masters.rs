@@ -78,6 +78,8 @@ struct Device {
     sdo_info: bool,
     complete_access: bool,
     device_name: Option<String>,
+    /// 0x1008 / 0x1009 / 0x100A defaults (`DefaultString`, or `DefaultData` as text).
+    strings: BTreeMap<String, String>,
     object_names: BTreeMap<String, String>,
     rx: Vec<(u16, u8, u32)>,
     tx: Vec<(u16, u8, u32)>,
@@ -168,6 +170,25 @@ fn file_devices(path: &Path, with_selector: bool) -> Vec<(Device, Vec<u32>)> {
                 .copied()
                 .find(|o| esi_number(text(kid(*o, "Index"))) == index)
         };
+        let string_default = |index: u32| {
+            object(index).and_then(|o| {
+                let info = kid(o, "Info")?;
+                if let Some(s) = kid(info, "DefaultString") {
+                    return Some(text(Some(s)).to_string());
+                }
+                kid(info, "DefaultData").map(|h| {
+                    String::from_utf8_lossy(&hex_bytes(text(Some(h))))
+                        .trim_end_matches('\0')
+                        .to_string()
+                })
+            })
+        };
+        let mut strings = BTreeMap::new();
+        for index in [0x1008u32, 0x1009, 0x100A] {
+            if let Some(v) = string_default(index) {
+                strings.insert(format!("{index:#06x}"), v);
+            }
+        }
         let device_name = object(0x1008).and_then(|o| {
             let info = kid(o, "Info")?;
             if let Some(s) = kid(info, "DefaultString") {
@@ -209,6 +230,7 @@ fn file_devices(path: &Path, with_selector: bool) -> Vec<(Device, Vec<u32>)> {
                 sdo_info: flag(coe_node, "SdoInfo"),
                 complete_access: flag(coe_node, "CompleteAccess"),
                 device_name,
+                strings,
                 object_names,
                 rx,
                 tx,
@@ -363,6 +385,7 @@ fn inner(python: &Path) {
             "pos": pos, "file": d.arg, "vendor": d.vendor, "product": d.product,
             "revision": d.revision, "type": d.type_name, "coe": d.coe, "sdo_info": d.sdo_info,
             "complete_access": d.complete_access, "device_name": d.device_name,
+            "strings": d.strings,
             "object_names": d.object_names,
             "rx": d.rx, "tx": d.tx, "rx_pdos": d.rx_pdos, "tx_pdos": d.tx_pdos,
             "drive": d.drive(), "touch_probe": d.touch_probe && d.drive(),
@@ -581,6 +604,11 @@ fn check_pysoem(r: &Value, seg: &[Device], probe_inc: i64) {
         if let Some(n) = &d.device_name {
             assert_eq!(s["device_name"], n.as_str(), "{s}");
         }
+    }
+    // Our servo's ESI gives 0x1008, 0x1009 and 0x100A defaults: SOEM read all three.
+    let servo = sdo.iter().find(|s| s["pos"] == 1).expect("servo SDO step");
+    for idx in ["0x1008", "0x1009", "0x100a"] {
+        assert_eq!(servo["strings"][idx], json!(seg[1].strings[idx]), "{servo}");
     }
     let dc = &step(r, "dc")[0];
     assert_eq!(dc["dc"], true, "SOEM found no DC device: {dc}");

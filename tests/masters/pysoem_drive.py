@@ -9,7 +9,8 @@ tests/masters/kickcat_drive.py (computed from the ESI files by the Rust test). T
 our own segment (segmented upload, the timestamp terminal, working counters) is
 tests/pysoem/interop.py.
 
-Steps: config_init (count, identities); per CoE device 0x1008 (= the ESI default), an expedited
+Steps: config_init (count, identities); per CoE device 0x1008, 0x1009, 0x100A (= the ESI's
+`DefaultString` / `DefaultData` where it gives one), an expedited
 write of 0x6060 = 8 read back, complete access of 0x1C12 / 0x1C13 (= the ESI's default
 assignment where the ESI gives one) downloaded back, SDO Information (`slave.od`: the object
 list holds 0x6041 with the ESI's name); config_map (image sizes = the ESI default mapping),
@@ -93,6 +94,12 @@ def drive(master, devices, spec):
             name = s.sdo_read(0x1008, 0).rstrip(b"\0").decode("latin-1")
             check(name == e["device_name"], f"device {e['pos']}: 0x1008 {name!r}, ESI {e['device_name']!r}")
             rec["device_name"] = name
+        strings = {}
+        for idx, want in e["strings"].items():
+            got = s.sdo_read(int(idx, 16), 0).rstrip(b"\0").decode("latin-1")
+            check(got == want, f"device {e['pos']}: {idx} {got!r}, ESI default {want!r}")
+            strings[idx] = got
+        rec["strings"] = strings
         if e["drive"]:
             s.sdo_write(0x6060, 0, struct.pack("<b", 8))
             back = struct.unpack("<b", s.sdo_read(0x6060, 0)[:1])[0]
