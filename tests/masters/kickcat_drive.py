@@ -201,8 +201,8 @@ def run(iface, spec):
                 # defaults in the dictionary only (Eyou): there the image must be consistent.
                 check(got == pdos if e["pdo_elements"] else len(img) >= 2 + 2 * n,
                       f"device {e['pos']}: CA {assign:#06x} = {img.hex()}, ESI assignment {pdos}")
-                # Written back: sub-index 0 (16 bits) and its n entries (a normal download).
-                body = img[: 2 + 2 * n]
+                # The whole uploaded image back (a normal download; entries past n included).
+                body = img
                 st = sdo.write(assign, 0, body, ca=True)
                 check(st == MessageStatus.SUCCESS,
                       f"device {e['pos']}: CA download {assign:#06x} {body.hex()}: status {st:#x}")

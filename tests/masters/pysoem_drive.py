@@ -111,7 +111,9 @@ def drive(master, devices, spec):
                 got = [struct.unpack_from("<H", img, 2 + 2 * j)[0] for j in range(k)]
                 check(got == pdos if e["pdo_elements"] else len(img) >= 2 + 2 * k,
                       f"device {e['pos']}: CA {assign:#06x} = {img.hex()}, ESI {pdos}")
-                s.sdo_write(assign, 0, img[: 2 + 2 * k], ca=True)
+                # The whole uploaded image back (entries past n included), as a configurator
+                # that reads, edits and writes the object does.
+                s.sdo_write(assign, 0, img, ca=True)
                 again = s.sdo_read(assign, 0, ca=True)
                 check(again == img, f"device {e['pos']}: after CA download {assign:#06x}: {again.hex()}")
                 rec[f"ca_{assign:04x}"] = img.hex()

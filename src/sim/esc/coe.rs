@@ -744,8 +744,9 @@ impl CoeServer {
 
     /// Complete-access download to `index` from `sub` (ETG.1000.6 §5.6.2.1.2, "complete
     /// access"): from sub-index 0 the data is sub-index 0 as 16 bits (its value n, padding)
-    /// followed by sub-indices 1 … n; from sub-index 1, sub-indices 1 … in order, as many as
-    /// the data holds. Read-only entries are skipped. The value n is what TwinCAT and SOEM write
+    /// followed by sub-indices 1 … n (and, if the data goes on, the entries after n up to the
+    /// whole object, as an upload gives it); from sub-index 1, sub-indices 1 … in order, as many
+    /// as the data holds. Read-only entries are skipped. The value n is what TwinCAT and SOEM write
     /// to set a PDO assignment (0x1C12 / 0x1C13) or mapping in one request: it is applied the
     /// CiA 301 way — sub-index 0 = 0, the entries, sub-index 0 = n — each step under the PDO
     /// rules of an emulated vendor device, so the request is accepted or refused exactly as the
@@ -777,7 +778,7 @@ impl CoeServer {
             .filter(|&i| self.entries[i].sub >= 1)
             .collect();
         for (k, &i) in entries.iter().enumerate() {
-            if count.is_some_and(|n| self.entries[i].sub > n) || pos >= data.len() {
+            if pos >= data.len() {
                 break;
             }
             let e = &self.entries[i];
@@ -790,7 +791,10 @@ impl CoeServer {
             parts.push((i, part));
             pos += n;
         }
-        if pos != data.len() || count.is_some_and(|n| usize::from(n) != parts.len()) {
+        // The data may go on past entry n up to the whole object, as a complete-access upload
+        // hands it out: entries above n are written too (they hold no mapping until sub-index 0
+        // says so), so an uploaded image can be downloaded back unchanged.
+        if pos != data.len() || count.is_some_and(|n| usize::from(n) > parts.len()) {
             return Err(abort::LENGTH);
         }
         let Some(n) = count else {
@@ -1171,13 +1175,26 @@ mod tests {
         let r = upload_ca(&mut s, 2, 0x1C12, 0);
         assert_eq!(&r[8..10], &[1, 0]);
         assert_eq!(&r[10..12], &[0x01, 0x16]);
-        // A length that does not match the count: abort 0x06070010, object unchanged.
+        // The whole image an upload gives (count 2, then every entry, the spare one 0) goes
+        // back unchanged.
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 8, 0, 0, 0];
+        req.extend_from_slice(&[2, 0, 0x00, 0x16, 0x01, 0x16, 0, 0]);
+        let r = s.handle(&request(4, &req)).expect("reply");
+        assert_eq!(sdo_of(&r)[0], 0x60, "whole image accepted: {r:02x?}");
+        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![2]);
+        assert_eq!(s.read(0x1C12, 2).unwrap(), vec![0x01, 0x16]);
+        // Fewer entries than the count, or a length between entries: abort 0x06070010, object
+        // unchanged.
         let mut req = vec![0x31, 0x12, 0x1C, 0, 4, 0, 0, 0];
         req.extend_from_slice(&[2, 0, 0x00, 0x16]);
-        let r = s.handle(&request(3, &req)).expect("reply");
+        let r = s.handle(&request(5, &req)).expect("reply");
         assert_eq!(sdo_of(&r)[0], 0x80);
         assert_eq!(&sdo_of(&r)[4..8], &abort::LENGTH.to_le_bytes());
-        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![1]);
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 5, 0, 0, 0];
+        req.extend_from_slice(&[1, 0, 0x00, 0x16, 0x01]);
+        let r = s.handle(&request(6, &req)).expect("reply");
+        assert_eq!(&sdo_of(&r)[4..8], &abort::LENGTH.to_le_bytes());
+        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![2]);
     }
 
     #[test]
