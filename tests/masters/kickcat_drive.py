@@ -30,7 +30,9 @@ probe surface, 0x60B9 bit 1 (TP1 rising edge stored) and 0x60BA = the surface in
 Known KickCAT 2.5 defect tested around: a segmented SDO upload crashes it (the client
 mis-handles the upload segment response; fixed upstream after 2.5), so no object longer than
 the device's mailbox is read here — the segmented upload is exercised with SOEM
-(tests/pysoem/interop.py). The 2.5 bindings expose no distributed-clock configuration (the C++
+(tests/pysoem/interop.py). KickCAT 2.5 also ends a request answered with an SDO abort as
+TIMEDOUT instead of reporting the abort code, so refusals are tested with SOEM and in the
+emulator's unit tests, not here. The 2.5 bindings expose no distributed-clock configuration (the C++
 Bus has it, the Python module does not), so DC is not activated by this master.
 
 Prints `KICKCAT_RESULT {json}`; exits 0 when every check passed.
