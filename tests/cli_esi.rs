@@ -17,7 +17,7 @@ fn show_servo() {
         "vendor: 0x00000FB0 fieldprobe emulated devices",
         "device FP-CIA402-SERVO: fieldprobe CiA 402 servo drive (touch probe)",
         "  identity: vendor 0x00000FB0, product code 0x00010402, revision 0x00010000",
-        "  mailbox: CoE (SdoInfo, PdoAssign, PdoConfig, SegmentedSdo); data link layer",
+        "  mailbox: CoE (SdoInfo, PdoAssign, PdoConfig, CompleteAccess, SegmentedSdo); data link layer",
         "    SM0 MBoxOut: start 0x1000, default size 128, control 0x26, enabled",
         "    SM1 MBoxIn: start 0x1080, default size 128, control 0x22, enabled",
         "    SM2 Outputs: start 0x1100, default size 9, control 0x64, enabled",

@@ -1,5 +1,6 @@
 //! SOEM (through pysoem) as an independent EtherCAT master against `fieldprobe sim ethercat`
-//! over a veth pair: discovery, SDO (incl. a segmented upload), PDO mapping, DC, OP with
+//! over a veth pair: discovery, SDO (incl. a segmented upload and complete access up and
+//! down on the PDO assignment and mapping), PDO mapping, DC, OP with
 //! cyclic process data, the CiA 402 enable sequence and a touch-probe latch on a probe surface
 //! of the emulated world (`--probe-at`) (notes `ethercat.md` §0 point 2, §6).
 //!
@@ -77,6 +78,51 @@ fn drive_increments(path: &Path, mm: f64) -> i64 {
     ((mm - num("offset")) * num("increments_per_unit")).round() as i64
 }
 
+/// The servo's default PDO assignment (0x1C12 / 0x1C13 = the `RxPdo` / `TxPdo` with an `Sm`)
+/// and the entries of its first TxPDO, read from the ESI with roxmltree (independently of
+/// `fieldprobe::esi`): what complete-access uploads must return.
+fn kid<'a, 'i>(n: roxmltree::Node<'a, 'i>, tag: &str) -> Option<roxmltree::Node<'a, 'i>> {
+    n.children().find(|c| c.has_tag_name(tag))
+}
+
+fn servo_pdo_defaults(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path).expect("read ESI");
+    let doc = roxmltree::Document::parse(&text).expect("parse ESI");
+    let num =
+        |n: Option<roxmltree::Node>| esi_xml::esi_number(n.and_then(|n| n.text()).unwrap_or("0"));
+    let device = doc
+        .descendants()
+        .find(|n| n.has_tag_name("Device"))
+        .expect("Device");
+    let pdos = |tag: &str| -> Vec<roxmltree::Node> {
+        device
+            .children()
+            .filter(|c| c.has_tag_name(tag) && c.attribute("Sm").is_some())
+            .collect()
+    };
+    let index = |p: &roxmltree::Node| num(kid(*p, "Index"));
+    let tx = pdos("TxPdo");
+    let first_tx = tx.first().expect("a default TxPDO");
+    let entries: Vec<[u32; 3]> = first_tx
+        .children()
+        .filter(|c| c.has_tag_name("Entry"))
+        .map(|e| {
+            [
+                num(kid(e, "Index")),
+                num(kid(e, "SubIndex")),
+                num(kid(e, "BitLen")),
+            ]
+        })
+        .collect();
+    json!({
+        "assign": {
+            "0x1C12": pdos("RxPdo").iter().map(index).collect::<Vec<_>>(),
+            "0x1C13": tx.iter().map(index).collect::<Vec<_>>(),
+        },
+        "mapping": { format!("{:#06X}", index(first_tx)).replace("0X", "0x"): entries },
+    })
+}
+
 /// The venv directory: `$PYSOEM_VENV`, else `target/pysoem-venv` in the crate.
 fn venv_dir() -> PathBuf {
     veth::pysoem_venv_dir()
@@ -131,6 +177,7 @@ fn inner(python: &Path) {
             "index": 0x2000, "sub": 0,
             "text": fieldprobe::sim::esc::coe::EMULATOR_NOTICE,
         },
+        "complete_access": servo_pdo_defaults(&manifest_path(ESI_FILES[SERVO])),
         "probe": {
             "device": SERVO,
             "position_inc": probe_inc,
@@ -198,6 +245,12 @@ fn inner(python: &Path) {
         upload["bytes"],
         fieldprobe::sim::esc::coe::EMULATOR_NOTICE.len()
     );
+    // SOEM uploaded the PDO assignment and the first TxPDO mapping with complete access, found
+    // the ESI's defaults and downloaded them back (interop.py checks the bytes).
+    let ca = &result_step(&result, "complete_access")["objects"];
+    for idx in ["0x1C12", "0x1C13", "0x1A00"] {
+        assert!(ca[idx].is_string(), "no complete access of {idx}: {ca}");
+    }
     let map = result_step(&result, "config_map");
     let sizes: Vec<(u64, u64)> = map["sizes"]
         .as_array()

@@ -125,7 +125,7 @@ pub struct Object {
     /// `BitSize`.
     pub bit_size: u32,
     /// `Info/DefaultData`: the default value's bytes (ETG.2000 hexBinary, little-endian, as on
-    /// the wire), if given.
+    /// the wire), if given; else the UTF-8 bytes of `Info/DefaultString` (a STRING default).
     pub default_data: Option<Vec<u8>>,
     /// `Info/DefaultValue`, `MinValue`, `MaxValue`: numbers (`#x` hex or decimal, not
     /// hexBinary), if given.
@@ -167,7 +167,7 @@ fn default_number(data: Option<&[u8]>, value: Option<i128>) -> Option<u64> {
 pub struct ObjectSubItem {
     /// `Name`.
     pub name: String,
-    /// `Info/DefaultData` bytes, if given.
+    /// `Info/DefaultData` bytes (else `Info/DefaultString`'s UTF-8 bytes), if given.
     pub default_data: Option<Vec<u8>>,
     /// `Info/DefaultValue`, `MinValue`, `MaxValue`, if given.
     pub values: InfoValues,

@@ -11,10 +11,13 @@ independently of fieldprobe's ESI parser):
                   "out_bits": int, "in_bits": int}, ...],       # ring order
      "servo": int,                                              # ring position of the CiA 402 drive
      "long_object": {"index": int, "sub": int, "text": str},    # read by segmented upload
-     "probe": null | {"device": int, "position_inc": int, "start_inc": int, "end_inc": int}}
+     "probe": null | {"device": int, "position_inc": int, "start_inc": int, "end_inc": int},
+     "complete_access": null | {"assign": {"0x1C12": [pdo, ...], ...},
+                                "mapping": {"0x1A00": [[index, sub, bits], ...], ...}}}
 
 Steps: config_init (identities and names), SDO reads (0x1000, 0x1018:1..3, 0x6041), SDO write +
-read-back (0x6065), the segmented upload, config_map (image sizes = ESI PDO bit sums), config_dc
+read-back (0x6065), the segmented upload, complete access (upload of the PDO assignment and a
+mapping = the ESI's defaults, download of the same image, read back), config_map (image sizes = ESI PDO bit sums), config_dc
 (recorded, not required), SAFE-OP -> OP with cyclic process data and the expected working
 counter, CiA 402 enable (controlword 6 -> 7 -> 15, statusword & 0x6F: 0x21 -> 0x23 -> 0x27) in CSP
 through the outputs, and, with "probe", a touch-probe latch (0x60B8 via the outputs, a ramp of
@@ -169,6 +172,10 @@ def run(iface, spec):
                                   f"{text!r}, expected {len(lo['text'])} bytes {lo['text']!r}")
         step("segmented_upload", index=hex(lo["index"]), bytes=len(data))
 
+        ca = spec.get("complete_access")
+        if ca:
+            complete_access(s, ca)
+
         iomap = master.config_map()
         sizes = [(len(bytes(sl.output)), len(bytes(sl.input))) for sl in master.slaves]
         for pos, ((o, i), e) in enumerate(zip(sizes, devices)):
@@ -244,6 +251,38 @@ def run(iface, spec):
                       wkc_errors=cyc.wkc_errors, seconds=round(time.monotonic() - t0, 3))
     finally:
         master.close()
+
+
+def complete_access(s, ca):
+    """SDO complete access (ETG.1000.6 §5.6.2.1.2, from sub-index 0: sub-index 0 as 16 bits, then
+    the entries), upload and download, on the PDO assignment and a PDO mapping of the servo in
+    PRE-OP, against the ESI's default assignment / mapping (ca = {"assign": {hex index: [pdo,
+    ...]}, "mapping": {hex index: [[index, sub, bits], ...]}})."""
+    seen = {}
+    for idx, pdos in ca["assign"].items():
+        index = int(idx, 16)
+        img = s.sdo_read(index, 0, ca=True)
+        n = img[0]
+        got = [struct.unpack_from("<H", img, 2 + 2 * k)[0] for k in range(n)]
+        check(got == pdos, f"CA upload {idx} = {img.hex()}, ESI default assignment {pdos}")
+        # Written back in one request, as TwinCAT and SOEM configure PDOs.
+        s.sdo_write(index, 0, img, ca=True)
+        again = s.sdo_read(index, 0, ca=True)
+        check(again == img, f"CA download {idx} {img.hex()}, then reads {again.hex()}")
+        seen[idx] = img.hex()
+    for idx, entries in ca["mapping"].items():
+        index = int(idx, 16)
+        img = s.sdo_read(index, 0, ca=True)
+        n = img[0]
+        got = [struct.unpack_from("<I", img, 2 + 4 * k)[0] for k in range(n)]
+        want = [(i << 16) | (sub << 8) | bits for i, sub, bits in entries]
+        check(got == want, f"CA upload {idx}: {[hex(v) for v in got]}, ESI {[hex(v) for v in want]}")
+        body = img[: 2 + 4 * n]
+        s.sdo_write(index, 0, body, ca=True)  # a normal (not expedited) download
+        again = s.sdo_read(index, 0, ca=True)
+        check(again[: len(body)] == body, f"CA download {idx}, then reads {again.hex()}")
+        seen[idx] = body.hex()
+    step("complete_access", objects=seen)
 
 
 def probe_latch(cyc, p):

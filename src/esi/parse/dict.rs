@@ -171,11 +171,20 @@ fn info_values(cx: &Ctx, info: Option<Node>) -> InfoValues {
     }
 }
 
+/// The default of an `Info` element as bytes: `DefaultData` (hexBinary), else `DefaultString`
+/// (ETG.2000 `InfoType`: the default of a STRING object as text, e.g. Inovance's 0x1008
+/// `SV660-ECAT`), its UTF-8 bytes.
+fn default_bytes(cx: &Ctx, info: Node) -> Option<Vec<u8>> {
+    if let Some(d) = cx.child(info, "DefaultData") {
+        return cx.hex_bytes(d);
+    }
+    cx.child(info, "DefaultString")
+        .map(|d| d.text().unwrap_or_default().as_bytes().to_vec())
+}
+
 fn parse_object(cx: &Ctx, o: Node) -> Res<Object> {
     let info = cx.child(o, "Info");
-    let default_data = info
-        .and_then(|i| cx.child(i, "DefaultData"))
-        .and_then(|d| cx.hex_bytes(d));
+    let default_data = info.and_then(|i| default_bytes(cx, i));
     let subitems = match info {
         None => Vec::new(),
         Some(i) => cx
@@ -184,9 +193,7 @@ fn parse_object(cx: &Ctx, o: Node) -> Res<Object> {
                 let si = cx.child(s, "Info");
                 ObjectSubItem {
                     name: cx.child_text(s, "Name").unwrap_or_default(),
-                    default_data: si
-                        .and_then(|si| cx.child(si, "DefaultData"))
-                        .and_then(|d| cx.hex_bytes(d)),
+                    default_data: si.and_then(|si| default_bytes(cx, si)),
                     values: info_values(cx, si),
                 }
             })

@@ -12,8 +12,13 @@
 //!   unused-byte count for segments shorter than 7 bytes);
 //! * SDO download expedited, normal and segmented (data in the initiate request may be followed
 //!   by download segments; toggle checked, total size checked);
-//! * complete access (CA bit) for records/arrays, starting at sub 0 (sub 0 padded to 16 bits,
-//!   ETG.1000.6 complete-access rule — from memory) or sub 1 (ethercrab's `SubIndex::Complete`);
+//! * complete access (CA bit), upload and download, for every record/array of a device whose
+//!   ESI declares it (`Mailbox/CoE@CompleteAccess`, SII CoE details bit 5; a device that does
+//!   not declare it answers every CA request with abort 0x06010000 "unsupported access to an
+//!   object", [`CoeServer::set_complete_access`]), starting at sub 0 (sub 0 padded to 16 bits,
+//!   ETG.1000.6 §5.6.2.1.2 complete access; SOEM's `ec_PDOassignt` reads it so) or sub 1
+//!   (ethercrab's `SubIndex::Complete`); downloads to PDO objects follow the PDO rules
+//!   ([`super::pdo_rules`]);
 //! * SDO abort requests (CoE service 2, command 0x80) with CiA 301 abort codes ([`abort`]);
 //! * emergency messages (CoE service 1) queued by [`CoeServer::emergency`] or when the model's
 //!   error code changes ([`CoeServer::poll`]);
@@ -355,6 +360,8 @@ pub struct CoeServer {
     descriptions: OdDescriptions,
     /// PDO configuration rules (emulated vendor devices), checked before every download.
     pdo_rules: Option<super::pdo_rules::PdoRules>,
+    /// SDO complete access supported (ESI `Mailbox/CoE@CompleteAccess`).
+    complete_access: bool,
     /// Model-backed entries whose model object has another index: (entry, model object) — a
     /// vendor device's object that plays a CiA 402 object (e.g. 0x7010:03 → 0x6060).
     aliases: Vec<((u16, u8), (u16, u8))>,
@@ -390,6 +397,7 @@ impl CoeServer {
             entries,
             descriptions,
             pdo_rules: None,
+            complete_access: true,
             aliases: Vec::new(),
             mbx_size: mailbox_size.max(16),
             counter: MailboxCounter::default(),
@@ -403,6 +411,12 @@ impl CoeServer {
             sdo_requests: 0,
             sdo_info_requests: 0,
         }
+    }
+
+    /// Does the device support SDO complete access (ESI `Mailbox/CoE@CompleteAccess`)? A server
+    /// starts with it on; off, every CA upload or download is aborted with 0x06010000.
+    pub fn set_complete_access(&mut self, on: bool) {
+        self.complete_access = on;
     }
 
     /// Let the model-backed entry `entry` answer with the model's object `model` (a vendor
@@ -713,7 +727,7 @@ impl CoeServer {
 
     /// Complete-access image of `index` from `sub` (0 or 1); sub 0 padded to 16 bits.
     fn read_complete(&self, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
-        if sub > 1 {
+        if sub > 1 || !self.complete_access {
             return Err(abort::UNSUPPORTED_ACCESS);
         }
         self.find(index, sub)?;
@@ -730,14 +744,15 @@ impl CoeServer {
 
     /// Complete-access download to `index` from `sub` (ETG.1000.6 §5.6.2.1.2, "complete
     /// access"): from sub-index 0 the data is sub-index 0 as 16 bits (its value n, padding)
-    /// followed by sub-indices 1 … n; from sub-index 1, sub-indices 1 … in order, as many as
-    /// the data holds. Read-only entries are skipped. The value n is what TwinCAT and SOEM write
+    /// followed by sub-indices 1 … n (and, if the data goes on, the entries after n up to the
+    /// whole object, as an upload gives it); from sub-index 1, sub-indices 1 … in order, as many
+    /// as the data holds. Read-only entries are skipped. The value n is what TwinCAT and SOEM write
     /// to set a PDO assignment (0x1C12 / 0x1C13) or mapping in one request: it is applied the
     /// CiA 301 way — sub-index 0 = 0, the entries, sub-index 0 = n — each step under the PDO
     /// rules of an emulated vendor device, so the request is accepted or refused exactly as the
     /// single writes would be; on a refusal the object's old entries are put back.
     fn write_complete(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), u32> {
-        if sub > 1 {
+        if sub > 1 || !self.complete_access {
             return Err(abort::UNSUPPORTED_ACCESS);
         }
         self.find(index, sub)?;
@@ -763,7 +778,7 @@ impl CoeServer {
             .filter(|&i| self.entries[i].sub >= 1)
             .collect();
         for (k, &i) in entries.iter().enumerate() {
-            if count.is_some_and(|n| self.entries[i].sub > n) || pos >= data.len() {
+            if pos >= data.len() {
                 break;
             }
             let e = &self.entries[i];
@@ -776,7 +791,10 @@ impl CoeServer {
             parts.push((i, part));
             pos += n;
         }
-        if pos != data.len() || count.is_some_and(|n| usize::from(n) != parts.len()) {
+        // The data may go on past entry n up to the whole object, as a complete-access upload
+        // hands it out: entries above n are written too (they hold no mapping until sub-index 0
+        // says so), so an uploaded image can be downloaded back unchanged.
+        if pos != data.len() || count.is_some_and(|n| usize::from(n) > parts.len()) {
             return Err(abort::LENGTH);
         }
         let Some(n) = count else {
@@ -907,6 +925,9 @@ impl CoeServer {
                     return self.finish_download(index, sub, complete_access, &d);
                 }
                 // Segmented: check the target now (CiA 301 lets the server abort early).
+                if complete_access && !self.complete_access {
+                    return abort_body(index, sub, abort::UNSUPPORTED_ACCESS);
+                }
                 if !complete_access {
                     match self.find(index, sub) {
                         Ok(i) if self.entries[i].access == Access::Ro => {
@@ -1067,5 +1088,134 @@ impl EscApplication for CoeServer {
 
     fn mailbox_reset(&mut self) {
         self.reset_session();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Complete access (ETG.1000.6 §5.6.2.1.2) over the mailbox, bytes built here from the
+    //! standard's layouts: mailbox header (length, address, channel/priority, type 3 = CoE |
+    //! counter << 4), CoE header (service 2 = SDO request << 12), SDO command byte, index,
+    //! sub-index, 4 data / size bytes.
+
+    use super::*;
+    use crate::drive::catalogue;
+    use crate::drive::model::ds402::Ds402Model;
+
+    fn server(complete_access: bool) -> CoeServer {
+        let def = catalogue::builtin("cia402-generic").expect("built-in drive");
+        let mut entries = ds402_objects("ca test");
+        let rw = |index, sub, ty, v| ObjectEntry {
+            access: Access::Rw,
+            ..ObjectEntry::constant(index, sub, ty, v)
+        };
+        // 0x1C12 = [0x1600, 0x1601], 4 entries capacity; 0x1600 = two entries.
+        entries.push(rw(0x1C12, 0, DataType::U8, 2));
+        entries.push(rw(0x1C12, 1, DataType::U16, 0x1600));
+        entries.push(rw(0x1C12, 2, DataType::U16, 0x1601));
+        entries.push(rw(0x1C12, 3, DataType::U16, 0));
+        entries.push(rw(0x1600, 0, DataType::U8, 2));
+        entries.push(rw(0x1600, 1, DataType::U32, 0x6040_0010));
+        entries.push(rw(0x1600, 2, DataType::U32, 0x607A_0020));
+        let mut s = CoeServer::new(Box::new(Ds402Model::new(&def)), entries, 128);
+        s.set_complete_access(complete_access);
+        s
+    }
+
+    /// A CoE SDO request with mailbox counter `counter`.
+    fn request(counter: u8, sdo: &[u8]) -> Vec<u8> {
+        let mut m = Vec::new();
+        let len = (2 + sdo.len()) as u16;
+        m.extend_from_slice(&len.to_le_bytes());
+        m.extend_from_slice(&[0, 0, 0, 0x03 | (counter << 4)]);
+        m.extend_from_slice(&(2u16 << 12).to_le_bytes());
+        m.extend_from_slice(sdo);
+        m
+    }
+
+    /// The SDO part of a reply (after mailbox and CoE headers).
+    fn sdo_of(reply: &[u8]) -> &[u8] {
+        &reply[8..]
+    }
+
+    fn upload_ca(s: &mut CoeServer, counter: u8, index: u16, sub: u8) -> Vec<u8> {
+        let i = index.to_le_bytes();
+        // ccs 2 (initiate upload) << 5 | CA bit 4.
+        let r = s
+            .handle(&request(counter, &[0x50, i[0], i[1], sub, 0, 0, 0, 0]))
+            .expect("reply");
+        sdo_of(&r).to_vec()
+    }
+
+    #[test]
+    fn complete_access_upload_from_sub_0_and_1() {
+        let mut s = server(true);
+        let r = upload_ca(&mut s, 1, 0x1C12, 0);
+        // scs 2 << 5 | CA | size indicated (0x01), not expedited: 0x51; size 2 + 3 × 2 = 8.
+        assert_eq!(r[0], 0x51, "{r:02x?}");
+        assert_eq!(&r[1..4], &[0x12, 0x1C, 0]);
+        assert_eq!(u32::from_le_bytes([r[4], r[5], r[6], r[7]]), 8);
+        assert_eq!(&r[8..16], &[2, 0, 0x00, 0x16, 0x01, 0x16, 0, 0]);
+        let r = upload_ca(&mut s, 2, 0x1600, 1);
+        assert_eq!(u32::from_le_bytes([r[4], r[5], r[6], r[7]]), 8);
+        assert_eq!(&r[8..16], &[0x10, 0, 0x40, 0x60, 0x20, 0, 0x7A, 0x60]);
+    }
+
+    #[test]
+    fn complete_access_download_then_upload() {
+        let mut s = server(true);
+        // Normal download with CA from sub 0: ccs 1 << 5 | CA | size indicated = 0x31, size 4:
+        // sub 0 = 1 (16 bits), sub 1 = 0x1601.
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 4, 0, 0, 0];
+        req.extend_from_slice(&[1, 0, 0x01, 0x16]);
+        let r = s.handle(&request(1, &req)).expect("reply");
+        assert_eq!(
+            sdo_of(&r)[0],
+            0x60,
+            "download response, not an abort: {r:02x?}"
+        );
+        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![1]);
+        assert_eq!(s.read(0x1C12, 1).unwrap(), vec![0x01, 0x16]);
+        let r = upload_ca(&mut s, 2, 0x1C12, 0);
+        assert_eq!(&r[8..10], &[1, 0]);
+        assert_eq!(&r[10..12], &[0x01, 0x16]);
+        // The whole image an upload gives (count 2, then every entry, the spare one 0) goes
+        // back unchanged.
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 8, 0, 0, 0];
+        req.extend_from_slice(&[2, 0, 0x00, 0x16, 0x01, 0x16, 0, 0]);
+        let r = s.handle(&request(4, &req)).expect("reply");
+        assert_eq!(sdo_of(&r)[0], 0x60, "whole image accepted: {r:02x?}");
+        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![2]);
+        assert_eq!(s.read(0x1C12, 2).unwrap(), vec![0x01, 0x16]);
+        // Fewer entries than the count, or a length between entries: abort 0x06070010, object
+        // unchanged.
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 4, 0, 0, 0];
+        req.extend_from_slice(&[2, 0, 0x00, 0x16]);
+        let r = s.handle(&request(5, &req)).expect("reply");
+        assert_eq!(sdo_of(&r)[0], 0x80);
+        assert_eq!(&sdo_of(&r)[4..8], &abort::LENGTH.to_le_bytes());
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 5, 0, 0, 0];
+        req.extend_from_slice(&[1, 0, 0x00, 0x16, 0x01]);
+        let r = s.handle(&request(6, &req)).expect("reply");
+        assert_eq!(&sdo_of(&r)[4..8], &abort::LENGTH.to_le_bytes());
+        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![2]);
+    }
+
+    #[test]
+    fn complete_access_refused_where_the_esi_does_not_declare_it() {
+        let mut s = server(false);
+        let r = upload_ca(&mut s, 1, 0x1C12, 0);
+        assert_eq!(r[0], 0x80, "abort: {r:02x?}");
+        assert_eq!(&r[4..8], &abort::UNSUPPORTED_ACCESS.to_le_bytes());
+        let mut req = vec![0x31, 0x12, 0x1C, 0, 4, 0, 0, 0];
+        req.extend_from_slice(&[1, 0, 0x00, 0x16]);
+        let r = s.handle(&request(2, &req)).expect("reply");
+        assert_eq!(&sdo_of(&r)[4..8], &abort::UNSUPPORTED_ACCESS.to_le_bytes());
+        assert_eq!(s.read(0x1C12, 0).unwrap(), vec![2], "unchanged");
+        // Ordinary access still works.
+        let r = s
+            .handle(&request(3, &[0x40, 0x12, 0x1C, 0, 0, 0, 0, 0]))
+            .expect("reply");
+        assert_eq!(sdo_of(&r)[0] & 0xE0, 0x40, "upload response: {r:02x?}");
     }
 }

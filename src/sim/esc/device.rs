@@ -151,6 +151,10 @@ pub enum ServoError {
 
 /// The mailbox server of an emulated drive: CoE for CiA 402 (and every object-dictionary
 /// family), SoE for SERCOS. Either owns the drive model.
+// One per emulated device, built once and never moved per cycle: the size difference between
+// the CoE server and a bare model costs nothing, a box would cost an indirection per mailbox
+// access.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
 pub enum MailboxServer {
     /// CoE (SDO, EMCY).
@@ -620,6 +624,15 @@ pub const MAPPING_CAPACITY: u8 = 16;
 /// Sub-indices each PDO assignment object offers.
 pub const ASSIGN_CAPACITY: u8 = 4;
 
+/// Does the ESI declare SDO complete access for `device` (`Mailbox/CoE@CompleteAccess`)?
+pub(crate) fn esi_complete_access(device: &Device) -> bool {
+    device
+        .mailbox
+        .as_ref()
+        .and_then(|m| m.coe.as_ref())
+        .is_some_and(|c| c.complete_access)
+}
+
 /// Assignment object (0x1C12/0x1C13) and mapping objects of `pdos`: the CoE entries a master
 /// reads to discover the PDO mapping, and writes in PRE-OP to change it (CiA 301 procedure:
 /// sub 0 = 0, entries, sub 0 = count). They hold the ESI default mapping at start; the
@@ -736,6 +749,7 @@ pub fn emulated_drive(
                     align_with_esi(&mut entries, dict, model.as_ref());
                 }
                 let mut coe = CoeServer::new(model, entries, usize::from(mbx.tx_size));
+                coe.set_complete_access(esi_complete_access(device));
                 if let Some(dict) = device.dictionary() {
                     coe.set_descriptions(OdDescriptions::from_esi(dict, coe.entries()));
                 }
@@ -787,7 +801,9 @@ pub fn emulated_drive(
 ///   content needs them;
 /// * a single-value object the ESI declares and the table lacks is added: backed by the drive
 ///   model when the model answers it (e.g. the touch-probe edge counters 0x60D5–0x60D8), else
-///   a constant with the ESI `DefaultData`; an object with neither is left out.
+///   a constant with the ESI `DefaultData`; an object with neither is left out;
+/// * a VISIBLE_STRING object with a default in the ESI (0x1008, 0x1009, 0x100A) serves that
+///   text (it replaces the device name the table starts with).
 fn align_with_esi(
     entries: &mut Vec<ObjectEntry>,
     dict: &crate::esi::Dictionary,
@@ -806,6 +822,18 @@ fn align_with_esi(
                 .find_map(|e| e.data.as_ref().and_then(|d| d.first().copied()))
                 .unwrap_or(0);
             entries.retain(|e| e.index != o.index || subs.contains(&e.sub) || e.sub <= used);
+            continue;
+        }
+        if data_type_of_esi_name(&o.type_name) == Some(0x0009) {
+            // A VISIBLE_STRING with a default (0x1008 device name, 0x1009 hardware version,
+            // 0x100A software version): the device serves the ESI's text, so a configurator
+            // shows what the file says (ETG.2000 `DefaultString` / `DefaultData`).
+            if let Some(d) = &o.default_data {
+                let len = usize::try_from(o.bit_size / 8).unwrap_or(usize::MAX);
+                let text: Vec<u8> = d.iter().copied().take(len).collect();
+                entries.retain(|e| e.index != o.index);
+                entries.push(ObjectEntry::bytes(o.index, 0, Access::Ro, &text, len));
+            }
             continue;
         }
         if entries.iter().any(|e| e.index == o.index) {

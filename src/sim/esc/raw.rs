@@ -356,6 +356,71 @@ mod tests {
         assert!(!is_ethercat(&[0; 10]));
     }
 
+    /// Frames in from a list, frames out into a list; the clock stands still.
+    struct ListIo {
+        incoming: Vec<Vec<u8>>,
+        sent: Vec<Vec<u8>>,
+    }
+
+    impl FrameIo for ListIo {
+        fn recv(&mut self, _timeout: Duration) -> Result<Option<Vec<u8>>, RawError> {
+            Ok(if self.incoming.is_empty() {
+                None
+            } else {
+                Some(self.incoming.remove(0))
+            })
+        }
+        fn send(&mut self, frame: &[u8]) -> Result<(), RawError> {
+            self.sent.push(frame.to_vec());
+            Ok(())
+        }
+    }
+
+    /// A clock that advances 1 µs every time it is read, so the loop reaches its deadline.
+    struct Ticking(std::cell::Cell<u64>);
+    impl Clock for Ticking {
+        fn now_ns(&self) -> u64 {
+            let t = self.0.get() + 1_000;
+            self.0.set(t);
+            t
+        }
+    }
+
+    /// A master's frame (one BRD of register 0x0000, 1 byte): Ethernet II to broadcast from
+    /// `src`, EtherCAT header (length 13, type 1), datagram header, data, working counter.
+    fn brd_frame(src: [u8; 6]) -> Vec<u8> {
+        let mut f = vec![0xFF; 6];
+        f.extend_from_slice(&src);
+        f.extend_from_slice(&[0x88, 0xA4]);
+        f.extend_from_slice(&(13u16 | (1 << 12)).to_le_bytes());
+        f.extend_from_slice(&[0x07, 0x00, 0, 0, 0, 0, 1, 0, 0, 0, 0x00, 0, 0]);
+        f.resize(60, 0);
+        f
+    }
+
+    #[test]
+    fn returned_frames_have_the_locally_administered_bit_set() {
+        // ETG.1000.4 / Beckhoff ESC datasheet (frame processing): the ESC sets bit 1 of the
+        // first source-MAC byte in every frame it processes; a master's own address (ethercrab
+        // 10:10:10:10:10:10) comes back as 12:10:10:10:10:10, one that has the bit already
+        // (KickCAT, any veth address) keeps it.
+        let mut seg = Segment::new(Vec::new(), 0);
+        let stop = AtomicBool::new(false);
+        let mut io = ListIo {
+            incoming: vec![brd_frame([0x10; 6]), brd_frame([0x02, 0, 0, 0, 0, 0x01])],
+            sent: Vec::new(),
+        };
+        let clock = Ticking(std::cell::Cell::new(0));
+        let stats =
+            serve_loop(&mut io, &clock, &mut seg, &stop, Some(1_000_000), |_| {}).expect("serve");
+        assert_eq!(stats.answered, 2);
+        assert_eq!(io.sent.len(), 2, "both frames answered");
+        assert_eq!(&io.sent[0][6..12], &[0x12, 0x10, 0x10, 0x10, 0x10, 0x10]);
+        assert_eq!(&io.sent[1][6..12], &[0x02, 0, 0, 0, 0, 0x01]);
+        // Everything else but the source MAC is the frame as processed (no device: BRD WKC 0).
+        assert_eq!(&io.sent[0][12..], &brd_frame([0x10; 6])[12..]);
+    }
+
     #[test]
     fn unknown_interface_is_named() {
         let mut seg = Segment::new(Vec::new(), 0);

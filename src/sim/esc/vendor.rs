@@ -149,6 +149,7 @@ pub fn emulated_vendor_drive(
     pdo_entries(&mut entries, 0x1C12, &device.rx_pdos, cfg.output_sm);
     pdo_entries(&mut entries, 0x1C13, &device.tx_pdos, cfg.input_sm);
     let mut coe = CoeServer::new(model, entries, usize::from(mbx.tx_size));
+    coe.set_complete_access(super::device::esi_complete_access(device));
     for (entry, model) in aliases {
         coe.alias(entry, model);
     }
