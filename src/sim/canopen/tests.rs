@@ -815,3 +815,21 @@ fn the_error_history_holds_the_newest_eight_and_reset_node_clears_it() {
     b.at_ms(ms + 1);
     assert_eq!(b.read(0x1003, 0), Ok(0));
 }
+
+#[test]
+fn from_eds_the_error_objects_are_the_nodes_own_with_the_eds_size_of_0x1003() {
+    let Some(mut n) = technosoft_node("from_eds_the_error_objects_are_the_nodes_own") else {
+        return;
+    };
+    // The iPOS EDS lists 0x1003 with sub-indices 0 … 5 ([1003] SubNumber=6).
+    assert_eq!(upload(&mut n, 0x1001, 0), Ok([0, 0, 0, 0]));
+    assert_eq!(upload(&mut n, 0x1003, 0), Ok([0, 0, 0, 0]));
+    assert_eq!(upload(&mut n, 0x1003, 5), Err(NO_DATA));
+    assert_eq!(upload(&mut n, 0x1003, 6), Err(0x0609_0011));
+    // 0x1001 stays read-only whatever the EDS says.
+    let r = sdo(&mut n, [0x2F, 0x01, 0x10, 0, 1, 0, 0, 0]);
+    assert_eq!(
+        (r[0], u32::from_le_bytes([r[4], r[5], r[6], r[7]])),
+        (0x80, 0x0601_0002)
+    );
+}
