@@ -30,7 +30,11 @@
 //! writes the RPDO event-timer; the node's abort 0x06090011 makes that a warning, as
 //! `link::canopen` documents), and a TPDO of transmission type 2 … 240 that, once due, goes
 //! out at every SYNC (its `SyncHandler` never resets its counter): a durand bug the master
-//! does not meet here, as it maps its TPDOs with type 0 or 1.
+//! does not meet here, as it maps its TPDOs with type 0 or 1. Two more deviations from CiA 301
+//! in durand 0.5.0 that this run does not depend on: NMT reset communication does not restore
+//! the communication parameters (the master remaps every PDO after its reset anyway), and its
+//! RPDO length error sends EMCY 0x8210 with error register 0 (CiA 301 §7.5.2.2 wants bit 0 set
+//! while an error is present).
 //!
 //! Every process is bounded by `timeout`; SKIP only without namespaces or without the seeds.
 

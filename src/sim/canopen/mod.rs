@@ -3,7 +3,10 @@
 //! [`CanopenSegment`], the nodes of one bus with their [`World`] (probe surfaces, fixed stops).
 //!
 //! Object dictionary: the CiA 402 objects of [`ds402_objects`] (backed by the drive model), 0x1018
-//! identity, 0x1017 producer heartbeat time, and the communication / mapping parameters of 4
+//! identity, 0x1017 producer heartbeat time, 0x1200 SDO server parameter, 0x1001 error register
+//! and 0x1003 pre-defined error field with the EMCYs that go with them ([`errors`]: one EMCY
+//! when an error becomes active, EMCY 0x0000 "error reset" when one is gone, e.g. after a
+//! fault reset by controlword bit 7), and the communication / mapping parameters of 4
 //! RPDOs (0x1400.. / 0x1600..) and 4 TPDOs (0x1800.. / 0x1A00..), which start with the drive
 //! file's process data packed by [`pack_layout`] (transmission type 1) — or with an EDS's
 //! defaults — and may be rewritten in PRE-OPERATIONAL by the CiA 301 procedure. On NMT start
