@@ -203,7 +203,8 @@ fn durand_cia402_node_runs_meas1_under_our_master() {
            --surface 1={surface_inc} --seconds {node_s} >{d}/node.out 2>{d}/node.err & N=$!; \
          i=0; while ! grep -q READY {d}/node.out 2>/dev/null && [ $i -lt 600 ]; do sleep 0.1; \
            i=$((i+1)); done; \
-         timeout 20 {b} can scan --link {link} >{d}/scan.out 2>{d}/scan.err; \
+         for t in 1 2 3; do timeout 20 {b} can scan --link {link} >{d}/scan.out 2>{d}/scan.err; \
+           grep -q '^1 ' {d}/scan.out && break; echo \"scan $t: no node 1\" >>{d}/scan.retries; done; \
          timeout 60 {b} sdos --link {link} --node 1 --eds {EDS} >{d}/sdos.out 2>{d}/sdos.err; \
          timeout 20 {b} sdo read --link {link} --node 1 0x1008 >{d}/r1008.out 2>&1; \
          timeout 20 {b} sdo read --link {link} --node 1 0x1018:1 >{d}/r1018.out 2>&1; \
@@ -242,7 +243,9 @@ fn durand_cia402_node_runs_meas1_under_our_master() {
     );
     println!("{TEST}: {:?}\nnode log:\n{node_log}", t0.elapsed());
 
-    // 2. can scan: node 1 with the EDS's identity.
+    // 2. can scan: node 1 with the EDS's identity. A Python node on a loaded machine may answer
+    // the scan's broadcast SDO late; up to three scans, the retries printed.
+    println!("scan retries: {:?}", read("scan.retries"));
     let scan = read("scan.out");
     let line = scan
         .lines()
