@@ -310,6 +310,54 @@ pub fn python_master_drives_sim(python: &Path, bus: PeerBus) {
         let l = r[latch].as_i64().unwrap();
         assert!((l - surface).abs() <= 1, "{latch} = {l}, surface {surface}");
     }
+    // CiA 301 error objects and EMCY (issue 26). Before the fault: no error, empty history.
+    assert_eq!(r["err_1001_before"], 0);
+    assert_eq!(r["err_1003_0_before"], 0);
+    // A following error (CiA 402 EMCY 0x8611): FAULT, python-canopen's EMCY consumer has it
+    // active; error register = generic (bit 0) + device profile (bit 5) = 0x21 (CiA 301
+    // §7.5.2.2); 0x1003 holds one entry, the code in its low 16 bits.
+    assert_eq!(r["faulted"], true, "the runaway target faulted the drive");
+    let codes = |k: &str| -> Vec<u64> {
+        r[k].as_array()
+            .unwrap_or_else(|| panic!("{k}: {}", r[k]))
+            .iter()
+            .map(|c| c.as_u64().unwrap())
+            .collect()
+    };
+    assert!(
+        codes("emcy_log_in_fault").contains(&0x8611),
+        "{}",
+        r["emcy_log_in_fault"]
+    );
+    assert_eq!(codes("emcy_active_in_fault"), vec![0x8611]);
+    assert_eq!(r["err_1001_in_fault"], 0x21);
+    assert_eq!(r["err_1003_0_in_fault"], 1);
+    assert_eq!(r["err_1003_1_in_fault"], 0x8611);
+    // EMCY frames on the wire: `11 86 21 00 00 00 00 00` (0x8611, register 0x21, 5 zero
+    // manufacturer bytes), and after the fault reset exactly one `00 00 00 00 00 00 00 00`
+    // (error reset, register 0x00).
+    let frames: Vec<&str> = r["emcy_frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(frames.contains(&"1186210000000000"), "{frames:?}");
+    assert_eq!(
+        r["emcy_frames_after_reset"],
+        serde_json::json!(["0000000000000000"])
+    );
+    // After the reset: SWITCH ON DISABLED, nothing active for python-canopen, register 0, the
+    // history keeps the fault until 0 is written to 0x1003:00; any other value is refused
+    // (0x06090030), and an empty field has no sub-index 1 entry (0x08000024, no data).
+    assert_eq!(r["statusword_after_reset"].as_u64().unwrap() & 0x4F, 0x40);
+    assert_eq!(codes("emcy_active_after_reset"), Vec::<u64>::new());
+    assert_eq!(r["err_1001_after_reset"], 0);
+    assert_eq!(r["err_1003_0_after_reset"], 1);
+    assert_eq!(r["err_1003_1_after_reset"], 0x8611);
+    assert_eq!(r["err_1003_write_1"], 0x0609_0030);
+    assert_eq!(r["err_1003_0_cleared"], 0);
+    assert_eq!(r["err_1003_1_cleared"], 0x0800_0024);
     println!("python-canopen master against sim canopen: {elapsed:?}");
 }
 

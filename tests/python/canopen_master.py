@@ -49,6 +49,12 @@ def remote_od():
     """CiA 301 / CiA 402 objects the master uses (types from CiA 301 / CiA 402)."""
     od = odm.ObjectDictionary()
     od.add_object(var("Device type", 0x1000, 0, U32, "ro"))
+    od.add_object(var("Error register", 0x1001, 0, U8, "ro"))
+    errors = odm.ODArray("Pre-defined error field", 0x1003)
+    errors.add_member(var("Number of errors", 0x1003, 0, U8, "rw"))
+    for k in range(1, 9):
+        errors.add_member(var(f"Standard error field {k}", 0x1003, k, U32, "ro"))
+    od.add_object(errors)
     od.add_object(var("Device name", 0x1008, 0, odm.VISIBLE_STRING, "ro"))
     od.add_object(var("Producer heartbeat time", 0x1017, 0, U16))
     for k in range(4):
@@ -274,7 +280,71 @@ def run(net, node_id, ramp_end, out):
     out["tp_latch_sdo"] = sdo[0x60BA].raw
     step("ramp")
 
+    errors_after_fault(net, node, sdo, r1, t1, out)
+    step("fault and fault reset")
+
     node.nmt.state = "PRE-OPERATIONAL"
+
+
+def errors_after_fault(net, node, sdo, r1, t1, out):
+    """CiA 301 error objects and EMCY: 0x1001 / 0x1003 before a fault, a following error
+    provoked (window 0x6065 = 10 increments, the target running away), 0x1001 / 0x1003 and
+    python-canopen's EMCY consumer in FAULT, then a fault reset by controlword bit 7 and the
+    EMCY consumer again; 0x1003 cleared by writing 0, another value refused."""
+    emcys = Frames()
+    net.subscribe(0x80 + node.id, emcys)  # raw EMCY frames, besides node.emcy's own view
+    out["err_1001_before"] = sdo[0x1001].raw
+    out["err_1003_0_before"] = sdo[0x1003][0].raw
+    sdo[0x6065].raw = 10  # following error window, increments
+    control, target = r1[0], r1[1]
+    pos = target.raw
+    faulted = False
+    for _ in range(200):
+        pos += 5000
+        target.raw = pos
+        r1.transmit()
+        lockstep(net, t1)
+        if t1[0].raw & 0x4F == 0x08:  # CiA 402 FAULT
+            faulted = True
+            break
+    out["faulted"] = faulted
+    end = time.monotonic() + 2.0  # the EMCY may come before or after the TPDO showing FAULT
+    while time.monotonic() < end and not any(e.code == 0x8611 for e in node.emcy.log):
+        time.sleep(0.02)
+    out["emcy_log_in_fault"] = [e.code for e in node.emcy.log]
+    out["emcy_active_in_fault"] = [e.code for e in node.emcy.active]
+    out["err_1001_in_fault"] = sdo[0x1001].raw
+    out["err_1003_0_in_fault"] = sdo[0x1003][0].raw
+    out["err_1003_1_in_fault"] = sdo[0x1003][1].raw
+    # Fault reset: controlword 0, then 0x80 (rising edge of bit 7), in the event-driven RPDO1.
+    t_reset = time.monotonic()
+    for cw in (0x00, 0x80):
+        control.raw = cw
+        r1.transmit()
+        time.sleep(0.05)
+    end = time.monotonic() + 3.0
+    while time.monotonic() < end and (node.emcy.active or sdo[0x6041].raw & 0x4F == 0x08):
+        time.sleep(0.02)
+    out["statusword_after_reset"] = sdo[0x6041].raw
+    out["emcy_active_after_reset"] = [e.code for e in node.emcy.active]
+    with emcys.lock:
+        out["emcy_frames"] = [d.hex() for (_, d, _) in emcys.items]
+        out["emcy_frames_after_reset"] = [d.hex() for (_, d, t) in emcys.items if t >= t_reset]
+    out["err_1001_after_reset"] = sdo[0x1001].raw
+    out["err_1003_0_after_reset"] = sdo[0x1003][0].raw
+    out["err_1003_1_after_reset"] = sdo[0x1003][1].raw
+    try:
+        sdo[0x1003][0].raw = 1
+        out["err_1003_write_1"] = None
+    except SdoAbortedError as e:
+        out["err_1003_write_1"] = e.code
+    sdo[0x1003][0].raw = 0
+    out["err_1003_0_cleared"] = sdo[0x1003][0].raw
+    try:
+        sdo[0x1003][1].raw
+        out["err_1003_1_cleared"] = None
+    except SdoAbortedError as e:
+        out["err_1003_1_cleared"] = e.code
 
 
 if __name__ == "__main__":

@@ -3,7 +3,10 @@
 //! [`CanopenSegment`], the nodes of one bus with their [`World`] (probe surfaces, fixed stops).
 //!
 //! Object dictionary: the CiA 402 objects of [`ds402_objects`] (backed by the drive model), 0x1018
-//! identity, 0x1017 producer heartbeat time, and the communication / mapping parameters of 4
+//! identity, 0x1017 producer heartbeat time, 0x1200 SDO server parameter, 0x1001 error register
+//! and 0x1003 pre-defined error field with the EMCYs that go with them ([`errors`]: one EMCY
+//! when an error becomes active, EMCY 0x0000 "error reset" when one is gone, e.g. after a
+//! fault reset by controlword bit 7), and the communication / mapping parameters of 4
 //! RPDOs (0x1400.. / 0x1600..) and 4 TPDOs (0x1800.. / 0x1A00..), which start with the drive
 //! file's process data packed by [`pack_layout`] (transmission type 1) — or with an EDS's
 //! defaults — and may be rewritten in PRE-OPERATIONAL by the CiA 301 procedure. On NMT start
@@ -112,9 +115,11 @@ use crate::sim::esc::coe::{ds402_objects, Access, CoeServer, DataType, ObjectEnt
 use crate::sim::world::{Port, PortBuffer, World};
 use crate::units::Nanos;
 
+pub mod errors;
 pub mod pdo;
 pub mod rules;
 
+use self::errors::NodeErrors;
 use self::rules::NodeRules;
 
 /// Vendor ID the emulated nodes report in 0x1018:1 (the EtherCAT emulator's, made up).
@@ -130,8 +135,14 @@ pub use crate::bus::canopen::nmt::SYNC_TIMEOUT_PERIODS;
 pub const SYNC_TIMEOUT_EMCY: u16 = 0x8100;
 /// EMCY error code of an RPDO deadline time-out (CiA 301 "RPDO time-out").
 pub const RPDO_TIMEOUT_EMCY: u16 = 0x8250;
-/// Error register (0x1001) sent with a SYNC time-out: bit 0 generic, bit 4 communication.
-const SYNC_TIMEOUT_REGISTER: u8 = 0x11;
+/// EMCY error code of an RPDO whose length is not its mapping's (CiA 301 table 21).
+pub const PDO_LENGTH_EMCY: u16 = 0x8210;
+/// EMCY error code of a refused NMT start (a PDO mapping the node cannot serve): 0x8200
+/// "protocol error".
+pub const START_REFUSED_EMCY: u16 = 0x8200;
+/// SDO abort 0x0800_0024 "no data available": a sub-index of 0x1003 beyond the errors
+/// recorded.
+pub const NO_DATA: u32 = 0x0800_0024;
 /// Capacity (bytes) of a VISIBLE_STRING / OCTET_STRING / UNICODE_STRING / DOMAIN object built
 /// from an EDS entry whose default is shorter ([`EmulatedNode::from_eds`]).
 pub const EDS_STRING_CAPACITY: usize = 256;
@@ -155,14 +166,37 @@ struct Od<'a> {
     wrote: bool,
     /// The controlword 0x6040 was written (the drive acts on it at once).
     wrote_controlword: bool,
+    /// 0 was written to 0x1003 sub-index 0: the node deletes its error history.
+    clear_history: bool,
 }
 
 impl ObjectAccess for Od<'_> {
     fn read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
-        self.od.read(index, sub)
+        let value = self.od.read(index, sub)?;
+        if index == 0x1003 && sub > 0 {
+            // CiA 301 §7.5.2.3: sub-index 0 tells how many errors are recorded; a sub-index
+            // of the field beyond them holds none (CANopenNode answers the same).
+            let n = self.od.read_with(0x1003, 0, |b| b.first().copied())?;
+            if n.is_some_and(|n| sub > n) {
+                return Err(NO_DATA);
+            }
+        }
+        Ok(value)
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), u32> {
+        if (index, sub) == (0x1003, 0) && self.od.read(0x1003, 0).is_ok() {
+            // CiA 301 §7.5.2.3: writing 0 deletes the error history; any other value is
+            // refused.
+            return match data {
+                [0] => {
+                    self.clear_history = true;
+                    Ok(())
+                }
+                [_] => Err(rules::INVALID_VALUE),
+                _ => Err(0x0607_0010),
+            };
+        }
         if (0x1400..0x1C00).contains(&index) && self.state == NmtState::Operational {
             // CiA 301: data cannot be transferred because of the present device state.
             return Err(0x0800_0022);
@@ -208,7 +242,13 @@ pub struct EmulatedNode {
     inputs: Vec<u8>,
     last_heartbeat: Option<Nanos>,
     boot_pending: bool,
-    last_error: u16,
+    /// Active errors, the error register 0x1001 and the history 0x1003 ([`errors`]).
+    errors: NodeErrors,
+    /// An RPDO came with a length its mapping does not have (EMCY 0x8210), and no RPDO of
+    /// the right length since.
+    pdo_length_error: bool,
+    /// The last NMT start was refused (EMCY 0x8200): a mapping the node cannot serve.
+    start_refused: bool,
     outgoing: Vec<CanFrame>,
     syncs: u64,
     sdo_muted: bool,
@@ -228,9 +268,6 @@ pub struct EmulatedNode {
     rpdo_seen: [Option<Nanos>; MAX_PDOS],
     rpdo_lost: [bool; MAX_PDOS],
     rpdo_timeouts: u64,
-    /// An EMCY for this model error code was sent already (the SYNC watch sends it before the
-    /// model faults).
-    emcy_sent_for: Option<u16>,
     /// The writable objects of the communication area 0x1000 … 0x1FFF as built (0x1006,
     /// 0x1007, 0x1017, the PDO parameters …), restored by NMT reset communication:
     /// (index, sub-index, value).
@@ -256,6 +293,19 @@ fn u8_entry(index: u16, sub: u8, v: u8) -> ObjectEntry {
         access: Access::Rw,
         ..ObjectEntry::constant(index, sub, DataType::U8, i64::from(v))
     }
+}
+
+/// The error objects of CiA 301: 0x1001 error register (UNSIGNED8, read-only, mandatory) and,
+/// with a `history` capacity > 0, 0x1003 pre-defined error field (sub-index 0 UNSIGNED8
+/// read-write: the number of errors recorded; sub-indices 1 … `history` UNSIGNED32
+/// read-only). The node keeps their values ([`EmulatedNode::poll`], [`errors`]).
+fn error_objects(history: u8) -> Vec<ObjectEntry> {
+    let mut v = vec![ObjectEntry::constant(0x1001, 0, DataType::U8, 0)];
+    if history > 0 {
+        v.push(u8_entry(0x1003, 0, 0));
+        v.extend((1..=history).map(|k| ObjectEntry::constant(0x1003, k, DataType::U32, 0)));
+    }
+    v
 }
 
 /// Communication and mapping parameters of `pdos` plus disabled ones up to [`MAX_PDOS`].
@@ -406,7 +456,18 @@ impl EmulatedNode {
             // CiA 301 communication cycle period and synchronous window length, µs (0 = none).
             u32_entry(0x1006, 0, 0),
             u32_entry(0x1007, 0, 0),
+            // CiA 301 §7.5.2.33 SDO server parameter of the default SDO (read-only): COB-IDs
+            // client → server and server → client.
+            ObjectEntry::constant(0x1200, 0, DataType::U8, 2),
+            ObjectEntry::constant(
+                0x1200,
+                1,
+                DataType::U32,
+                i64::from(SDO_RX_BASE) + i64::from(id),
+            ),
+            ObjectEntry::constant(0x1200, 2, DataType::U32, 0x580 + i64::from(id)),
         ]);
+        entries.extend(error_objects(errors::DEFAULT_HISTORY));
         Self::build(id, def, entries, BTreeMap::new(), NodeRules::default())
     }
 
@@ -444,6 +505,9 @@ impl EmulatedNode {
     ///   when the EDS has them, with the model's data type and access (the EDS default is not
     ///   written to the model); model objects the EDS lacks are not in the dictionary (SDO
     ///   abort 0x0602_0000), although the drive file's process data still carries them.
+    /// * 0x1001 error register and 0x1003 pre-defined error field are the node's own
+    ///   ([`errors`]): 0x1001 always (CiA 301 mandatory), 0x1003 when the EDS has it, with as
+    ///   many entries as the EDS's highest sub-index of 0x1003.
     /// * 0x1018 identity from the EDS: subs 1 … 3 from [`Eds::identity`] (the sub's value,
     ///   else `[DeviceInfo]` VendorNumber / ProductNumber / RevisionNumber, else 0), sub 4
     ///   from the EDS, else the node id. Always read-only, sub 0 = 4.
@@ -477,7 +541,9 @@ impl EmulatedNode {
             // PDOs 5 and up (number = index & 0x1FF in each of the four parameter ranges).
             let beyond =
                 (0x1400..0x1C00).contains(&index) && usize::from(index & 0x1FF) >= MAX_PDOS;
-            if beyond || index == 0x1018 {
+            // 0x1001 / 0x1003 are the node's own (its error state), with the EDS's size of
+            // 0x1003.
+            if beyond || matches!(index, 0x1018 | 0x1001 | 0x1003) {
                 continue;
             }
             if let Some(m) = model_backed.get(&(index, sub)) {
@@ -510,6 +576,14 @@ impl EmulatedNode {
                 ..ObjectEntry::constant(0x1017, 0, DataType::U16, i64::from(DEFAULT_HEARTBEAT_MS))
             });
         }
+        let history = eds
+            .objects
+            .range((0x1003, 1)..=(0x1003, u8::MAX))
+            .map(|(&(_, sub), _)| sub)
+            .max()
+            .unwrap_or(0)
+            .min(254);
+        entries.extend(error_objects(history));
         let ident = eds.identity();
         let serial = eds
             .get(0x1018, 4)
@@ -572,10 +646,18 @@ impl EmulatedNode {
         let mut inputs = vec![0; model.tx_len()];
         model.finish_step(&mut inputs);
         let od = CoeServer::new(model, entries, 0);
+        let history = od
+            .entries()
+            .iter()
+            .filter(|e| e.index == 0x1003 && e.sub > 0)
+            .count()
+            .min(254) as u8;
+        // 0x1003:00 is the error state, not a communication parameter.
         let comm_defaults = od
             .entries()
             .iter()
             .filter(|e| (0x1000..0x2000).contains(&e.index) && e.access != Access::Ro)
+            .filter(|e| e.index != 0x1003)
             .filter_map(|e| Some((e.index, e.sub, e.data.clone()?)))
             .collect();
         Ok(EmulatedNode {
@@ -591,7 +673,9 @@ impl EmulatedNode {
             inputs,
             last_heartbeat: None,
             boot_pending: true,
-            last_error: 0,
+            errors: NodeErrors::new(history),
+            pdo_length_error: false,
+            start_refused: false,
             outgoing: Vec::new(),
             syncs: 0,
             sdo_muted: false,
@@ -605,7 +689,6 @@ impl EmulatedNode {
             rpdo_seen: [None; MAX_PDOS],
             rpdo_lost: [false; MAX_PDOS],
             rpdo_timeouts: 0,
-            emcy_sent_for: None,
             comm_defaults,
         })
     }
@@ -674,8 +757,6 @@ impl EmulatedNode {
         tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
             "no SYNC for {} µs (0x1006 = {us} µs): EMCY 0x8100, drive fault",
             now.0.saturating_sub(last.0) / 1000);
-        self.emcy_with(SYNC_TIMEOUT_EMCY, SYNC_TIMEOUT_REGISTER);
-        self.emcy_sent_for = Some(SYNC_TIMEOUT_EMCY);
         self.od.model_mut().inject_fault(SYNC_TIMEOUT_EMCY);
     }
 
@@ -936,16 +1017,26 @@ impl EmulatedNode {
                         self.rx = rx;
                         self.tx = tx;
                         self.state = NmtState::Operational;
+                        self.start_refused = false;
                     }
                     (Err(e), _) | (_, Err(e)) => {
                         tracing::debug!(target: "fieldprobe::sim::canopen", node = self.id, "start refused: {e}");
-                        self.emcy(0x8200);
+                        // Reported at the next poll (EMCY 0x8200, [`Self::report_errors`]);
+                        // a start that succeeds or a reset ends the error.
+                        self.start_refused = true;
                     }
                 }
             }
             NmtCommand::Stop => self.state = NmtState::Stopped,
             NmtCommand::EnterPreOperational => self.state = NmtState::PreOperational,
             NmtCommand::ResetNode | NmtCommand::ResetCommunication => {
+                if cmd == NmtCommand::ResetNode {
+                    // The application restarts: its error history with it.
+                    self.errors.clear_history();
+                    self.refresh_error_objects();
+                }
+                self.start_refused = false;
+                self.pdo_length_error = false;
                 self.state = NmtState::BootUp;
                 self.boot_pending = true;
                 // The SDO server is a communication object: a transfer a client abandoned ends
@@ -967,11 +1058,6 @@ impl EmulatedNode {
         self.sync_lost = false;
         self.rpdo_seen = [None; MAX_PDOS];
         self.rpdo_lost = [false; MAX_PDOS];
-    }
-
-    fn emcy(&mut self, code: u16) {
-        let register = if code == 0 { 0 } else { 0x01 };
-        self.emcy_with(code, register);
     }
 
     fn emcy_with(&mut self, code: u16, register: u8) {
@@ -1014,9 +1100,14 @@ impl EmulatedNode {
                 rules: &self.rules,
                 wrote: false,
                 wrote_controlword: false,
+                clear_history: false,
             };
             let replies = self.sdo.handle(f, &mut od, now);
             let (wrote, controlword) = (od.wrote, od.wrote_controlword);
+            if od.clear_history {
+                self.errors.clear_history();
+                self.refresh_error_objects();
+            }
             self.outgoing.extend(replies);
             if wrote {
                 self.acted(controlword);
@@ -1028,8 +1119,9 @@ impl EmulatedNode {
                 let p = &mut self.rx[i];
                 let k = usize::from(p.number);
                 if f.payload().len() != p.len() {
-                    self.emcy(0x8210); // PDO not processed due to length error
+                    self.pdo_length_error = true;
                 } else {
+                    self.pdo_length_error = false;
                     if k < MAX_PDOS {
                         self.rpdo_seen[k] = Some(now);
                         self.rpdo_lost[k] = false;
@@ -1069,16 +1161,102 @@ impl EmulatedNode {
             }
         }
         self.outgoing.extend(self.sdo.poll(now));
-        let e = self.od.model().last_error_code();
-        if e != self.last_error {
-            self.last_error = e;
-            if self.emcy_sent_for.take() != Some(e) {
-                self.emcy(e);
-            }
-        }
         self.watch_sync(now);
         self.watch_rpdos(now);
+        self.report_errors();
         self.send_event_tpdos(now);
+    }
+
+    /// The errors active now (at most one per source): the CiA 402 drive fault with its
+    /// 0x603F code (FAULT REACTION ACTIVE or FAULT), a SYNC time-out, an RPDO time-out, a PDO
+    /// length error, a refused NMT start.
+    fn active_errors(&self) -> ([u16; 5], usize) {
+        let mut a = [0u16; 5];
+        let mut n = 0;
+        let mut add = |code: u16| {
+            if code != 0 && !a[..n].contains(&code) {
+                a[n] = code;
+                n += 1;
+            }
+        };
+        let model = self.od.model();
+        if matches!(
+            model.state(),
+            crate::drive::PowerState::Fault | crate::drive::PowerState::FaultReactionActive
+        ) {
+            // A fault without a code is still an error: 0x1000 generic.
+            add(match model.last_error_code() {
+                0 => 0x1000,
+                c => c,
+            });
+        }
+        if self.sync_lost {
+            add(SYNC_TIMEOUT_EMCY);
+        }
+        if self.rpdo_lost.iter().any(|&l| l) {
+            add(RPDO_TIMEOUT_EMCY);
+        }
+        if self.pdo_length_error {
+            add(PDO_LENGTH_EMCY);
+        }
+        if self.start_refused {
+            add(START_REFUSED_EMCY);
+        }
+        (a, n)
+    }
+
+    /// Compare the active errors with the last poll's: EMCY for every new error, EMCY 0x0000
+    /// "error reset" when one is gone ([`errors`]); 0x1001 / 0x1003 follow.
+    fn report_errors(&mut self) {
+        let (a, n) = self.active_errors();
+        if a[..n] == *self.errors.active() {
+            return;
+        }
+        let emcys = self.errors.update(&a[..n]);
+        // CiA 301 §7.3.2.2 (NMT states): no EMCY in STOPPED; the error state changes anyway.
+        if matches!(self.state, NmtState::PreOperational | NmtState::Operational) {
+            for (code, register) in emcys {
+                self.emcy_with(code, register);
+            }
+        }
+        self.refresh_error_objects();
+    }
+
+    /// Write the error state into 0x1001 and 0x1003 (sub-index 0 = errors recorded, 1 … n
+    /// newest first, 0 beyond).
+    fn refresh_error_objects(&mut self) {
+        let register = self.errors.register();
+        self.od.insert(ObjectEntry::constant(
+            0x1001,
+            0,
+            DataType::U8,
+            i64::from(register),
+        ));
+        let cap = self.errors.capacity();
+        if cap == 0 {
+            return;
+        }
+        let history = self.errors.history().to_vec();
+        let _ = self.od.write(0x1003, 0, &[history.len() as u8]);
+        for k in 1..=cap {
+            let v = history.get(usize::from(k) - 1).copied().unwrap_or(0);
+            self.od.insert(ObjectEntry::constant(
+                0x1003,
+                k,
+                DataType::U32,
+                i64::from(v),
+            ));
+        }
+    }
+
+    /// The error register 0x1001 now.
+    pub fn error_register(&self) -> u8 {
+        self.errors.register()
+    }
+
+    /// The pre-defined error field 0x1003 sub-indices 1 … n now (newest first).
+    pub fn error_history(&self) -> &[u32] {
+        self.errors.history()
     }
 
     /// Event-driven TPDOs (types 254 / 255) at `now` (operational only): sent when their data
@@ -1128,8 +1306,6 @@ impl EmulatedNode {
             tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
                 "RPDO {} missing for {} µs (event-timer {ms} ms): EMCY 0x8250, drive fault",
                 k + 1, now.0.saturating_sub(last.0) / 1000);
-            self.emcy_with(RPDO_TIMEOUT_EMCY, SYNC_TIMEOUT_REGISTER);
-            self.emcy_sent_for = Some(RPDO_TIMEOUT_EMCY);
             self.od.model_mut().inject_fault(RPDO_TIMEOUT_EMCY);
         }
     }

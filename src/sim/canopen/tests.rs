@@ -680,3 +680,156 @@ fn a_long_sync_gap_steps_at_most_max_sync_step() {
     b.sync();
     assert_eq!(b.seg.last_sync_step(), Some(Nanos::from_micros(1000)));
 }
+
+/// EMCY frames (code, register, manufacturer bytes) in `out`.
+fn emcys(out: &[CanFrame]) -> Vec<(u16, u8, [u8; 5])> {
+    on(out, 0x080 + u32::from(NODE))
+        .iter()
+        .map(|d| {
+            assert_eq!(d.len(), 8, "EMCY is 8 bytes: {d:02x?}");
+            (
+                u16::from_le_bytes([d[0], d[1]]),
+                d[2],
+                [d[3], d[4], d[5], d[6], d[7]],
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_mandatory_cia_301_objects_are_there() {
+    let mut b = Bench::built_in();
+    // 0x1000 device type: CiA 402 (0x0192), servo drive (0x0002).
+    assert_eq!(b.read(0x1000, 0), Ok(0x0002_0192));
+    // 0x1001 error register: no error.
+    assert_eq!(b.read(0x1001, 0), Ok(0));
+    // 0x1018 identity, sub 0 = 4 entries.
+    assert_eq!(b.read(0x1018, 0), Ok(4));
+    assert_eq!(b.read(0x1018, 1), Ok(VENDOR_ID));
+    assert_eq!(b.read(0x1018, 4), Ok(u32::from(NODE)));
+    // 0x1017 producer heartbeat time (instead of node guarding 0x100C / 0x100D).
+    assert_eq!(b.read(0x1017, 0), Ok(u32::from(DEFAULT_HEARTBEAT_MS)));
+    // 0x1200 default SDO server: 0x600 + node, 0x580 + node, read-only.
+    assert_eq!(b.read(0x1200, 0), Ok(2));
+    assert_eq!(b.read(0x1200, 1), Ok(0x600 + u32::from(NODE)));
+    assert_eq!(b.read(0x1200, 2), Ok(0x580 + u32::from(NODE)));
+    assert_eq!(
+        b.write(0x1200, 1, &0x601u32.to_le_bytes()),
+        Err(0x0601_0002)
+    );
+    // 0x1001 is read-only; 0x1003 starts empty.
+    assert_eq!(b.write(0x1001, 0, &[0]), Err(0x0601_0002));
+    assert_eq!(b.read(0x1003, 0), Ok(0));
+    assert_eq!(b.read(0x1003, 1), Err(NO_DATA));
+}
+
+#[test]
+fn a_drive_fault_sets_0x1001_and_0x1003_and_its_reset_sends_emcy_0000() {
+    let mut b = Bench::built_in();
+    b.map_pdo1(Direction::Rx, &[0x6040_0010], 1, 0, 0);
+    b.nmt(NmtCommand::Start);
+    b.at_ms(1);
+    let out = b.sync();
+    assert!(emcys(&out).is_empty(), "{out:?}");
+
+    b.seg.nodes_mut()[0].model_mut().inject_fault(0x8611);
+    // The fault takes effect at the next model step (FAULT REACTION ACTIVE), the EMCY goes out
+    // at the poll after it: 085 [8] 11 86 21 00 00 00 00 00 = following error (CiA 402),
+    // register generic (bit 0) + device profile (bit 5).
+    b.at_ms(2);
+    let mut out = b.sync();
+    out.extend(b.at_ms(3));
+    assert_eq!(emcys(&out), vec![(0x8611, 0x21, [0; 5])]);
+    // FAULT REACTION ACTIVE for one step, then FAULT.
+    assert_eq!(b.statusword() & 0x4F, 0x0F, "FAULT REACTION ACTIVE");
+    b.at_ms(3);
+    assert!(emcys(&b.sync()).is_empty());
+    assert_eq!(b.statusword() & 0x4F, 0x08, "FAULT");
+    assert_eq!(b.read(0x1001, 0), Ok(0x21));
+    assert_eq!(b.node().error_register(), 0x21);
+    assert_eq!(b.read(0x1003, 0), Ok(1));
+    assert_eq!(b.read(0x1003, 1), Ok(0x0000_8611));
+    assert_eq!(b.read(0x1003, 2), Err(NO_DATA));
+    // Still in FAULT at the next SYNCs: no second EMCY.
+    for ms in 4..=6 {
+        b.at_ms(ms);
+        assert!(emcys(&b.sync()).is_empty());
+    }
+
+    // Fault reset: controlword 0 then 0x80 (rising edge of bit 7) by SDO, acted on at once
+    // (transition 15, SWITCH ON DISABLED): EMCY 0x0000, error register 0x00.
+    b.write(0x6040, 0, &0u16.to_le_bytes()).unwrap();
+    let [lo, hi] = 0x80u16.to_le_bytes();
+    let out = b.send(&[CanFrame::new(0x605, &[0x2B, 0x40, 0x60, 0, lo, hi, 0, 0]).unwrap()]);
+    assert_eq!(emcys(&out), vec![(0x0000, 0x00, [0; 5])], "{out:?}");
+    assert_eq!(b.statusword() & 0x4F, 0x40, "SWITCH ON DISABLED");
+    assert_eq!(b.read(0x1001, 0), Ok(0));
+    // The history keeps the fault …
+    assert_eq!(b.read(0x1003, 0), Ok(1));
+    assert_eq!(b.read(0x1003, 1), Ok(0x8611));
+    // … until 0 is written to sub-index 0; any other value is refused.
+    assert_eq!(b.write(0x1003, 0, &[1]), Err(0x0609_0030));
+    assert_eq!(b.write(0x1003, 1, &0u32.to_le_bytes()), Err(0x0601_0002));
+    assert_eq!(b.write(0x1003, 0, &[0]), Ok(()));
+    assert_eq!(b.read(0x1003, 0), Ok(0));
+    assert_eq!(b.read(0x1003, 1), Err(NO_DATA));
+    // A second fault is history entry 1 again.
+    b.seg.nodes_mut()[0].model_mut().inject_fault(0x2310);
+    b.at_ms(7);
+    let mut out = b.sync();
+    out.extend(b.at_ms(8));
+    assert_eq!(emcys(&out), vec![(0x2310, 0x03, [0; 5])]);
+    assert_eq!(b.read(0x1003, 1), Ok(0x2310));
+}
+
+#[test]
+fn the_error_history_holds_the_newest_eight_and_reset_node_clears_it() {
+    let mut b = Bench::built_in();
+    b.map_pdo1(Direction::Rx, &[0x6040_0010], 1, 0, 0);
+    b.nmt(NmtCommand::Start);
+    let mut ms = 0;
+    for k in 1..=10u16 {
+        b.seg.nodes_mut()[0].model_mut().inject_fault(0x1000 + k);
+        ms += 1;
+        b.at_ms(ms);
+        b.sync();
+        // Reset by the RPDO (controlword 0x80 at the next SYNC) and 0 again.
+        for cw in [0x80u16, 0] {
+            b.send(&[CanFrame::new(0x205, &cw.to_le_bytes()).unwrap()]);
+            ms += 1;
+            b.at_ms(ms);
+            b.sync();
+        }
+    }
+    assert_eq!(b.read(0x1003, 0), Ok(8));
+    for sub in 1..=8u8 {
+        // Newest first: 0x100A, 0x1009, … 0x1003.
+        assert_eq!(
+            b.read(0x1003, sub),
+            Ok(0x100A - u32::from(sub) + 1),
+            "sub {sub}"
+        );
+    }
+    assert_eq!(b.read(0x1003, 9), Err(0x0609_0011));
+    b.nmt(NmtCommand::ResetNode);
+    b.at_ms(ms + 1);
+    assert_eq!(b.read(0x1003, 0), Ok(0));
+}
+
+#[test]
+fn from_eds_the_error_objects_are_the_nodes_own_with_the_eds_size_of_0x1003() {
+    let Some(mut n) = technosoft_node("from_eds_the_error_objects_are_the_nodes_own") else {
+        return;
+    };
+    // The iPOS EDS lists 0x1003 with sub-indices 0 … 5 ([1003] SubNumber=6).
+    assert_eq!(upload(&mut n, 0x1001, 0), Ok([0, 0, 0, 0]));
+    assert_eq!(upload(&mut n, 0x1003, 0), Ok([0, 0, 0, 0]));
+    assert_eq!(upload(&mut n, 0x1003, 5), Err(NO_DATA));
+    assert_eq!(upload(&mut n, 0x1003, 6), Err(0x0609_0011));
+    // 0x1001 stays read-only whatever the EDS says.
+    let r = sdo(&mut n, [0x2F, 0x01, 0x10, 0, 1, 0, 0, 0]);
+    assert_eq!(
+        (r[0], u32::from_le_bytes([r[4], r[5], r[6], r[7]])),
+        (0x80, 0x0601_0002)
+    );
+}

@@ -144,20 +144,24 @@ impl Parser<'_> {
         }
     }
 
+    /// An optional number: a key that is missing or has an empty value (`VendorNumber=`, as
+    /// CANopenNode's own `DS301_profile.eds` has it) is absent, without a warning (CiA 306
+    /// makes these header entries optional).
     fn opt_number<T: TryFrom<u64>>(
         &mut self,
         s: &Section,
         key: &str,
     ) -> Result<Option<T>, EdsError> {
         match s.get(key) {
-            Some(k) => self.number(s, k),
-            None => Ok(None),
+            Some(k) if !k.value.trim().is_empty() => self.number(s, k),
+            _ => Ok(None),
         }
     }
 
-    /// A 0 / 1 flag; anything else is a warning (module documentation).
+    /// A 0 / 1 flag; anything else is a warning (module documentation). A missing key or an
+    /// empty value is 0.
     fn flag(&mut self, s: &Section, key: &str) -> Result<bool, EdsError> {
-        let Some(k) = s.get(key) else {
+        let Some(k) = s.get(key).filter(|k| !k.value.trim().is_empty()) else {
             return Ok(false);
         };
         let word = k.value.trim().to_ascii_lowercase();
@@ -197,8 +201,11 @@ fn type_max<T: TryFrom<u64>>() -> u64 {
         .unwrap_or(0)
 }
 
+/// An optional text; an empty value is an absent one, as for [`Parser::opt_number`].
 fn key_text(s: &Section, key: &str) -> Option<String> {
-    s.get(key).map(|k| k.value.to_string())
+    s.get(key)
+        .map(|k| k.value.to_string())
+        .filter(|v| !v.trim().is_empty())
 }
 
 /// The kind of an object-related section name.
@@ -1196,5 +1203,41 @@ fn access_name(a: AccessType) -> &'static str {
         AccessType::ReadWriteInput => "rwr",
         AccessType::ReadWriteOutput => "rww",
         AccessType::Const => "const",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::bus::canopen::eds::{parse_with, ParseOptions};
+
+    /// The header of CANopenNode's `DS301_profile.eds` leaves the vendor and product entries
+    /// empty; CiA 306 makes them optional, so an empty value reads as an absent one, without a
+    /// warning, even in strict mode.
+    #[test]
+    fn empty_header_values_are_absent() {
+        let text = "[DeviceInfo]\nVendorName=\nVendorNumber=\nProductName=\nProductNumber=\n\
+                    RevisionNumber=  \nOrderCode=\nSimpleBootUpSlave=\nGranularity=8\n\
+                    [MandatoryObjects]\nSupportedObjects=1\n1=0x1000\n\
+                    [1000]\nParameterName=Device type\nObjectType=0x7\nDataType=0x0007\n\
+                    AccessType=ro\nDefaultValue=0x00000000\n";
+        let e = parse_with(text, "DS301_profile.eds", ParseOptions { strict: true })
+            .expect("empty optional header values are no error");
+        assert!(e.warnings.is_empty(), "{:?}", e.warnings);
+        let d = &e.device_info;
+        assert_eq!(d.vendor_number, None);
+        assert_eq!(d.product_number, None);
+        assert_eq!(d.revision_number, None);
+        assert_eq!(d.vendor_name, None);
+        assert_eq!(d.product_name, None);
+        assert_eq!(d.order_code, None);
+        assert!(!d.simple_boot_up_slave);
+        // A value that is there is still read, and a bad one still refused in strict mode.
+        assert_eq!(d.granularity, Some(8));
+        let bad = text.replace("VendorNumber=\n", "VendorNumber=0x12G\n");
+        let err = parse_with(&bad, "t.eds", ParseOptions { strict: true }).unwrap_err();
+        assert!(err.to_string().contains("VendorNumber"), "{err}");
+        let lenient = parse_with(&bad, "t.eds", ParseOptions::default()).unwrap();
+        assert_eq!(lenient.warnings.len(), 1, "{:?}", lenient.warnings);
+        assert_eq!(lenient.device_info.vendor_number, None);
     }
 }
