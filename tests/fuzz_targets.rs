@@ -189,6 +189,9 @@ fn every_fuzz_target_runs_without_crash() {
     let require_data = env_is_1("FIELDPROBE_REQUIRE_TEST_DATA");
     let mut failures = Vec::new();
     let mut table = Vec::new();
+    // Two targets at a time (this test runs alone on a two-core CI machine): every target
+    // still gets its full `-max_total_time`.
+    let mut prepared = Vec::new();
     for t in &targets {
         let corpus = fuzz_dir.join("corpus").join(t);
         let artifacts = fuzz_dir.join("artifacts").join(t);
@@ -214,21 +217,42 @@ fn every_fuzz_target_runs_without_crash() {
                 eprintln!("note: {t}: seeds {} absent (plain clone)", p.display());
             }
         }
-        let before: Vec<PathBuf> = list(&artifacts);
-        let started = Instant::now();
-        let o = Command::new(bin_dir.join(t))
-            .args(&dirs)
-            .arg(format!("-max_total_time={seconds}"))
-            .arg(format!("-max_len={}", max_len(t)))
-            .arg("-timeout=10")
-            .arg("-rss_limit_mb=2048")
-            .arg(format!("-artifact_prefix={}/", artifacts.display()))
-            .current_dir(&root)
-            .output()
-            .unwrap_or_else(|e| panic!("run {t}: {e}"));
+        prepared.push((t, dirs, artifacts));
+    }
+    let mut runs = Vec::new();
+    for pair in prepared.chunks(2) {
+        let children: Vec<_> = pair
+            .iter()
+            .map(|(t, dirs, artifacts)| {
+                let before: Vec<PathBuf> = list(artifacts);
+                let started = Instant::now();
+                let child = Command::new(bin_dir.join(t))
+                    .args(dirs)
+                    .arg(format!("-max_total_time={seconds}"))
+                    .arg(format!("-max_len={}", max_len(t)))
+                    .arg("-timeout=10")
+                    .arg("-rss_limit_mb=2048")
+                    .arg(format!("-artifact_prefix={}/", artifacts.display()))
+                    .current_dir(&root)
+                    .stdout(std::process::Stdio::piped())
+                    .stderr(std::process::Stdio::piped())
+                    .spawn()
+                    .unwrap_or_else(|e| panic!("run {t}: {e}"));
+                (t, artifacts, before, started, child)
+            })
+            .collect();
+        for (t, artifacts, before, started, child) in children {
+            let o = child
+                .wait_with_output()
+                .unwrap_or_else(|e| panic!("run {t}: {e}"));
+            runs.push((t, artifacts, before, started.elapsed(), o));
+        }
+    }
+    for (t, artifacts, before, took, o) in runs {
+        let artifacts = &artifacts;
         let log = text(&o);
-        let took = started.elapsed().as_secs_f64();
-        let new: Vec<PathBuf> = list(&artifacts)
+        let took = took.as_secs_f64();
+        let new: Vec<PathBuf> = list(artifacts)
             .into_iter()
             .filter(|p| !before.contains(p))
             .collect();
@@ -238,7 +262,7 @@ fn every_fuzz_target_runs_without_crash() {
                     "{t:18} {:>10} execs {:>7} exec/s  cov {:>5}  ft {:>6}  ({took:.0} s)",
                     s.execs, s.exec_per_s, s.cov, s.ft
                 );
-                table.push((t.clone(), s));
+                table.push(((*t).clone(), s));
             }
             _ => {
                 let tail: Vec<&str> = log.lines().rev().take(40).collect();

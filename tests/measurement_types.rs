@@ -1002,3 +1002,44 @@ fn g101_without_a_measured_value_is_an_error() {
     let r = run(&mut m, "N10 G100 Z10 F1000\nN20 G101 Z1\nN30 M30\n");
     aborted_with(&r, 900045, 20);
 }
+
+#[test]
+fn meas_type_keyword_sets_the_type_as_meas_mode_does() {
+    // Seed 004 §8.2.1, P-CHAN-00057 remarks: "This measurement type can be changed at any time
+    // in the NC program with #MEAS MODE or #MEAS [TYPE]." `#MEAS [TYPE=2]` is type 2: no F
+    // needed, the measuring feed of P-AXIS-00215 (20000 µm/s = 20 mm/s), V.G.MEAS_TYPE = 2.
+    let prog = "N10 #MEAS [TYPE=2]\nN20 G100 Z50\nN30 M30\n";
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let (c, msgs) = traced_commands(&mut m, prog, Z);
+    assert!(msgs.is_empty(), "{msgs:?}");
+    close("type 2 feed", peak_velocity(&c), 20.0, 1e-6);
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(
+        &mut m,
+        // An expression; type 2 measures without F (type 1 would refuse the G100, 900021).
+        "N10 #MEAS [TYPE=1+1]\nN20 G100 Z50\nN30 M30\n",
+    );
+    completed(&r);
+    close(
+        "latched",
+        r.measurements[Z].result.unwrap().acs,
+        30.0,
+        LATCH_TOL,
+    );
+    // Beside an axis's signal settings, TYPE sets the channel's type too.
+    let mut m = machine(&["Z.P-AXIS-00215=20000"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(
+        &mut m,
+        "N10 #MEAS [AXNR=3 EDGE=POS TYPE=2]\nN20 G100 Z50\nN30 M30\n",
+    );
+    completed(&r);
+    // Out of range, and a signal setting without an axis: refused.
+    let mut m = machine(&[]);
+    let r = run(&mut m, "N10 #MEAS [TYPE=8]\nN20 M30\n");
+    assert_eq!(r.status, RunStatus::Aborted, "{:?}", r.messages());
+    assert!(parse("#MEAS [TYPE=2 EDGE=POS]\n").is_err());
+    assert!(parse("#MEAS [TYPE=PLC]\n").is_err());
+}

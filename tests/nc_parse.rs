@@ -1175,7 +1175,7 @@ fn measurement_syntax_errors() {
         "N10 #MEAS [AXNR=1 FOO=2]",
         1,
         19,
-        "unknown keyword FOO in #MEAS [...] (expected one of AXNR, SIGNAL, INPUT, EDGE)",
+        "unknown keyword FOO in #MEAS [...] (expected one of AXNR, SIGNAL, INPUT, EDGE, TYPE)",
     );
     err_at("N10 #MEAS [AXNR=1 AXNR=2]", 1, 19, "AXNR is given twice");
     err_at(
@@ -1194,7 +1194,7 @@ fn measurement_syntax_errors() {
         "N10 #MEAS [AXNR=1, SIGNAL=PLC]",
         1,
         18,
-        "expected a keyword (AXNR, SIGNAL, INPUT, EDGE) or ']'",
+        "expected a keyword (AXNR, SIGNAL, INPUT, EDGE, TYPE) or ']'",
     );
     err_at(
         "N10 #MEAS PREPARE []",

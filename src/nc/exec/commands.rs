@@ -122,6 +122,21 @@ impl Executor {
 
     /// `#MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]`.
     fn meas_config(&mut self, args: &[KeyArg], span: Span, ch: &mut Channel) -> Result<(), Fail> {
+        // `TYPE=n` beside the axis's signal settings: the channel's measurement type, as
+        // `#MEAS MODE [n]` (P-CHAN-00057).
+        if let Some(e) = arg(args, "TYPE").and_then(|a| a.value.as_ref()) {
+            let v = self.num(e, span, ch)?;
+            self.modal.meas_type = MeasType::from_number(v as i64)
+                .filter(|_| v.fract() == 0.0)
+                .ok_or_else(|| {
+                    err(
+                        ids::MEAS_CONFIG,
+                        format!(
+                            "#MEAS [TYPE={v}]: the measurement type must be 1 … 7 (P-CHAN-00057)"
+                        ),
+                    )
+                })?;
+        }
         let a = arg(args, "AXNR").ok_or_else(|| {
             err(
                 ids::MEAS_CONFIG,

@@ -7,6 +7,7 @@
 //! #MSG [SYN] ["format", <expr>, …]
 //! #MEAS MODE [<expr>]            MeasMode { mode: Some }   (FCT-C4 §3; also `#MEAS MODE[2]`)
 //! #MEAS MODE                     MeasMode { mode: None }   (channel default P-CHAN-00057)
+//! #MEAS [TYPE=<expr>]            MeasMode { mode: Some }   (P-CHAN-00057 remark: "#MEAS [TYPE]")
 //! #MEAS [AXNR=.. SIGNAL=.. INPUT=.. EDGE=..]               MeasConfig (AXNR required)
 //! #MEAS PREPARE [AXNR=.. {AXNR=..}]                        MeasPrepare (at least one AXNR)
 //! #CS ON [<expr>{, <expr>}]      Cs { on: Some(1 to 6 values) } (x, y, z, a, b, c)
@@ -106,6 +107,7 @@ const MEAS_CONFIG_KEYS: &[KeySpec] = &[
     value("SIGNAL"),
     value("INPUT"),
     value("EDGE"),
+    value("TYPE"),
 ];
 
 const MEAS_PREPARE_KEYS: &[KeySpec] = &[KeySpec {
@@ -163,7 +165,30 @@ fn command_msg(p: &mut BlockParser<'_>, _hash: Span) -> PResult<Command> {
 fn command_meas(p: &mut BlockParser<'_>, _hash: Span) -> PResult<Command> {
     p.continue_at_next_line_bracket();
     if p.cur.peek() == Some('[') {
-        let (open, args) = p.key_list("#MEAS", MEAS_CONFIG_KEYS)?;
+        let (open, mut args) = p.key_list("#MEAS", MEAS_CONFIG_KEYS)?;
+        // `#MEAS [TYPE=n]`: the measurement type, as #MEAS MODE [n] (P-CHAN-00057: "can be
+        // changed at any time in the NC program with #MEAS MODE or #MEAS [TYPE]").
+        if has(&args, "TYPE") && !has(&args, "AXNR") {
+            if let Some(other) = args.iter().find(|a| a.key != "TYPE") {
+                return Err(ParseError::at(
+                    other.span,
+                    format!(
+                        "#MEAS [{} ...] needs the axis number AXNR=<expr>; TYPE=<expr> alone sets the measurement type",
+                        other.key
+                    ),
+                ));
+            }
+            let t = args.remove(0);
+            return match t.value {
+                Some(mode) if !matches!(mode, Expr::Str(_)) => {
+                    Ok(Command::MeasMode { mode: Some(mode) })
+                }
+                _ => Err(ParseError::at(
+                    t.span,
+                    "#MEAS [TYPE=<expr>]: the measurement type is a number 1 … 7 (P-CHAN-00057)",
+                )),
+            };
+        }
         if !has(&args, "AXNR") {
             return Err(ParseError::at(
                 open,
