@@ -243,8 +243,12 @@ def run(net, node_id, ramp_end, out):
     # --- arm touch probe 1 (enable, first event, TP1 input, positive edge) in the RPDO
     tp_func.raw = 0x0011
     r2.transmit()
-    for _ in range(3):
+    # The RPDO takes effect at a SYNC and the status comes with a later one (CiA 301 sync
+    # PDOs); in a slow guest a TPDO can miss lockstep's wait, so up to 20 SYNCs.
+    for _ in range(20):
         lockstep(net, t2)
+        if t2[0].raw & 0x0001:
+            break
     out["tp_status_armed"] = t2[0].raw
     step("probe armed")
 
