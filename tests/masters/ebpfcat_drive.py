@@ -43,20 +43,7 @@ from ebpfcat.ebpfcat import (Device, EBPFTerminal, PacketDesc, SimpleEtherCat, S
                              TerminalVar)
 from ebpfcat.ethercat import EtherCatError, MachineState, SyncManager, Terminal
 
-RESULT = {"ok": False, "steps": []}
-
-
-class CheckFailed(Exception):
-    pass
-
-
-def check(cond, what):
-    if not cond:
-        raise CheckFailed(what)
-
-
-def step(name, **kw):
-    RESULT["steps"].append(dict(step=name, **kw))
+from common import RESULT, CheckFailed, check, step, FMT, layout
 
 
 def bpf_probe():
@@ -70,24 +57,12 @@ def bpf_probe():
     return 0
 
 
-FMT = {8: "b", 16: "h", 32: "i"}
-
-
 async def io(what, coro, timeout=5.0):
     """An ebpfcat request, bounded (ebpfcat polls the mailbox without a time limit)."""
     try:
         return await asyncio.wait_for(coro, timeout)
     except asyncio.TimeoutError:
         raise CheckFailed(f"{what}: no answer within {timeout} s") from None
-
-
-def layout(entries):
-    out, bit = {}, 0
-    for i, s, n in entries:
-        if i != 0 and i not in out:
-            out[i] = (bit // 8, n)
-        bit += n
-    return out
 
 
 def drive_terminal(e):

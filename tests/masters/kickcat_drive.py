@@ -47,47 +47,11 @@ import traceback
 import kickcat
 from kickcat.mailbox.request import MessageStatus
 
-RESULT = {"ok": False, "steps": []}
+from common import RESULT, CheckFailed, check, step, layout, get, put
+
 SDO_TIMEOUT_S = 1.0
 LINK_TIMEOUT_S = 0.02
 INIT_ATTEMPTS = 4
-
-
-class CheckFailed(Exception):
-    pass
-
-
-def check(cond, what):
-    if not cond:
-        raise CheckFailed(what)
-
-
-def step(name, **kw):
-    RESULT["steps"].append(dict(step=name, **kw))
-
-
-FMT = {8: "b", 16: "h", 32: "i"}
-
-
-def layout(entries):
-    """{index: (byte offset, bits)} of a mapping (sub-index 0 entries of CiA 402 objects)."""
-    out, bit = {}, 0
-    for i, s, n in entries:
-        if i != 0 and i not in out:
-            out[i] = (bit // 8, n)
-        bit += n
-    return out
-
-
-def get(buf, lay, index, signed=True):
-    o, n = lay[index]
-    f = FMT[n]
-    return struct.unpack_from("<" + (f if signed else f.upper()), buf, o)[0]
-
-
-def put(buf, lay, index, value):
-    o, n = lay[index]
-    struct.pack_into("<" + FMT[n].upper(), buf, o, value & ((1 << n) - 1))
 
 
 class Sdo:

@@ -29,42 +29,9 @@ import traceback
 
 import pysoem
 
-RESULT = {"ok": False, "steps": []}
+from common import RESULT, CheckFailed, check, step, layout, get, put
+
 RECEIVE_TIMEOUT_US = 100_000
-FMT = {8: "b", 16: "h", 32: "i"}
-
-
-class CheckFailed(Exception):
-    pass
-
-
-def check(cond, what):
-    if not cond:
-        raise CheckFailed(what)
-
-
-def step(name, **kw):
-    RESULT["steps"].append(dict(step=name, **kw))
-
-
-def layout(entries):
-    out, bit = {}, 0
-    for i, s, n in entries:
-        if i != 0 and i not in out:
-            out[i] = (bit // 8, n)
-        bit += n
-    return out
-
-
-def get(buf, lay, index, signed=True):
-    o, n = lay[index]
-    f = FMT[n]
-    return struct.unpack_from("<" + (f if signed else f.upper()), buf, o)[0]
-
-
-def put(buf, lay, index, value):
-    o, n = lay[index]
-    struct.pack_into("<" + FMT[n].upper(), buf, o, value & ((1 << n) - 1))
 
 
 def run(iface, spec):
