@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Run a command inside a small Linux guest that has SocketCAN, for the SocketCAN tests on a
-# machine whose own kernel has none (tests/socketcan.rs, docs/canopen.md "SocketCAN tests").
+# machine whose own kernel has none (tests/system/socketcan.rs, docs/canopen.md "SocketCAN tests").
 #
 #   scripts/can-guest.sh [--timeout SECS] [--] COMMAND [ARG]...   run COMMAND in the guest
 #   scripts/can-guest.sh --check                                  say whether a guest can run

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Create a Python venv with the independent EtherCAT masters of `tests/independent_masters.rs`,
+# Create a Python venv with the independent EtherCAT masters of `tests/system/independent_masters.rs`,
 # installed from PyPI:
 #   * kickcat 2.5 — Python bindings of KickCAT, a C++ EtherCAT master (binary wheels);
 #   * ebpfcat 1.0.0 — a pure-Python EtherCAT master whose fast process-data path is an XDP/eBPF

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Create a Python venv with pysoem (Cython wrapper around SOEM, an independent EtherCAT master) for the
-# interop test `tests/pysoem_interop.rs`.
+# interop test `tests/system/pysoem_interop.rs`.
 #
 #   scripts/pysoem-venv.sh [VENV_DIR]        # default: $PYSOEM_VENV or target/pysoem-venv
 #

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Create a Python venv with python-can, msgpack, python-canopen and durand, the independent peers
-# of the CAN-over-UDP interop tests (tests/can_udp_interop.rs, the CANopen interop tests, and
-# tests/canopen_independent_node.rs with a CiA 402 node on durand):
+# of the CAN-over-UDP interop tests (tests/system/can_udp_interop.rs, the CANopen interop tests, and
+# tests/system/canopen_independent_node.rs with a CiA 402 node on durand):
 #
 #   scripts/python-can-venv.sh [VENV_DIR]     # default: $PYTHON_CAN_VENV or target/can-venv
 #

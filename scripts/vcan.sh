@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Set up a virtual SocketCAN interface for the SocketCAN tests (tests/can_transport.rs
+# Set up a virtual SocketCAN interface for the SocketCAN tests (tests/system/can_transport.rs
 # `socketcan_vcan_round_trip`), the way socketcan-rs's scripts/vcan.sh does:
 #
 #   sudo scripts/vcan.sh [IFACE]          # default vcan0

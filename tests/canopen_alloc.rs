@@ -34,7 +34,7 @@ static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 /// Counted cycles: 1 s of machine time at 4 ms, ten heartbeat periods of every node.
 const CYCLES: u64 = 250;
 
-/// The default machine at a cycle its bus carries (see tests/canopen_link.rs: 56 % at 4 ms).
+/// The default machine at a cycle its bus carries (see tests/it/canopen_link.rs: 56 % at 4 ms).
 fn machine(link: &str) -> Machine {
     let mut cfg = MachineConfig::default_machine();
     cfg.apply_set("cycle_time_us=4000").unwrap();

@@ -180,7 +180,7 @@ const fn obj(index: u16, sub: u8, ty: DataType, name: &'static str) -> ObjectInf
 
 /// The CiA 402 (and CiA 301) objects fieldprobe maps or reads, with their data types
 /// (CiA 402-2 object descriptions; cross-checked against a Leadshine EL7 SDO dump in
-/// `tests/ds402.rs`).
+/// `tests/it/ds402.rs`).
 pub const OBJECTS: &[ObjectInfo] = &[
     obj(0x603F, 0, DataType::U16, "error code"),
     obj(0x6040, 0, DataType::U16, "controlword"),

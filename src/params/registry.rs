@@ -1247,7 +1247,7 @@ pub fn parameters_markdown() -> String {
     let mut out = String::new();
     out.push_str("# Parameters\n\n");
     out.push_str(
-        "Generated from `src/params/registry.rs` by `cargo test --test params` \
+        "Generated from `src/params/registry.rs` by `cargo test --test it params::` \
          (`FIELDPROBE_BLESS=1` rewrites it). Do not edit by hand.\n\n",
     );
     out.push_str(

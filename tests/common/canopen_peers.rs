@@ -1,7 +1,7 @@
 //! The two CANopen interop cases with python-canopen 2.4.1 as the independent peer (notes
 //! `canopen.md` §3, §4), on any bus python-can and fieldprobe both reach: CAN over UDP
-//! multicast (`tests/canopen_interop.rs`, in a private network namespace) or SocketCAN
-//! (`tests/socketcan.rs`, on vcan0 of the host or of the Linux guest).
+//! multicast (`tests/system/canopen_interop.rs`, in a private network namespace) or SocketCAN
+//! (`tests/system/socketcan.rs`, on vcan0 of the host or of the Linux guest).
 //!
 //! (a) [`python_master_drives_sim`]: python-canopen as master (`tests/python/canopen_master.py`)
 //!     against `fieldprobe sim canopen`: boot-up, SDO expedited / segmented / block, abort, PDO

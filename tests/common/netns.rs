@@ -174,7 +174,12 @@ pub fn rerun_in_namespace(test_name: &str, inner_env: &str, value: &OsStr, timeo
             .arg("-rn")
             .arg("--")
             .arg(&exe)
-            .args([test_name, "--exact", "--nocapture", "--test-threads=1"])
+            .args([
+                super::full_test_name(test_name).as_str(),
+                "--exact",
+                "--nocapture",
+                "--test-threads=1",
+            ])
             .env(inner_env, value),
         timeout,
     );

@@ -18,8 +18,7 @@ use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-#[path = "netns.rs"]
-pub mod netns;
+pub use super::netns;
 use netns::manifest_path;
 
 /// The master's end of the pair.

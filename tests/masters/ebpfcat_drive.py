@@ -4,7 +4,7 @@
 
     ebpfcat_drive.py IFACE SPEC_JSON
 
-Run by tests/independent_masters.rs inside a private user + network namespace, with the SPEC of
+Run by tests/system/independent_masters.rs inside a private user + network namespace, with the SPEC of
 tests/masters/kickcat_drive.py (computed from the ESI files by the Rust test).
 
 ebpfcat has two process-data paths. The fast one (`FastEtherCat`, `FastSyncGroup`) compiles the

@@ -4,7 +4,7 @@
 
     kickcat_drive.py IFACE SPEC_JSON
 
-Run by tests/independent_masters.rs inside a private network namespace, on one end of a veth
+Run by tests/system/independent_masters.rs inside a private network namespace, on one end of a veth
 pair whose other end the emulator serves. SPEC_JSON is computed by the Rust test from the ESI
 files with its own XML reader (roxmltree, not fieldprobe's) and the drive file's scaling
 (toml_edit); nothing here is read back from fieldprobe:

@@ -4,7 +4,7 @@ device of every vendor ESI file on one segment.
 
     pysoem_drive.py IFACE SPEC_JSON
 
-Run by tests/independent_masters.rs inside a private network namespace, with the SPEC of
+Run by tests/system/independent_masters.rs inside a private network namespace, with the SPEC of
 tests/masters/kickcat_drive.py (computed from the ESI files by the Rust test). The deeper run on
 our own segment (segmented upload, the timestamp terminal, working counters) is
 tests/pysoem/interop.py.

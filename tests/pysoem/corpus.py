@@ -3,7 +3,7 @@
 
     corpus.py IFACE SPEC_JSON
 
-Run by tests/vendor_corpus_ethercat.rs inside a private network namespace, once per vendor ESI
+Run by tests/system/vendor_corpus_ethercat.rs inside a private network namespace, once per vendor ESI
 file. SPEC_JSON is computed by the Rust test from the ESI file with its own XML reader:
 
     {"devices": [{"vendor": int, "product": int, "revision": int}, ...]}     # ring order

@@ -3,7 +3,7 @@
 
     interop.py IFACE SPEC_JSON
 
-Run by tests/pysoem_interop.rs inside a private network namespace, on one end of a veth pair
+Run by tests/system/pysoem_interop.rs inside a private network namespace, on one end of a veth pair
 whose other end the emulator serves. SPEC_JSON (computed by the Rust test from the ESI XML,
 independently of fieldprobe's ESI parser):
 

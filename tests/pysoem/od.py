@@ -3,7 +3,7 @@
 
     od.py IFACE POSITION
 
-Run by tests/pysoem_sdoinfo.rs inside a private network namespace on one end of a veth pair
+Run by tests/system/pysoem_sdoinfo.rs inside a private network namespace on one end of a veth pair
 whose other end `fieldprobe sim ethercat` serves. Scans the segment (config_init: PRE-OP) and
 reads `slave.od` of the device at ring POSITION: SOEM's ecx_readODlist (Get OD List),
 ecx_readODdescription (Get Object Description) and ecx_readOE (Get Entry Description for every

@@ -3,7 +3,7 @@
 
     sdo_read.py IFACE POSITION INDEX:SUB[:s] ...
 
-Run by tests/serve_sessions.rs inside a private network namespace on one end of a veth pair
+Run by tests/system/serve_sessions.rs inside a private network namespace on one end of a veth pair
 whose other end `fieldprobe sim ethercat` serves. Scans the segment (config_init: INIT ->
 PRE-OP), reads each object of the device at ring POSITION by CoE SDO upload (`:s` = a string,
 else an unsigned little-endian integer of the reply's length), and leaves the segment in

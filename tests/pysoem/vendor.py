@@ -3,7 +3,7 @@
 
     vendor.py IFACE SPEC_JSON
 
-Run by tests/vendor_ethercat.rs inside a private network namespace. SPEC_JSON is computed by the
+Run by tests/system/vendor_ethercat.rs inside a private network namespace. SPEC_JSON is computed by the
 Rust test from the vendor ESI files with its own XML reader (not fieldprobe's):
 
     {"devices": [{"vendor": int, "product": int, "revision": int, "name": str, "type": str,

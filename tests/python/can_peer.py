@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""python-can udp_multicast peer for tests/can_udp_interop.rs (independent implementation of the
+"""python-can udp_multicast peer for tests/system/can_udp_interop.rs (independent implementation of the
 wire format: python-can 4.6.1 + msgpack).
 
   can_peer.py send GROUP PORT FRAMES_JSON   send the frames, 2 ms apart, then print "SENT n"

@@ -3,7 +3,7 @@
 
   canopen_between_runs.py GROUP PORT NODE...
 
-Run by tests/canopen_sessions.rs inside a private network namespace against `fieldprobe sim
+Run by tests/system/canopen_sessions.rs inside a private network namespace against `fieldprobe sim
 canopen --bus udp:GROUP:PORT`. For each NODE: SDO uploads of 0x1000, 0x1018:1, 0x1018:2 and
 0x1018:4, NMT start (the node's heartbeat must then say OPERATIONAL), then a segmented upload
 of 0x1008 that is started (initiate + first segment) and ABANDONED: the script leaves without

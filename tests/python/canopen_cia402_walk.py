@@ -4,7 +4,7 @@
   canopen_cia402_walk.py GROUP PORT NODE_ID [NODE_ID ...]
 
 For each node on python-can's udp_multicast bus GROUP:PORT (the tests run `fieldprobe sim
-canopen --eds FILE` there, tests/vendor_eds_corpus.rs): python-canopen's BaseNode402 state
+canopen --eds FILE` there, tests/system/vendor_eds_corpus.rs): python-canopen's BaseNode402 state
 setter moves the drive to SWITCH ON DISABLED, READY TO SWITCH ON, SWITCHED ON and OPERATION
 ENABLED in turn (it picks the controword of each transition, CiA 402 §6.2 figure "state
 machine", and writes it by SDO: no PDO is set up here), and after each step the statusword

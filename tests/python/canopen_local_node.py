@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""python-canopen 2.4.1 LocalNode (CANopen slave) for tests/canopen_interop.rs: our Rust master
+"""python-canopen 2.4.1 LocalNode (CANopen slave) for tests/system/canopen_interop.rs: our Rust master
 talks to it over python-can's udp_multicast bus.
 
   canopen_local_node.py GROUP PORT NODE_ID EDS SECONDS   (or socketcan:IF 0 NODE_ID EDS SECONDS)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""python-canopen 2.4.1 as CANopen master against `fieldprobe sim canopen` (tests/canopen_interop.rs).
+"""python-canopen 2.4.1 as CANopen master against `fieldprobe sim canopen` (tests/system/canopen_interop.rs).
 
   canopen_master.py GROUP PORT NODE_ID RAMP_END_INC   (or socketcan:IF 0 NODE_ID RAMP_END_INC)
 

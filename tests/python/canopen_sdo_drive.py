@@ -5,7 +5,7 @@
       --node 5 [--eds FILE]
   canopen_sdo_drive.py --interface socketcan --channel vcan0 --node 5 [--eds FILE]
 
-Written for `fieldprobe sim canopen --eds FILE` (tests/canopen_interop.rs), usable against
+Written for `fieldprobe sim canopen --eds FILE` (tests/system/canopen_interop.rs), usable against
 any CiA 402 node on any python-can interface. No SYNC is ever sent. With --eds, python-canopen
 reads the object dictionary from that file; without, a minimal one is written out here.
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """An independent CiA 402 node on durand (PyPI, a pure-Python CiA 301 node stack) for our
-master (tests/canopen_independent_node.rs).
+master (tests/system/canopen_independent_node.rs).
 
   durand_cia402_node.py --channel GROUP --port PORT --node 1 --surface 1=1000000 --seconds 90
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Read a candump -L log with python-can 4.6.1's own reader (can.CanutilsLogReader), the
-independent reader of tests/candump_logs.rs.
+independent reader of tests/system/candump_logs.rs.
 
   read_candump.py FILE    one JSON object per message: {"t": float, "channel": str,
                           "id": int, "ext": bool, "rtr": bool, "err": bool, "data": "hex"},

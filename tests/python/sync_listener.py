@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent SYNC observer for tests/canopen_udp_run.rs: listens on a python-can udp_multicast
+"""Independent SYNC observer for tests/system/canopen_udp_run.rs: listens on a python-can udp_multicast
 bus and records every SYNC frame (COB-ID 0x080, standard identifier) with python-can's own
 timestamp (the kernel's receive time, SO_TIMESTAMPNS), not with anything the sender put in the
 datagram.

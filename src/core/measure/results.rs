@@ -16,7 +16,7 @@
 //! | `MEAS.PCS.VALUE` | ACS without offsets | ACS converted into the CS, without offsets | `w − shifts − MEIN − tool length` (+ ball) |
 //! | `MOFFS` | `MESS − PROG − zero shifts − tool offset` | same | same |
 //!
-//! Checked against §5 meas1–meas4 (`tests/frames_results.rs`): meas2 (`G92 Z33`, latch at 100)
+//! Checked against §5 meas1–meas4 (`tests/it/frames_results.rs`): meas2 (`G92 Z33`, latch at 100)
 //! gives MESS 100, PCS 67, MOFFS `100 − 20 − 33 = 47`; meas3 (`#CS ON[0,0,33,0,0,0]`) MESS 67;
 //! meas4 (`#CS ON[0,0,75,0,15,0]`, latch at ACS Z 55.5) MESS ≈ 20, MOFFS ≈ 30.
 //!

@@ -16,7 +16,7 @@
 //!   acceleration, a speed limit (`max_velocity`) the speed. Against a fixed stop the axis stalls:
 //!   velocity 0, the position error grows with the command, the torque sits at the limit.
 //!   Following error at constant speed: 0; along a ramp of a = 1 m/s² at T = 1 ms: well below
-//!   1 µm (`tests` in [`motion`] and `tests/drive_physics.rs`).
+//!   1 µm (`tests` in [`motion`] and `tests/it/drive_physics.rs`).
 //! - **Without feed-forward** (`feed_forward = false`): the plain first-order position loop
 //!   `ẋ = kv·(r − x)` of [`motion::integrate`] (lag v / kv at constant speed, a/kv² left after a
 //!   ramp, decaying with 1/kv), torque = lag × `torque_per_increment`, a torque limit capping the

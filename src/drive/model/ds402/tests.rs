@@ -1,5 +1,5 @@
 //! Unit tests of the CiA 402 drive model (module-private parts; the end-to-end behaviour is
-//! tested through the adapter in `tests/ds402.rs` and `tests/touch_probe.rs`).
+//! tested through the adapter in `tests/it/ds402.rs` and `tests/it/touch_probe.rs`).
 
 use super::motion::SUBSAMPLES;
 use super::power::{decode_command, Command};
