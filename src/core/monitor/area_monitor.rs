@@ -178,6 +178,22 @@ pub fn geometry(area: &Area) -> Result<geo::Area, String> {
         .map_err(|e| format!("control area {}: {e}", area.id()))
 }
 
+/// Does the channel position `p` lie in `area` by the rule of the path check — the rule the
+/// channel applies when an area is activated (seed 000 §3.2)? A protection area counts as
+/// occupied when `p` lies inside it or within [`AREA_TOLERANCE`] of it (a zero-length path from
+/// `p` would violate it); a workspace contains `p` when `p` lies inside it or at most
+/// [`AREA_TOLERANCE`] outside (a zero-length path from `p` would be allowed). Non-finite
+/// coordinates count as violating. `Err` if the area names axes the channel lacks.
+pub fn position_inside(area: &Area, axes: &ChannelAxes, p: &[f64]) -> Result<bool, String> {
+    let violated = AreaMonitor::from_areas([area], axes)?
+        .check_position(p)
+        .is_err();
+    Ok(match area.kind() {
+        AreaKind::Prot => violated,
+        AreaKind::Work => !violated,
+    })
+}
+
 impl AreaMonitor {
     /// The active areas of `table` on the channel axes `axes`, with [`AREA_TOLERANCE`].
     pub fn build(table: &AreaTable, axes: &ChannelAxes) -> Result<Self, String> {

@@ -47,10 +47,14 @@
 //! - `ON ID=..` of an undefined ID is an error; `OFF` / `CLEAR` of an undefined ID are "nop".
 //! - While a definition is open only definition blocks and `END` are accepted.
 //! - Activation checks the TCP against the resulting set of active areas: workspaces form a union
-//!   per monitoring space (MCS main axes, IMCS, additional axes, Fig. 7), protection overrides
-//!   workspaces (§2.3). `ON ALL` is all-or-nothing. Boundaries belong to the area (a TCP on a
-//!   workspace boundary is valid, on a protection-area boundary invalid), within
-//!   [`POINT_EPSILON`].
+//!   per monitoring space (MCS main axes, IMCS, additional axes, Fig. 7),
+//!   protection overrides workspaces (§2.3). `ON ALL` is all-or-nothing. Whether the TCP is
+//!   "inside" an area is the [`TcpLocator`]'s answer: the channel passes one with the tolerance
+//!   band of the path check (`area_monitor::AREA_TOLERANCE`, a TCP within the band of a
+//!   protection area is inside it, one within the band outside a workspace is inside that), so
+//!   that an activation that is accepted never leaves a TCP that no block could leave (§3.2 "the
+//!   TCP may not incur any violation at the current position"). The built-in [`AreaPoint`]
+//!   locator takes the exact boundary ([`POINT_EPSILON`]).
 
 use std::fmt;
 
