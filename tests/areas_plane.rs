@@ -323,3 +323,33 @@ fn definition_errors_name_the_plane_axes() {
     assert!(text.contains("G17") && text.contains("G19"), "{text}");
     assert_eq!(m.channel().areas().state(5), AreaState::Cleared);
 }
+
+/// `MONITOR_LVL=IMCS` areas (seed §2.4, U/V/W the secondary path's main axes) follow the plane
+/// the same way: under G18 the contour is W/U and V the excursion.
+#[test]
+fn an_imcs_area_under_g18_lies_in_w_u_with_v_as_excursion() {
+    let cfg = MachineConfig::parse(
+        "[[axis]]\nname = \"X\"\n[[axis]]\nname = \"Y\"\n[[axis]]\nname = \"Z\"\n\
+         [[axis]]\nname = \"U\"\n[[axis]]\nname = \"V\"\n[[axis]]\nname = \"W\"\n",
+        "test.toml",
+    )
+    .unwrap();
+    let mut m = Machine::new(&cfg).unwrap();
+    let r = run(
+        &mut m,
+        "N10 G18\n\
+         N20 #CONTROL AREA BEGIN [ID1 WORK POLY MIN_EXCUR=-100 MAX_EXCUR=100 MONITOR_LVL=IMCS]\n\
+         N30 G01 F1000 G90 W-20 U-50\nN40 W20\nN50 U50\nN60 W-20\nN70 U-50\n\
+         N80 #CONTROL AREA END\n\
+         N90 #CONTROL AREA ON [ID1]\n\
+         N100 G01 U40 V90 W10 F5000\nN110 W30\nN120 M30\n",
+    );
+    aborted_with("sim", &r, 900317, 110);
+    let ch = m.channel();
+    assert_eq!(ch.areas().area(1).unwrap().plane, Plane::G18);
+    let hit = ch.area_refusal().unwrap().hit.clone();
+    // Channel axes U = 3, V = 4, W = 5: plane W/U, excursion V.
+    assert_eq!(hit.axes, [5, 3, 4]);
+    close("W", hit.point[0], 20.0 + AREA_TOLERANCE, 1e-9);
+    assert_eq!(pos(&m)[3..], [40.0, 90.0, 10.0]);
+}
