@@ -142,6 +142,7 @@ fn bench_area_monitor(c: &mut Criterion) {
                 monitor_level: MonitorLevel::Mcs,
             },
             axes: AreaAxes::Main,
+            plane: Default::default(),
             geometry: AreaGeometry::Polygon {
                 vertices: star(
                     [(i % 5) as f64 * 25.0, (i / 5) as f64 * 25.0],

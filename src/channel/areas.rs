@@ -8,10 +8,10 @@
 //! ignores `#CS` before it hands a [`DefBlock`] over.
 
 use super::Channel;
-use crate::core::monitor::area_monitor::{AreaHit, AreaMonitor, ChannelAxes, HitKind};
-use crate::core::monitor::areas::{
-    AreaCommand, AreaKind, AreaPoint, AreaTable, DefBlock, Selector,
+use crate::core::monitor::area_monitor::{
+    position_inside, AreaHit, AreaMonitor, ChannelAxes, HitKind,
 };
+use crate::core::monitor::areas::{AreaCommand, AreaKind, AreaTable, DefBlock, Selector};
 use crate::core::path::Segment;
 use crate::messages::{ids, BlockRef, CncMessage};
 
@@ -130,13 +130,13 @@ impl Channel {
         let at = self.block;
         let pos = self.command_positions();
         let axes = self.areas.axes.clone();
-        let mut tcp = |a: &crate::core::monitor::areas::Area| match axes.resolve(a) {
-            Ok([p, q, e]) => a.contains(AreaPoint {
-                plane: [pos[p], pos[q]],
-                excursion: pos[e],
-            }),
+        // One rule for activation and block preparation (seed 000 §3.2 "when a protection area
+        // is activated, the TCP may not incur any violation at the current position"): the TCP
+        // is located with the path check's tolerance band, so a TCP that ON accepts can always
+        // leave, and one that no block could leave is refused here (docs/interpretations.md A18).
+        let mut tcp = |a: &crate::core::monitor::areas::Area| {
             // Cannot be located: an unusable area is treated as violated.
-            Err(_) => a.kind() == AreaKind::Prot,
+            position_inside(a, &axes, &pos).unwrap_or(a.kind() == AreaKind::Prot)
         };
         let result = self.areas.table.apply(cmd, at, &mut tcp);
         match result {

@@ -461,7 +461,13 @@ fn self_intersecting_polygon_is_refused() {
 #[test]
 fn start_point_must_be_complete_and_axes_not_mixed() {
     let e = def_err(SEED_POLY, &[g01(20).x(0.0)]);
-    assert_eq!(e.kind, AreaErrorKind::StartIncomplete { id: 3 });
+    assert_eq!(
+        e.kind,
+        AreaErrorKind::StartIncomplete {
+            id: 3,
+            axes: "X and Y (G17)".into()
+        }
+    );
     assert_eq!(e.message().id, ids::AREA_AXES);
     let e = def_err(SEED_POLY, &[g01(20).xy(0.0, 0.0), g01(30).x2(5.0)]);
     assert_eq!(e.kind, AreaErrorKind::MixedAxes { id: 3 });
@@ -878,4 +884,96 @@ fn a_closure_can_locate_the_tcp() {
     t.apply(&parse("ON [ID4]"), None, &mut locator).unwrap();
     assert_eq!(asked, vec![4]);
     assert_eq!(t.state(4), AreaState::Active);
+}
+
+/// Seed 000 §3.1.1: "Normally, the surface area of the workspace or protection area is defined
+/// by the first two main axes of the active machining plane." Under G18 the block's 1st / 2nd
+/// coordinates are Z / X (DIN 66025), the area records the plane of its starting point.
+#[test]
+fn an_area_keeps_the_plane_of_its_starting_point() {
+    let mut t = AreaTable::new();
+    // G18: (Z, X) = (-10, 40) … a 20 × 20 square.
+    let blocks: Vec<DefBlock> = [(-10.0, 40.0), (10.0, 40.0), (10.0, 60.0), (-10.0, 60.0)]
+        .iter()
+        .chain([(-10.0, 40.0)].iter())
+        .enumerate()
+        .map(|(i, &(z, x))| g01(20 + 10 * i as u32).xy(z, x).plane(Plane::G18))
+        .collect();
+    define(
+        &mut t,
+        "BEGIN [ID5 PROT POLY MIN_EXCUR=-5 MAX_EXCUR=5]",
+        &blocks,
+    )
+    .unwrap();
+    let a = t.area(5).unwrap();
+    assert_eq!(a.plane, Plane::G18);
+    assert_eq!(a.axis_names(), ["Z", "X", "Y"]);
+    assert_eq!(
+        a.geometry,
+        AreaGeometry::Polygon {
+            vertices: vec![[-10.0, 40.0], [10.0, 40.0], [10.0, 60.0], [-10.0, 60.0]]
+        }
+    );
+    // G19: Y / Z, excursion X; IMCS: the same order with U / V / W.
+    assert_eq!(
+        plane_axis_names(MonitorLevel::Mcs, AreaAxes::Main, Plane::G19),
+        ["Y", "Z", "X"]
+    );
+    assert_eq!(
+        plane_axis_names(MonitorLevel::Imcs, AreaAxes::Main, Plane::G18),
+        ["W", "U", "V"]
+    );
+    // The additional axes of §4 are X2 / Y2 / Z2 in every plane.
+    let mut t = AreaTable::new();
+    let add: Vec<DefBlock> = [
+        (100.0, 100.0),
+        (-100.0, 100.0),
+        (-100.0, -100.0),
+        (100.0, 100.0),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(i, &(x, y))| g01(20 + 10 * i as u32).x2(x).y2(y).plane(Plane::G19))
+    .collect();
+    define(&mut t, SEED_POLY, &add).unwrap();
+    assert_eq!(t.area(3).unwrap().axis_names(), ["X2", "Y2", "Z2"]);
+}
+
+#[test]
+fn the_plane_must_not_change_within_a_definition() {
+    let e = def_err(
+        SEED_POLY,
+        &[
+            g01(20).xy(0.0, 0.0).plane(Plane::G18),
+            g01(30).xy(10.0, 0.0).plane(Plane::G17),
+        ],
+    );
+    assert_eq!(
+        e.kind,
+        AreaErrorKind::PlaneChanged {
+            id: 3,
+            plane: Plane::G18,
+            found: Plane::G17
+        }
+    );
+    assert_eq!(e.message().id, ids::AREA_AXES);
+    assert_eq!(e.at.and_then(|b| b.number), Some(30));
+    // The starting point names the coordinates of its plane when one is missing.
+    let e = def_err(SEED_POLY, &[g01(20).x(0.0).plane(Plane::G19)]);
+    assert_eq!(
+        e.kind,
+        AreaErrorKind::StartIncomplete {
+            id: 3,
+            axes: "Y and Z (G19)".into()
+        }
+    );
+    // A block without coordinates (e.g. `G17` alone) defines nothing and changes nothing.
+    let mut t = AreaTable::new();
+    let mut blocks = seed_poly_blocks();
+    for b in blocks.iter_mut() {
+        b.plane = Plane::G18;
+    }
+    blocks.insert(3, DefBlock::new(n(45), DefMotion::G01));
+    define(&mut t, SEED_POLY, &blocks).unwrap();
+    assert_eq!(t.area(3).unwrap().plane, Plane::G18);
 }

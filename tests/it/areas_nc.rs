@@ -512,6 +512,108 @@ fn activation_needs_a_valid_tcp() {
     assert_eq!(m.channel().areas().state(3), AreaState::Active);
 }
 
+/// A protection square X ∈ [50, 70], Y ∈ [−10, 10] (Z ∈ [−50, 50]); the TCP is put at `X{x}`
+/// in front of its face X = 50, the area switched on, then a block moves away to X0.
+fn prot_beside(x: f64) -> String {
+    format!(
+        "\
+N10 #CONTROL AREA BEGIN [ID4 PROT POLY MIN_EXCUR=-50 MAX_EXCUR=50]
+N20 G01 F1000 G90 X50 Y-10
+N30 X70
+N40 Y10
+N50 X50
+N60 Y-10
+N70 #CONTROL AREA END
+N80 G01 X{x} Y0 Z0 F5000
+N90 #CONTROL AREA ON [ID4]
+N100 G01 X0
+N110 M30
+"
+    )
+}
+
+/// Issue 27 item 3. Seed 000 §3.2: "when a protection area is activated, the TCP may not incur
+/// any violation at the current position"; §2.3: "a protection area must never be touched by the
+/// TCP". The path check counts a TCP within the tolerance band (1 µm) of a protection area as
+/// touching it; activation applies the same rule, so a TCP 0.5 µm in front of the area is
+/// refused at `ON` (900314) instead of being accepted and then refusing every block (900316).
+#[test]
+fn activation_beside_a_protection_area_uses_the_path_check_band() {
+    let mut m = machine();
+    let r = run_on(&mut m, &prot_beside(50.0 - 0.0005));
+    let msg = first_error(&r);
+    assert_eq!(id_block(&msg), (900314, Some(90)), "{msg}");
+    assert!(msg.text.contains("[4]"), "{msg}");
+    assert_eq!(m.channel().areas().state(4), AreaState::Defined);
+    assert!(m.channel().area_mon_violation_detected_r());
+    assert_close(
+        pos(&m)[0],
+        50.0 - 0.0005,
+        1e-12,
+        "X stayed in front of the area",
+    );
+    // Just inside the band: refused too; just outside it: accepted, and the block moving away
+    // runs — the band of the activation is the band of the path check.
+    let mut m = machine();
+    let r = run_on(&mut m, &prot_beside(50.0 - 0.999 * AREA_TOLERANCE));
+    assert_eq!(id_block(&first_error(&r)), (900314, Some(90)));
+    let mut m = machine();
+    let r = run_on(&mut m, &prot_beside(50.0 - 1.001 * AREA_TOLERANCE));
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    assert_eq!(m.channel().areas().state(4), AreaState::Active);
+    assert_close(pos(&m)[0], 0.0, 1e-12, "the move away ran");
+    // From there, a block towards the area that ends inside the band is refused by the path
+    // check at once: the same 1 µm.
+    let r = run_on(
+        &mut m,
+        &format!(
+            "N10 G01 X{} F5000\nN20 M30\n",
+            50.0 - 0.999 * AREA_TOLERANCE
+        ),
+    );
+    assert_eq!(id_block(&first_error(&r)), (900316, Some(10)));
+    let r = run_on(
+        &mut m,
+        &format!(
+            "N10 G01 X{} F5000\nN20 G01 X0\nN30 M30\n",
+            50.0 - 1.001 * AREA_TOLERANCE
+        ),
+    );
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+}
+
+/// The same rule on the workspace side (seed 000 §3.2 "When workspaces are activated, the TCP
+/// must already be located in the valid workspace"): a path may run up to 1 µm outside a
+/// workspace, so a TCP 0.5 µm outside may switch it on and move in; 1.5 µm outside it may not.
+#[test]
+fn activation_beside_a_workspace_uses_the_path_check_band() {
+    let work = |x: f64| {
+        format!(
+            "\
+N10 #CONTROL AREA BEGIN [ID2 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]
+N20 G01 F1000 G90 X-10 Y-10
+N30 X10
+N40 Y10
+N50 X-10
+N60 Y-10
+N70 #CONTROL AREA END
+N80 G01 X{x} Y0 Z0 F5000
+N90 #CONTROL AREA ON [ID2]
+N100 G01 X0
+N110 M30
+"
+        )
+    };
+    let mut m = machine();
+    let r = run_on(&mut m, &work(10.0 + 0.5 * AREA_TOLERANCE));
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    assert_close(pos(&m)[0], 0.0, 1e-12, "moved into the workspace");
+    let mut m = machine();
+    let r = run_on(&mut m, &work(10.0 + 1.5 * AREA_TOLERANCE));
+    assert_eq!(id_block(&first_error(&r)), (900314, Some(90)));
+    assert_eq!(m.channel().areas().state(2), AreaState::Defined);
+}
+
 #[test]
 fn areas_survive_program_end_and_reset_deactivates_them() {
     let mut m = machine();

@@ -175,3 +175,50 @@ fn parse_error_names_file_and_line() {
     );
     assert!(!out.exists());
 }
+
+/// Issue 27 item 4: an area defined under G18 lies in Z/X (seed 000 §3.1.1 "the first two main
+/// axes of the active machining plane"); the default picture plane is that of the first area,
+/// Z,X, and the violation is drawn where the path meets its face X = 40.
+#[test]
+fn a_g18_area_is_drawn_in_the_z_x_plane() {
+    let dir = tempfile::tempdir().unwrap();
+    let prog = dir.path().join("g18.nc");
+    std::fs::write(
+        &prog,
+        "N10 G18\n\
+         N20 #CONTROL AREA BEGIN [ID5 PROT POLY MIN_EXCUR=-5 MAX_EXCUR=5]\n\
+         N30 G01 F1000 G90 Z-10 X40\nN40 Z10\nN50 X60\nN60 Z-10\nN70 X40\n\
+         N80 #CONTROL AREA END\n\
+         N90 G01 X0 Y0 Z0 F5000\nN100 #CONTROL AREA ON [ID5]\n\
+         N110 G01 X100\nN120 M30\n",
+    )
+    .unwrap();
+    let Plot { o, out, _dir } = plot(prog.to_str().unwrap(), "g18.svg", &[]);
+    assert_eq!(o.status.code(), Some(1), "stderr: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains("error 900316: the path enters protection area 5")
+            && stderr(&o).contains("(N110)"),
+        "stderr: {}",
+        stderr(&o)
+    );
+    assert!(!stderr(&o).contains("not drawn"), "{}", stderr(&o));
+    let texts = svg_texts(&std::fs::read_to_string(&out).unwrap());
+    for want in [
+        "Control areas in the ZX plane",
+        "Z [mm]",
+        "X [mm]",
+        "ID 5 PROT",
+        "block N110: enters protection area 5",
+    ] {
+        assert!(texts.iter().any(|t| t == want), "{want:?} not in {texts:?}");
+    }
+    // In the X,Y plane the Z/X square is not drawn, and the note says which plane it lies in.
+    let Plot { o, out, _dir } = plot(prog.to_str().unwrap(), "xy.svg", &["--plane", "X,Y"]);
+    assert_eq!(o.status.code(), Some(1), "stderr: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains("area 5 lies in the plane Z,X, not in X,Y: not drawn"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(out.exists());
+}

@@ -13,6 +13,8 @@ mod common;
 mod area_geom;
 mod areas;
 mod areas_manual;
+#[cfg(feature = "sim")]
+mod areas_plane;
 #[cfg(feature = "cli")]
 mod areas_nc;
 #[cfg(feature = "cli")]

@@ -315,10 +315,12 @@ impl Area {
     }
 }
 
-/// Circular interpolation plane (DIN 66025).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Circular interpolation plane, also the machining plane of a control area (DIN 66025;
+/// FCT-C14 §3.1.1 "the first two main axes of the active machining plane").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Plane {
     /// X/Y plane, angle from +X towards +Y, helix axis Z.
+    #[default]
     G17,
     /// Z/X plane, angle from +Z towards +X, helix axis Y.
     G18,
@@ -327,13 +329,24 @@ pub enum Plane {
 }
 
 impl Plane {
-    /// (first axis, second axis, normal axis) as coordinate indices.
-    fn axes(self) -> (usize, usize, usize) {
+    /// (first axis, second axis, normal axis) as coordinate indices (0 = X, 1 = Y, 2 = Z, or
+    /// the 1st / 2nd / 3rd main axis): G17 (0, 1, 2), G18 (2, 0, 1), G19 (1, 2, 0).
+    pub fn axes(self) -> (usize, usize, usize) {
         match self {
             Plane::G17 => (0, 1, 2),
             Plane::G18 => (2, 0, 1),
             Plane::G19 => (1, 2, 0),
         }
+    }
+}
+
+impl std::fmt::Display for Plane {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Plane::G17 => "G17",
+            Plane::G18 => "G18",
+            Plane::G19 => "G19",
+        })
     }
 }
 

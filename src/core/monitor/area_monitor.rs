@@ -9,9 +9,13 @@
 //!
 //! | area | plane axes | excursion axis (unless `EXCUR_AX` / `EXCUR_AXNR`) |
 //! |---|---|---|
-//! | `MONITOR_LVL=MCS` (default), main axes | 1st / 2nd main axis (X, Y) | 3rd main axis (Z) |
-//! | `MONITOR_LVL=IMCS` (seed §2.4) | U, V (secondary path) | W |
+//! | `MONITOR_LVL=MCS` (default), main axes | 1st / 2nd axis of the plane the area was defined in: X, Y (G17), Z, X (G18), Y, Z (G19) | 3rd: Z (G17), Y (G18), X (G19) |
+//! | `MONITOR_LVL=IMCS` (seed §2.4) | U, V / W, U / V, W (secondary path, same order) | W / V / U |
 //! | additional axes `X2=` / `Y2=` (seed §4) | X2, Y2 | Z2 |
+//!
+//! ([`plane_axis_names`](super::areas::plane_axis_names); seed 000 §3.1.1 "the first two main
+//! axes of the active machining plane".) An area's own coordinates are `[1st, 2nd, excursion]`,
+//! a right-handed frame for every plane, so an arc keeps its orientation in it.
 //!
 //! `EXCUR_AXNR=n` is the channel axis number n (1-based, the numbering of `AXNR` elsewhere).
 //! Workspaces form a union per set of monitored axes (seed Fig. 7); protection areas override
@@ -72,18 +76,15 @@ impl ChannelAxes {
     pub fn resolve(&self, area: &Area) -> Result<[usize; 3], String> {
         let id = area.id();
         let what = |s: &str| format!("control area {id} ({s})");
-        let (p0, p1, exc) = match (area.header.monitor_level, area.axes) {
-            (_, AreaAxes::Additional) => ("X2", "Y2", "Z2"),
-            (MonitorLevel::Imcs, AreaAxes::Main) => ("U", "V", "W"),
-            (MonitorLevel::Mcs, AreaAxes::Main) => ("X", "Y", "Z"),
-        };
+        let [p0, p1, exc] = area.axis_names();
+        let plane = area.plane;
         let level = match (area.header.monitor_level, area.axes) {
-            (_, AreaAxes::Additional) => "additional axes",
-            (MonitorLevel::Imcs, _) => "MONITOR_LVL=IMCS",
-            (MonitorLevel::Mcs, _) => "main axes",
+            (_, AreaAxes::Additional) => "additional axes".to_string(),
+            (MonitorLevel::Imcs, _) => format!("MONITOR_LVL=IMCS, {plane}"),
+            (MonitorLevel::Mcs, _) => format!("main axes, {plane}"),
         };
-        let a = self.need(p0, &what(level))?;
-        let b = self.need(p1, &what(level))?;
+        let a = self.need(p0, &what(&level))?;
+        let b = self.need(p1, &what(&level))?;
         let e = match &area.header.excur_axis {
             Some(ExcurAxis::Name(n)) => self.need(n, &what("EXCUR_AX"))?,
             Some(ExcurAxis::Number(k)) => {
@@ -176,6 +177,22 @@ pub fn geometry(area: &Area) -> Result<geo::Area, String> {
     };
     geo::Area::new(shape, area.header.min_excur, area.header.max_excur)
         .map_err(|e| format!("control area {}: {e}", area.id()))
+}
+
+/// Does the channel position `p` lie in `area` by the rule of the path check — the rule the
+/// channel applies when an area is activated (seed 000 §3.2)? A protection area counts as
+/// occupied when `p` lies inside it or within [`AREA_TOLERANCE`] of it (a zero-length path from
+/// `p` would violate it); a workspace contains `p` when `p` lies inside it or at most
+/// [`AREA_TOLERANCE`] outside (a zero-length path from `p` would be allowed). Non-finite
+/// coordinates count as violating. `Err` if the area names axes the channel lacks.
+pub fn position_inside(area: &Area, axes: &ChannelAxes, p: &[f64]) -> Result<bool, String> {
+    let violated = AreaMonitor::from_areas([area], axes)?
+        .check_position(p)
+        .is_err();
+    Ok(match area.kind() {
+        AreaKind::Prot => violated,
+        AreaKind::Work => !violated,
+    })
 }
 
 impl AreaMonitor {

@@ -20,9 +20,21 @@
 //! Areas are defined in the MCS (FCT-C14 §2.3 notice, §3.1 attention): the caller passes the
 //! definition points *after* G54 / G92 and the other Cartesian offsets, and *without* an active
 //! `#(A)CS` (which areas ignore). `MONITOR_LVL=IMCS` areas take IMCS coordinates of the secondary
-//! path (U/V, FCT-C14 §2.4); areas programmed with `X2=` / `Y2=` (FCT-C14 §4) are polygons in the
-//! plane of those additional axes. The caller resolves arc centres (I/J/K with G161/G162) to
+//! path (U/V/W, FCT-C14 §2.4); areas programmed with `X2=` / `Y2=` (FCT-C14 §4) are polygons in
+//! the plane of those additional axes. The caller resolves arc centres (I/J/K with G161/G162) to
 //! absolute coordinates before building a [`DefBlock`].
+//!
+//! # Machining plane
+//!
+//! "Normally, the surface area of the workspace or protection area is defined by the first two
+//! main axes of the active machining plane" (FCT-C14 §3.1.1): a main-axes area defined under
+//! G17 lies in X/Y (excursion Z), under G18 in Z/X (excursion Y), under G19 in Y/Z (excursion
+//! X) — DIN 66025's 1st / 2nd / 3rd axis of each plane ([`Plane::axes`]); on the IMCS level the
+//! same with U/V/W ([`plane_axis_names`]). The caller passes the plane of each block
+//! ([`DefBlock::plane`]); the plane of the starting point is the area's ([`Area::plane`]), a
+//! definition block in another plane is an error. The area keeps that plane afterwards, whatever
+//! G17 / G18 / G19 a later block selects: "A workspace/protection area is defined by an object in
+//! space" (§2.3). Additional-axes areas (`X2=` / `Y2=`, §4) always lie in X2/Y2 (excursion Z2).
 //!
 //! # Interpretations (where the seed is silent or ambiguous)
 //!
@@ -47,13 +59,18 @@
 //! - `ON ID=..` of an undefined ID is an error; `OFF` / `CLEAR` of an undefined ID are "nop".
 //! - While a definition is open only definition blocks and `END` are accepted.
 //! - Activation checks the TCP against the resulting set of active areas: workspaces form a union
-//!   per monitoring space (MCS main axes, IMCS, additional axes, Fig. 7), protection overrides
-//!   workspaces (§2.3). `ON ALL` is all-or-nothing. Boundaries belong to the area (a TCP on a
-//!   workspace boundary is valid, on a protection-area boundary invalid), within
-//!   [`POINT_EPSILON`].
+//!   per monitoring space (MCS main axes, IMCS, additional axes, each per plane; Fig. 7),
+//!   protection overrides workspaces (§2.3). `ON ALL` is all-or-nothing. Whether the TCP is
+//!   "inside" an area is the [`TcpLocator`]'s answer: the channel passes one with the tolerance
+//!   band of the path check (`area_monitor::AREA_TOLERANCE`, a TCP within the band of a
+//!   protection area is inside it, one within the band outside a workspace is inside that), so
+//!   that an activation that is accepted never leaves a TCP that no block could leave (§3.2 "the
+//!   TCP may not incur any violation at the current position"). The built-in [`AreaPoint`]
+//!   locator takes the exact boundary ([`POINT_EPSILON`]).
 
 use std::fmt;
 
+pub use super::area_geom::Plane;
 use crate::messages::{ids, BlockRef, CncMessage};
 
 /// FCT-C14 §2.3 / §3.1: at most 20 workspace and protection areas.
@@ -648,6 +665,9 @@ pub struct DefBlock {
     pub additional: [Option<f64>; 2],
     /// Absolute arc centre in the same plane as the end point (G02 / G03).
     pub centre: Option<[f64; 2]>,
+    /// The machining plane active for this block (G17 / G18 / G19): `main` and `centre` are its
+    /// 1st / 2nd axis (FCT-C14 §3.1.1). Not used for the additional axes.
+    pub plane: Plane,
 }
 
 impl DefBlock {
@@ -661,7 +681,14 @@ impl DefBlock {
             main: [None, None],
             additional: [None, None],
             centre: None,
+            plane: Plane::G17,
         }
+    }
+
+    /// Set the machining plane of the block (default G17).
+    pub fn plane(mut self, plane: Plane) -> Self {
+        self.plane = plane;
+        self
     }
 
     /// Set both main-plane coordinates.
@@ -722,6 +749,28 @@ pub enum AreaAxes {
     Additional,
 }
 
+/// Names of the channel axes an area of this kind lies on: `[1st plane axis, 2nd plane axis,
+/// default excursion axis]`.
+///
+/// | level / axes | G17 | G18 | G19 |
+/// |---|---|---|---|
+/// | MCS, main axes | X, Y, Z | Z, X, Y | Y, Z, X |
+/// | IMCS (§2.4) | U, V, W | W, U, V | V, W, U |
+/// | additional axes (§4) | X2, Y2, Z2 | X2, Y2, Z2 | X2, Y2, Z2 |
+///
+/// FCT-C14 §3.1.1 "the first two main axes of the active machining plane", §2.3 "Example of X/Y
+/// basic plane (G17): X → 1st main axis, Y → 2nd main axis, Z → 3rd main axis"; the planes'
+/// axis order is DIN 66025's (G18: Z → X, G19: Y → Z).
+pub fn plane_axis_names(level: MonitorLevel, axes: AreaAxes, plane: Plane) -> [&'static str; 3] {
+    let main = match (level, axes) {
+        (_, AreaAxes::Additional) => return ["X2", "Y2", "Z2"],
+        (MonitorLevel::Mcs, AreaAxes::Main) => ["X", "Y", "Z"],
+        (MonitorLevel::Imcs, AreaAxes::Main) => ["U", "V", "W"],
+    };
+    let (a, b, c) = plane.axes();
+    [main[a], main[b], main[c]]
+}
+
 /// The contour in the plane.
 #[derive(Debug, Clone, PartialEq)]
 pub enum AreaGeometry {
@@ -756,6 +805,9 @@ pub struct Area {
     pub header: AreaHeader,
     /// Main or additional axes.
     pub axes: AreaAxes,
+    /// The machining plane the area was defined in (main axes; G17 for additional axes): the
+    /// contour lies in its 1st / 2nd axis, the excursion is its 3rd (FCT-C14 §3.1.1).
+    pub plane: Plane,
     /// The contour.
     pub geometry: AreaGeometry,
     /// The BEGIN block.
@@ -783,8 +835,13 @@ impl Area {
     }
 
     /// The monitoring space this area belongs to; workspaces form a union per space.
-    pub fn space(&self) -> (MonitorLevel, AreaAxes) {
-        (self.header.monitor_level, self.axes)
+    pub fn space(&self) -> (MonitorLevel, AreaAxes, Plane) {
+        (self.header.monitor_level, self.axes, self.plane)
+    }
+
+    /// Axis names of the plane's 1st and 2nd axis and of the default excursion axis.
+    pub fn axis_names(&self) -> [&'static str; 3] {
+        plane_axis_names(self.header.monitor_level, self.axes, self.plane)
     }
 
     /// Extents of the body (plane bounding box and `MIN_EXCUR` / `MAX_EXCUR`).
@@ -920,10 +977,22 @@ pub enum AreaErrorKind {
         id: u32,
     },
     /// §4: the starting point must program both coordinates.
-    #[error("control area {id}: the starting point must program both plane coordinates")]
+    #[error("control area {id}: the starting point must program both plane coordinates ({axes})")]
     StartIncomplete {
         /// Area ID.
         id: u32,
+        /// The two coordinates expected, e.g. `Z and X (G18)`.
+        axes: String,
+    },
+    /// §3.1.1: the plane of the definition (that of its starting point) changed within it.
+    #[error("control area {id}: defined in the {plane} plane, a block in {found} found; the machining plane must not change within a definition")]
+    PlaneChanged {
+        /// Area ID.
+        id: u32,
+        /// The plane of the starting point.
+        plane: Plane,
+        /// The plane of the offending block.
+        found: Plane,
     },
     /// §4: main and additional axes mixed in one area.
     #[error("control area {id}: main axes and additional axes (X2/Y2) mixed in one definition")]
@@ -1052,7 +1121,10 @@ impl AreaErrorKind {
             NoFeed { .. } => ids::AREA_NO_FEED,
             WrongMotion { .. } => ids::AREA_WRONG_MOTION,
             TooManyBlocks { .. } => ids::AREA_TOO_MANY_BLOCKS,
-            StartIncomplete { .. } | MixedAxes { .. } | AdditionalAxesCirc { .. } => ids::AREA_AXES,
+            StartIncomplete { .. }
+            | PlaneChanged { .. }
+            | MixedAxes { .. }
+            | AdditionalAxesCirc { .. } => ids::AREA_AXES,
             NotClosed { .. } => ids::AREA_NOT_CLOSED,
             TooFewPoints { .. } => ids::AREA_TOO_FEW_POINTS,
             SelfIntersection { .. } => ids::AREA_SELF_INTERSECTION,
@@ -1123,6 +1195,8 @@ pub struct AreaDefinition {
     header: AreaHeader,
     begin_at: Option<BlockRef>,
     axes: Option<AreaAxes>,
+    /// The plane of the starting point (main axes).
+    plane: Option<Plane>,
     blocks: usize,
     points: Vec<DefPoint>,
     circle: Option<([f64; 2], f64)>,
@@ -1148,6 +1222,7 @@ impl AreaDefinition {
             header,
             begin_at: at,
             axes: None,
+            plane: None,
             blocks: 0,
             points: Vec::new(),
             circle: None,
@@ -1190,6 +1265,17 @@ impl AreaDefinition {
         if axes == AreaAxes::Additional && self.header.shape == AreaShape::Circ {
             return err(AreaErrorKind::AdditionalAxesCirc { id });
         }
+        let plane = match axes {
+            AreaAxes::Main => b.plane,
+            AreaAxes::Additional => Plane::G17,
+        };
+        if let Some(first) = self.plane.filter(|p| *p != plane) {
+            return err(AreaErrorKind::PlaneChanged {
+                id,
+                plane: first,
+                found: plane,
+            });
+        }
         let coords = match axes {
             AreaAxes::Main => b.main,
             AreaAxes::Additional => b.additional,
@@ -1198,12 +1284,22 @@ impl AreaDefinition {
         let end = match prev {
             None => match coords {
                 [Some(x), Some(y)] => [x, y],
-                _ => return err(AreaErrorKind::StartIncomplete { id }),
+                _ => {
+                    let [p, q, _] = plane_axis_names(self.header.monitor_level, axes, plane);
+                    let axes = match axes {
+                        AreaAxes::Main => format!("{p} and {q} ({plane})"),
+                        AreaAxes::Additional => format!("{p} and {q}"),
+                    };
+                    return err(AreaErrorKind::StartIncomplete { id, axes });
+                }
             },
             Some(p) => [coords[0].unwrap_or(p[0]), coords[1].unwrap_or(p[1])],
         };
         if !(end[0].is_finite() && end[1].is_finite()) {
-            return err(AreaErrorKind::StartIncomplete { id });
+            return err(AreaErrorKind::StartIncomplete {
+                id,
+                axes: "finite numbers".to_string(),
+            });
         }
         // FCT-C14 §2.4: the 2-path (IMCS) example programs its polygon with G0 blocks.
         let imcs_rapid = self.header.monitor_level == MonitorLevel::Imcs;
@@ -1259,12 +1355,14 @@ impl AreaDefinition {
                     self.blocks += 1;
                     self.circle = Some((c, r));
                     self.axes = Some(axes);
+                    self.plane = Some(plane);
                     return Ok(());
                 }
             },
         }
         self.blocks += 1;
         self.axes = Some(axes);
+        self.plane = Some(plane);
         if prev.is_none_or(|p| dist(p, end) > POINT_EPSILON) {
             self.points.push(DefPoint { p: end, at: b.at });
         }
@@ -1342,6 +1440,7 @@ impl AreaDefinition {
         Ok(Area {
             header: self.header,
             axes: self.axes.unwrap_or(AreaAxes::Main),
+            plane: self.plane.unwrap_or_default(),
             geometry,
             defined_at: self.begin_at,
         })
