@@ -983,6 +983,7 @@ impl Machine {
         exec.sync(&self.channel);
         let mut out = Vec::new();
         let mut ended = false;
+        let mut waited_for_independent = false;
         let status = loop {
             for m in self.channel.take_messages() {
                 emit(RunEvent::Message(m), &mut events);
@@ -1009,6 +1010,25 @@ impl Machine {
                         emit(RunEvent::Message(m), &mut events);
                     }
                     break RunStatus::Aborted;
+                }
+                // The program's end waits for independent motions still running
+                // (`INDP_ASYN`), then takes what they measured.
+                ChannelState::Idle if ended && self.channel.independent_running() => {
+                    waited_for_independent = true;
+                    self.step();
+                    on_cycle(&RunProgress {
+                        block: self.channel.block(),
+                        cycles: self.channel.cycles() - start_cycles,
+                        time: Nanos(self.now.0.saturating_sub(start_time.0)),
+                    });
+                }
+                ChannelState::Idle if ended && waited_for_independent => {
+                    waited_for_independent = false;
+                    if exec.step(&mut self.channel, &mut out) == Step::Abort
+                        && self.channel.state() == ChannelState::Idle
+                    {
+                        self.channel.abort_reported();
+                    }
                 }
                 ChannelState::Idle if ended => {
                     self.channel.program_end();
