@@ -1149,6 +1149,13 @@ pub fn channel_axis_config(
     };
     ChannelAxisConfig {
         rotary,
+        // P-AXIS-00127 modulou … P-AXIS-00126 moduloo (0.0001°), for a modulo rotary axis.
+        modulo: (rotary && is_modulo(p)).then(|| {
+            (
+                param_pos_to_mm(p.int("P-AXIS-00127")),
+                param_pos_to_mm(p.int("P-AXIS-00126")),
+            )
+        }),
         v_max: param_vel_to_mm_s(p.int("P-AXIS-00212")),
         a_feed: mm_s2("P-AXIS-00001"),
         d_feed: mm_s2("P-AXIS-00002"),

@@ -306,6 +306,27 @@ impl Executor {
         self.resync_positions(ch);
     }
 
+    /// A modulo axis the channel wrapped at rest (P-AXIS-00015 ACHSMODE_MODULO): its
+    /// programmed position follows, so the next block starts from the wrapped position.
+    fn resync_modulo(&mut self, ch: &Channel) {
+        let n = self.prog.len();
+        if !(0..n).any(|i| ch.modulo_range(i).is_some()) {
+            return;
+        }
+        let cmd = ch.command_positions();
+        if cmd.len() != n {
+            return;
+        }
+        let mut pcs = vec![0.0; n];
+        self.frames.acs_to_pcs(&cmd, &mut pcs);
+        for (i, p) in pcs.into_iter().enumerate() {
+            if ch.modulo_range(i).is_some() && !ch.moving_independently(i) && p != self.prog[i] {
+                self.prog[i] = p;
+                self.meas_target[i] = None;
+            }
+        }
+    }
+
     fn resync_positions(&mut self, ch: &Channel) {
         let cmd = ch.command_positions();
         if cmd.len() == self.prog.len() {
@@ -403,6 +424,7 @@ impl Executor {
             self.resync = false;
             self.resync_positions(ch);
         }
+        self.resync_modulo(ch);
         Ok(())
     }
 
