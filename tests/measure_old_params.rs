@@ -193,7 +193,10 @@ fn two_old_sources_that_disagree_are_refused_naming_both() {
     let text = "[[axis]]\nname = \"Z\"\nkenngr.meas_signal_fixed_stop = 1\n\
                 kenngr.probing_signal_via_plc = 1\n";
     let cfg = MachineConfig::parse(text, "two.toml").unwrap();
-    let e = Machine::new(&cfg).err().expect("refused").to_string();
+    let e = match Machine::new(&cfg) {
+        Ok(_) => panic!("two disagreeing old sources were accepted"),
+        Err(e) => e.to_string(),
+    };
     for w in [
         "two.toml",
         "axis Z",
