@@ -8,10 +8,10 @@
 use crate::axis::Axis;
 use crate::channel::acyclic::AcyclicOp;
 use crate::channel::{Channel, ChannelAxisConfig, ChannelConfig, ChannelState};
+use crate::core::measure::source::ProbeSettings;
 use crate::core::measure::timestamp::DcClock;
 use crate::core::measure::{
-    edge_from_text, trigger_mode_from_text, AxisMeasConfig, ChannelMeasConfig, MeasType,
-    SignalSource,
+    trigger_mode_from_text, AxisMeasConfig, ChannelMeasConfig, MeasType, SignalSource,
 };
 use crate::core::monitor::sls::{AxisLimitConfig, SlsBehaviour};
 use crate::drive::catalogue;
@@ -389,13 +389,19 @@ impl Machine {
         let mut defs = Vec::new();
         let mut images = Vec::new();
         let mut axis_cfgs = Vec::new();
+        let mut param_warnings = Vec::new();
         for a in &cfg.axes {
             let def = catalogue::load(&a.drive).map_err(|source| MachineError::Drive {
                 axis: a.name.clone(),
                 drive: a.drive.clone(),
                 cause: source,
             })?;
-            check_probing_input(a, &def)?;
+            // P-AXIS-00516 / 00517 / 00518 or the old parameters they replace (FCT-C4 §8.2.2).
+            let probe = ProbeSettings::from_params(&a.params).map_err(|e| {
+                MachineError::Config(format!("{}: axis {}: {e}", cfg.source, a.name))
+            })?;
+            param_warnings.extend(probe.warnings(&a.name));
+            check_probing_input(a, &probe, &def)?;
             let drive_err = |source| MachineError::Drive {
                 axis: a.name.clone(),
                 drive: a.drive.clone(),
@@ -412,7 +418,7 @@ impl Machine {
             images.push(ProcessImage::new(axis.output_len(), axis.input_len()));
             axes.push(axis);
             models.push(model);
-            let mut axis_cfg = channel_axis_config(a, cycle);
+            let mut axis_cfg = channel_axis_config(a, &probe, cycle);
             axis_cfg.servo_lag_time = servo_lag_time(&defs[defs.len() - 1].model);
             // Measurement type 6 needs a SERCOS axis (FCT-C4 §3 table).
             axis_cfg.meas.sercos = sercos;
@@ -441,6 +447,8 @@ impl Machine {
             .zip(&cfg.axes)
             .filter_map(|(c, a)| c.meas.fixed_stop.and_then(|f| f.startup_warning(&a.name)))
             .collect();
+        // Probing-signal parameters set without effect: warning 900047 (seed 004 §8.2.2).
+        startup.extend(param_warnings);
         let channel = Channel::new(ch_cfg.clone(), axes).map_err(MachineError::Config)?;
         let zero_offsets = cfg
             .zero_offsets
@@ -975,6 +983,7 @@ impl Machine {
         exec.sync(&self.channel);
         let mut out = Vec::new();
         let mut ended = false;
+        let mut waited_for_independent = false;
         let status = loop {
             for m in self.channel.take_messages() {
                 emit(RunEvent::Message(m), &mut events);
@@ -1001,6 +1010,25 @@ impl Machine {
                         emit(RunEvent::Message(m), &mut events);
                     }
                     break RunStatus::Aborted;
+                }
+                // The program's end waits for independent motions still running
+                // (`INDP_ASYN`), then takes what they measured.
+                ChannelState::Idle if ended && self.channel.independent_running() => {
+                    waited_for_independent = true;
+                    self.step();
+                    on_cycle(&RunProgress {
+                        block: self.channel.block(),
+                        cycles: self.channel.cycles() - start_cycles,
+                        time: Nanos(self.now.0.saturating_sub(start_time.0)),
+                    });
+                }
+                ChannelState::Idle if ended && waited_for_independent => {
+                    waited_for_independent = false;
+                    if exec.step(&mut self.channel, &mut out) == Step::Abort
+                        && self.channel.state() == ChannelState::Idle
+                    {
+                        self.channel.abort_reported();
+                    }
                 }
                 ChannelState::Idle if ended => {
                     self.channel.program_end();
@@ -1060,8 +1088,13 @@ impl Machine {
     }
 }
 
-/// The channel's view of one axis's parameters (seed units → mm, mm/s, mm/s²).
-pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
+/// The channel's view of one axis's parameters (seed units → mm, mm/s, mm/s²); `probe` is the
+/// axis's probing signal settings resolved from the same list ([`ProbeSettings::from_params`]).
+pub fn channel_axis_config(
+    a: &AxisConfig,
+    probe: &ProbeSettings,
+    cycle: Nanos,
+) -> ChannelAxisConfig {
     let p = &a.params;
     let rotary = is_rotary(p);
     let mm_s2 = |id: &str| p.int(id) as f64;
@@ -1091,10 +1124,9 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
     let a_rapid = mm_s2("P-AXIS-00004");
     let meas = AxisMeasConfig {
         enabled: p.int("P-AXIS-00118") != 0,
-        signal: SignalSource::from_text(p.text("P-AXIS-00516"))
-            .unwrap_or(SignalSource::DriveTypeDefault),
-        input: u8::try_from(p.int("P-AXIS-00517")).unwrap_or(1).max(1),
-        edge: edge_from_text(p.text("P-AXIS-00518")).unwrap_or(ProbeEdge::Positive),
+        signal: probe.signal,
+        input: probe.input,
+        edge: probe.edge,
         trigger_mode: trigger_mode_from_text(p.text("P-AXIS-00702")).unwrap_or_default(),
         stroke: param_pos_to_mm(p.int("P-AXIS-00086")),
         feed_type2: param_vel_to_mm_s(p.int("P-AXIS-00215")),
@@ -1117,6 +1149,13 @@ pub fn channel_axis_config(a: &AxisConfig, cycle: Nanos) -> ChannelAxisConfig {
     };
     ChannelAxisConfig {
         rotary,
+        // P-AXIS-00127 modulou … P-AXIS-00126 moduloo (0.0001°), for a modulo rotary axis.
+        modulo: (rotary && is_modulo(p)).then(|| {
+            (
+                param_pos_to_mm(p.int("P-AXIS-00127")),
+                param_pos_to_mm(p.int("P-AXIS-00126")),
+            )
+        }),
         v_max: param_vel_to_mm_s(p.int("P-AXIS-00212")),
         a_feed: mm_s2("P-AXIS-00001"),
         d_feed: mm_s2("P-AXIS-00002"),
@@ -1233,6 +1272,8 @@ pub struct AxisCheck {
     /// What the user should know that is not a mismatch (a drive without touch probe on an
     /// axis that measures through the CNC), in plain words.
     pub notes: Vec<String>,
+    /// Parameters the axis sets without effect (warning 900047), as the run reports them.
+    pub warnings: Vec<CncMessage>,
 }
 
 /// The timestamp input terminals (EL1252 kind) the machine names, in words for `check`: where
@@ -1289,8 +1330,22 @@ impl Machine {
             };
             let mut findings = Vec::new();
             let p = &a.params;
-            let signal = SignalSource::from_text(p.text("P-AXIS-00516"))
-                .unwrap_or(SignalSource::DriveTypeDefault);
+            // The same resolution as the run's (FCT-C4 §8.2.2: new parameter, else the old).
+            let probe = match ProbeSettings::from_params(p) {
+                Ok(s) => s,
+                Err(e) => {
+                    out.push(AxisCheck {
+                        axis: a.name.clone(),
+                        drive: def.name.clone(),
+                        profile: def.profile.name(),
+                        findings: vec![e],
+                        notes: Vec::new(),
+                        warnings: Vec::new(),
+                    });
+                    continue;
+                }
+            };
+            let signal = probe.signal;
             let measures = p.int("P-AXIS-00118") != 0;
             let link = std::cell::RefCell::new(self.link.as_mut());
             let read = |index: u16, sub: u8| link.borrow_mut().read_object(i, index, sub).ok();
@@ -1335,8 +1390,8 @@ impl Machine {
                 if !mapped(0x60B9) {
                     findings.push("the touch probe status 0x60B9 is not in the TxPDO; the drive latch cannot be read (seed 004 §6.4)".into());
                 }
-                let probe2 = p.int("P-AXIS-00517") == 2;
-                let edge_neg = p.text("P-AXIS-00518").eq_ignore_ascii_case("NEG");
+                let probe2 = probe.input == 2;
+                let edge_neg = probe.edge == ProbeEdge::Negative;
                 let value = match (probe2, edge_neg) {
                     (false, false) => 0x60BA,
                     (false, true) => 0x60BB,
@@ -1361,6 +1416,7 @@ impl Machine {
                 profile: def.profile.name(),
                 findings,
                 notes,
+                warnings: probe.warnings(&a.name),
             });
         }
         out
@@ -1372,13 +1428,12 @@ impl Machine {
 /// drive types (Lightbus, terminal) 1. 0 = not given (input 1).
 fn check_probing_input(
     a: &AxisConfig,
+    probe: &ProbeSettings,
     def: &crate::drive::catalogue::DriveDefinition,
 ) -> Result<(), MachineError> {
     use crate::drive::catalogue::Profile;
-    let p = &a.params;
-    let input = p.int("P-AXIS-00517");
-    let signal =
-        SignalSource::from_text(p.text("P-AXIS-00516")).unwrap_or(SignalSource::DriveTypeDefault);
+    let input = i64::from(probe.input);
+    let signal = probe.signal;
     let max = match signal {
         SignalSource::PlcExtLatchControl => 255,
         SignalSource::ExtProbeWithDrive => 2,
@@ -1388,12 +1443,13 @@ fn check_probing_input(
         },
         _ => return Ok(()),
     };
-    if input == 0 || (1..=max).contains(&input) {
+    if (1..=max).contains(&input) {
         return Ok(());
     }
     Err(MachineError::Config(format!(
-        "axis {}: P-AXIS-00517 kenngr.measure.input = {input} is not allowed for measurement method {} on a {} drive ('{}'); allowed 1 … {max} (seed 004 §8.2.2)",
+        "axis {}: {} = {input} is not allowed for measurement method {} on a {} drive ('{}'); allowed 1 … {max} (seed 004 §8.2.2)",
         a.name,
+        probe.input_origin.words(),
         signal.name(),
         def.profile.name(),
         def.name

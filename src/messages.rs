@@ -187,6 +187,11 @@ pub mod ids {
     /// EXT_PROBE_WITH_DRIVE) on an axis whose drive has no latch (a CiA 402 drive without
     /// touch probe); refused before motion, naming the sources of seed 004 §7 that remain.
     pub const MEAS_NO_DRIVE_LATCH: u32 = 900046;
+    /// Project (warning, at the start of a run and in `check`): a probing-signal parameter the
+    /// machine sets has no effect — an old one (P-AXIS-00113 / 00115 / 00116 / 00257 / 00269 /
+    /// 00330 / 00430 / 00295) beside the new one that replaces it (P-AXIS-00516 / 00517 / 00518,
+    /// seed 004 §8.2.2), or P-AXIS-00117 (no NC-kernel hardware interface here).
+    pub const MEAS_PARAM_UNUSED: u32 = 900047;
     /// Project: CNC position lag monitoring (P-AXIS-00168) tripped.
     pub const LAG_LIMIT: u32 = 900014;
     /// Project: an acyclic drive access (`#DRIVE`, `#IDENT`) failed.

@@ -70,6 +70,9 @@ pub struct Axis {
     aligned: bool,
     /// The drive definition (function table, IDN map), when known.
     definition: Option<std::sync::Arc<DriveDefinition>>,
+    /// Drive position − CNC position (mm / °): the whole modulo ranges the axis was wrapped by
+    /// ([`Axis::wrap_modulo`]).
+    wrap: f64,
 }
 
 impl Axis {
@@ -96,6 +99,7 @@ impl Axis {
             feedback: None,
             aligned: false,
             definition: None,
+            wrap: 0.0,
         }
     }
 
@@ -149,7 +153,7 @@ impl Axis {
                 axis: self.name.clone(),
                 source,
             })?;
-        self.actual = self.scaling.to_units(fb.position);
+        self.actual = self.scaling.to_units(fb.position) - self.wrap;
         self.drive_lag = fb.following_error.map(|fe| self.scaling.delta_to_units(fe));
         if !self.aligned || !fb.operational {
             // Cyclic synchronous position: while the drive does not follow, the target must
@@ -188,13 +192,13 @@ impl Axis {
 
     /// Encode this cycle's command into the output image.
     pub fn write(&mut self, now: Nanos, outputs: &mut [u8]) -> Result<(), AxisError> {
-        let target =
-            self.scaling
-                .to_increments(self.command)
-                .ok_or_else(|| AxisError::OutOfRange {
-                    axis: self.name.clone(),
-                    position: self.command,
-                })?;
+        let target = self
+            .scaling
+            .to_increments(self.command + self.wrap)
+            .ok_or_else(|| AxisError::OutOfRange {
+                axis: self.name.clone(),
+                position: self.command + self.wrap,
+            })?;
         let cmd = DriveCommand {
             enable: self.enable,
             target,
@@ -306,7 +310,36 @@ impl Axis {
     pub fn take_latch(&mut self) -> Option<f64> {
         self.adapter
             .take_probe_event()
-            .map(|e| self.scaling.to_units(e.position))
+            .map(|e| self.scaling.to_units(e.position) - self.wrap)
+    }
+
+    /// A modulo axis at rest: bring its position into `[lower, upper)` by a whole number of
+    /// ranges — command, actual and the commands in flight move together, the drive's own
+    /// position does not (the difference is kept, see [`Axis::modulo_offset`]). Returns the
+    /// shift subtracted (0: already inside, or an empty range).
+    pub fn wrap_modulo(&mut self, lower: f64, upper: f64) -> f64 {
+        let range = upper - lower;
+        if !(range.is_finite() && range > 0.0 && self.command.is_finite()) {
+            return 0.0;
+        }
+        let k = ((self.command - lower) / range).floor();
+        if k == 0.0 || !k.is_finite() {
+            return 0.0;
+        }
+        let shift = k * range;
+        self.command -= shift;
+        self.actual -= shift;
+        for s in &mut self.sent {
+            *s -= shift;
+        }
+        self.wrap += shift;
+        shift
+    }
+
+    /// The drive's position − the CNC's (mm / °): the whole ranges a modulo axis was wrapped
+    /// by ([`Axis::wrap_modulo`]); 0 for every other axis.
+    pub fn modulo_offset(&self) -> f64 {
+        self.wrap
     }
 
     /// Scaling of this axis.

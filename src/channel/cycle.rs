@@ -311,6 +311,8 @@ impl Channel {
                 }
             }
         }
+        // 6. Modulo axes at rest back into their range (the drive targets just written stay).
+        self.wrap_modulo_axes();
     }
 
     /// One cycle of a motion block (path interpolation, measurement, braking after the probing

@@ -185,6 +185,18 @@ impl Channel {
         Prepared::Started
     }
 
+    /// Axis `axis` is moving as an independent axis (an `INDP_SYN` / `INDP_ASYN` motion is still
+    /// running on it).
+    pub fn moving_independently(&self, axis: usize) -> bool {
+        self.indp.get(axis).is_some_and(Option::is_some)
+    }
+
+    /// Some independent motion (`INDP_SYN` or `INDP_ASYN`) is still running: the program's end
+    /// waits for it.
+    pub fn independent_running(&self) -> bool {
+        self.indp.iter().any(Option::is_some)
+    }
+
     /// Some `INDP_SYN` motion is still running.
     pub(super) fn independent_busy(&self) -> bool {
         self.indp.iter().flatten().any(|s| s.sync)

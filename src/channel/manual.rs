@@ -102,6 +102,14 @@ impl ManualState {
         self.jogging() || self.settling > 0
     }
 
+    /// Axis `i` was wrapped by `shift` (a modulo axis at rest): its reference for the relative
+    /// offset limits moves with it.
+    pub(super) fn shift_start(&mut self, i: usize, shift: f64) {
+        if let Some(s) = self.start.get_mut(i) {
+            *s -= shift;
+        }
+    }
+
     /// A jog runs.
     pub(super) fn jogging(&self) -> bool {
         self.jogs.iter().any(Option::is_some)

@@ -189,21 +189,32 @@ impl Channel {
         }
     }
 
-    /// The violation just beyond `from + sign·f` along axis `i`.
+    /// The violation just beyond `from + sign·f` along axis `i`, named at the boundary
+    /// `from + sign·f` itself, as the path check of automatic mode names the first point of a
+    /// violation: the area is found a little further on (10 × the tolerance), the point reported
+    /// is where the permitted travel ends.
     fn beyond(&self, from: &[f64], i: usize, sign: f64, f: f64) -> AreaHit {
-        let mut q = from.to_vec();
-        q[i] += sign * (f + 10.0 * self.areas.monitor.tolerance());
-        self.areas
-            .monitor
-            .check_position(&q)
-            .err()
-            .unwrap_or(AreaHit {
+        let mut boundary = from.to_vec();
+        boundary[i] += sign * f;
+        let mut q = boundary.clone();
+        q[i] += sign * 10.0 * self.areas.monitor.tolerance();
+        match self.areas.monitor.check_position(&q) {
+            Err(mut hit) => {
+                for k in 0..3 {
+                    if let Some(v) = boundary.get(hit.axes[k]) {
+                        hit.point[k] = *v;
+                    }
+                }
+                hit
+            }
+            Ok(()) => AreaHit {
                 kind: HitKind::Workspace,
                 id: None,
                 workspaces: Vec::new(),
                 axes: [i; 3],
-                point: [q[i]; 3],
-            })
+                point: [boundary[i]; 3],
+            },
+        }
     }
 
     /// From the violating position `p`: the distance along axis `i` in direction `sign` (at

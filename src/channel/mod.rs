@@ -23,6 +23,7 @@ mod cycle;
 mod independent;
 pub mod manual;
 pub mod measure;
+mod modulo;
 pub mod power_off;
 mod prep;
 pub mod profile;
@@ -44,6 +45,9 @@ use profile::{Braking, Trapezoid};
 pub struct ChannelAxisConfig {
     /// Rotary axis (P-AXIS-00018).
     pub rotary: bool,
+    /// The modulo range `[lower, upper)` (°) of a rotary axis with ACHSMODE_MODULO
+    /// (P-AXIS-00015; P-AXIS-00127 / 00126): at rest its position is kept inside it.
+    pub modulo: Option<(f64, f64)>,
     /// P-AXIS-00212 maximum axis velocity (mm/s) — also the rapid (G00) velocity.
     pub v_max: f64,
     /// P-AXIS-00001 acceleration at machining feed (mm/s²).

@@ -350,11 +350,14 @@ impl Channel {
         let mut a_acc = f64::INFINITY;
         let mut a_dec = f64::INFINITY;
         let mut v_stroke = f64::INFINITY;
+        // The feed's unit: °/min when only rotary axes move (the path is an angle), else mm/min.
+        let mut only_rotary = true;
         for (i, c) in self.cfg.axes.iter().enumerate() {
             let f = segment.axis_speed_factor(i);
             if f <= 1e-12 {
                 continue;
             }
+            only_rotary &= c.rotary;
             if mtype == MeasType::Type2 {
                 v = c.meas.feed_type2 / f;
             }
@@ -394,10 +397,11 @@ impl Channel {
             }
         }
         if v > v_stroke {
+            let unit = if only_rotary { "°/min" } else { "mm/min" };
             self.push(CncMessage::warning(
                 ids::MEAS_FEED_REDUCED,
                 format!(
-                    "measuring feed reduced from {:.3} to {:.3} mm/min so that braking stays inside the probe stroke (P-AXIS-00086)",
+                    "measuring feed reduced from {:.3} to {:.3} {unit} so that braking stays inside the probe stroke (P-AXIS-00086)",
                     v * 60.0,
                     v_stroke * 60.0
                 ),

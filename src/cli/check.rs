@@ -7,7 +7,8 @@
 //! ```
 //! Exit 0 when nothing was found, 1 when a finding was reported, 2 on bad input. A `note:` line
 //! (a drive without touch probe on an axis that does not measure with it: the sources of
-//! seed 004 §7 that remain) is not a finding.
+//! seed 004 §7 that remain) is not a finding, nor is a `warning 900047:` line (a probing-signal
+//! parameter the axis sets without effect, as `run` reports it at its start).
 
 use super::{load_machine, EXIT_CNC_ERROR, EXIT_OK};
 use fieldprobe::machine::Machine;
@@ -45,6 +46,10 @@ pub fn run(a: CheckArgs) -> anyhow::Result<i32> {
         }
         for n in &axis.notes {
             outln!("  note: {n}");
+        }
+        // A parameter set without effect (900047): said as the run says it, not a finding.
+        for w in &axis.warnings {
+            outln!("  {w}");
         }
     }
     Ok(if findings == 0 {

@@ -772,10 +772,19 @@ pub fn commissioning_check(
         Ok(c) => c,
         Err(e) => return vec![e.to_string()],
     };
-    let signal = axis.text("P-AXIS-00516");
-    if !matches!(signal, "" | "DRIVE" | "DRIVE_TYPE_DEFAULT") {
+    // P-AXIS-00516 / 00517 / 00518, else the old parameters (FCT-C4 §8.2.2): as the run reads
+    // them.
+    let probe = match crate::core::measure::source::ProbeSettings::from_params(axis) {
+        Ok(p) => p,
+        Err(e) => return vec![e],
+    };
+    let signal = probe.signal;
+    if !signal.uses_drive_latch() || signal == crate::core::measure::SignalSource::ExtProbeWithDrive
+    {
         out.push(format!(
-            "P-AXIS-00516 = {signal}: a SERCOS drive measures with P-AXIS-00516 = DRIVE (seed 004 §6.1); the drive's probe settings are not used"
+            "{} = {}: a SERCOS drive measures with P-AXIS-00516 = DRIVE (seed 004 §6.1); the drive's probe settings are not used",
+            probe.signal_origin.id_or("P-AXIS-00516"),
+            signal.name()
         ));
     }
     let rt = effective_rt(&cfg, axis);
@@ -789,13 +798,10 @@ pub fn commissioning_check(
             return out;
         }
     };
-    let probe = axis.int("P-AXIS-00517").clamp(1, 2) as u8;
-    let edge = match axis.text("P-AXIS-00518") {
-        "NEG" => ProbeEdge::Negative,
-        "POS" => ProbeEdge::Positive,
-        _ if axis.int("P-AXIS-00113") != 0 => ProbeEdge::Negative,
-        _ => ProbeEdge::Positive,
-    };
+    let edge = probe.edge;
+    let input_id = probe.input_origin.id_or("P-AXIS-00517");
+    let edge_id = probe.edge_origin.id_or("P-AXIS-00518");
+    let probe = probe.input.clamp(1, 2);
     let what = format!(
         "P-AXIS-00060 = {}{}",
         bits.echtzeit_bit_nr,
@@ -857,11 +863,12 @@ pub fn commissioning_check(
     );
     let want169 = probe_control_value(probe, edge);
     let edge_param = format!(
-        "P-AXIS-00517 = {} (probe {probe}) and P-AXIS-00518 = {}",
-        axis.int("P-AXIS-00517"),
-        match edge {
-            ProbeEdge::Positive => "POS",
-            ProbeEdge::Negative => "NEG",
+        "{input_id} = {} (probe {probe}) and {edge_id} = {}",
+        axis.int(input_id),
+        match (edge_id, edge) {
+            ("P-AXIS-00113", _) => axis.int(edge_id).to_string(),
+            (_, ProbeEdge::Positive) => "POS".into(),
+            (_, ProbeEdge::Negative) => "NEG".into(),
         }
     );
     match drive_idns(idn::PROBE_CONTROL) {

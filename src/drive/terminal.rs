@@ -281,17 +281,14 @@ pub fn check_edge(variant: Variant, edge: ProbeEdge) -> Vec<String> {
     }
 }
 
-/// [`check_edge`] for an axis parameter list: P-AXIS-00518 (`POS` / `NEG`), else the old
-/// P-AXIS-00113 (1 = negative edge), else POS.
+/// [`check_edge`] for an axis parameter list: the edge as the run reads it — P-AXIS-00518
+/// (`POS` / `NEG`), else the old P-AXIS-00113 (1 = negative edge)
+/// ([`ProbeSettings`](crate::core::measure::source::ProbeSettings)).
 pub fn check_axis_params(variant: Variant, axis: &crate::params::ParamSet) -> Vec<String> {
-    let edge = crate::core::measure::edge_from_text(axis.text("P-AXIS-00518")).unwrap_or(
-        if axis.int("P-AXIS-00113") != 0 {
-            ProbeEdge::Negative
-        } else {
-            ProbeEdge::Positive
-        },
-    );
-    check_edge(variant, edge)
+    match crate::core::measure::source::ProbeSettings::from_params(axis) {
+        Ok(p) => check_edge(variant, p.edge),
+        Err(e) => vec![e],
+    }
 }
 
 /// Extends a 16-bit counter to 64 bits (`int16_t` delta method).

@@ -603,6 +603,14 @@ registry_table! {
         "0/1", "----", "Measurement signal from hardware interface (old)", "seed 004 §8.2.4";
     MESSACHSE = "P-AXIS-00118", "kenngr.messachse", Axis, Boolean, di(0), BOOL, "0/1", "----",
         "Define axis as measurement axis", "seed 004 §8.2.2";
+    MODULOO = "P-AXIS-00126", "getriebe[i].moduloo", Axis, Sgn32, di(3_600_000),
+        ri(S32_MIN + 1, S32_MAX), "modulou < moduloo ≤ MAX(SGN32)", "R,S: 0.0001°",
+        "Upper modulo limit (rotary axes with ACHSMODE_MODULO, P-AXIS-00015)",
+        "ISG online parameter docs (not in seeds)";
+    MODULOU = "P-AXIS-00127", "getriebe[i].modulou", Axis, Sgn32, di(0),
+        ri(S32_MIN, S32_MAX - 1), "MIN(SGN32) ≤ modulou < moduloo", "R,S: 0.0001°",
+        "Lower modulo limit (rotary axes with ACHSMODE_MODULO, P-AXIS-00015)",
+        "ISG online parameter docs (not in seeds)";
     OFFSETGRENZE_NEG = "P-AXIS-00137", "handbetrieb.offsetgrenze_neg", Axis, Sgn32, di(-1_000_000),
         ri(S32_MIN, 0), "MIN(SGN32) ≤ offsetgrenze_neg ≤ 0", "T: 0.1µm, R: 0.0001°",
         "Relative negative offset limit in manual mode", "seed 001 §4.3";
@@ -1136,6 +1144,15 @@ impl ParamSet {
                 id::SWE_NEG,
                 &format!("< {}", self.show(id::SWE_POS)),
                 &[id::SWE_POS],
+            ));
+        }
+        // P-AXIS-00127 modulou < P-AXIS-00126 moduloo (ISG axis parameter docs).
+        if self.int(id::MODULOU) >= self.int(id::MODULOO) {
+            return Err(self.cross_error(
+                origin,
+                id::MODULOU,
+                &format!("< {}", self.show(id::MODULOO)),
+                &[id::MODULOO],
             ));
         }
         for limit in [id::ACS_LIMIT_NEG, id::ACS_LIMIT_POS] {

@@ -365,3 +365,52 @@ fn control_unit_set_means_no_limit_and_no_error() {
     assert!(ids(&mut m).is_empty());
     assert!(!m.channel().area_mon_violation_detected_r());
 }
+
+#[test]
+fn a_refused_incremental_step_names_the_boundary_as_automatic_mode_does() {
+    // Issue 27 item 6: the point named is where protection area 4 begins on the step's line —
+    // X = −√(75² − 25²) at Y50 (seed 000 §3.1 circle, centre (0, 75), radius 75) — not a
+    // point 10 tolerances inside it.
+    let point_x = |text: &str| -> f64 {
+        let at = text
+            .find(" at X=")
+            .unwrap_or_else(|| panic!("no point: {text}"))
+            + 6;
+        let end = text[at..].find(' ').map_or(text.len(), |e| at + e);
+        text[at..end].parse().unwrap()
+    };
+    let mut m = machine(PROT, &[]);
+    let ch = m.channel_mut();
+    assert!(ch.enter_manual());
+    assert!(!ch.jog_increment(0, 40.0, 40.0));
+    let msgs = ch.take_messages();
+    assert_eq!(msgs.iter().map(|x| x.id).collect::<Vec<_>>(), vec![900318]);
+    // On the near side of the edge, within the 1 µm band both modes keep from a protection
+    // area (docs/interpretations.md A6) and the 0.1 µm the search resolves.
+    let edge = prot_edge();
+    let near_edge = |x: f64| x <= edge && x >= edge - 1.1e-3;
+    let jog = point_x(&msgs[0].text);
+    assert!(
+        near_edge(jog),
+        "jog names {jog}, edge {edge}: {}",
+        msgs[0].text
+    );
+    // Automatic mode, the same line: 900316 names the same point.
+    let mut m = machine(PROT, &[]);
+    let r = m.run_program(
+        &parse("N10 G01 X-60 F1000\nN20 M30\n").unwrap(),
+        &mut |_| {},
+    );
+    assert_eq!(r.message_ids(), vec![900316], "{:?}", r.messages());
+    let auto = point_x(&r.messages()[0].text);
+    assert!(
+        near_edge(auto),
+        "automatic names {auto}: {}",
+        r.messages()[0].text
+    );
+    assert!(
+        (jog - auto).abs() <= 1e-4,
+        "jog {jog}, automatic {auto}: {}",
+        r.messages()[0].text
+    );
+}

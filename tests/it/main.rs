@@ -98,6 +98,8 @@ mod measure_sources;
 #[cfg(feature = "cli")]
 mod measure_timestamp_terminal;
 #[cfg(feature = "cli")]
+mod measure_old_params;
+#[cfg(feature = "cli")]
 mod measure_without_drive_latch;
 mod measurement_accuracy;
 #[cfg(feature = "cli")]
@@ -110,6 +112,7 @@ mod measurement_frames;
 #[cfg(feature = "cli")]
 mod measurement_sources;
 mod measurement_types;
+mod modulo_axes;
 #[cfg(feature = "sim")]
 mod motion_property;
 mod nc_parse;

@@ -1043,3 +1043,117 @@ fn meas_type_keyword_sets_the_type_as_meas_mode_does() {
     assert!(parse("#MEAS [TYPE=2 EDGE=POS]\n").is_err());
     assert!(parse("#MEAS [TYPE=PLC]\n").is_err());
 }
+
+// ---------------------------------------------------------------------------------------------
+// Issue 27 item 6: V.A.PROG after an interrupted G100, INDP_ASYN beside the path, 900044 units
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn v_a_prog_after_an_interrupted_g100_is_the_target_point_of_the_moffs_identity() {
+    // Seed 004 §5, meas1: probe at Z = 100, `G100 Z20` → "V.A.MOFFS.Z = 80.0", and the table's
+    // identity "MOFFS.X = V.A.MESS.X - V.A.PROG.X - Zero Shifts - Tool Offset" (no shifts, no
+    // tool): V.A.PROG.Z reads the target point 20 although the axis stopped near 100. The next
+    // incremental block starts where the axis stopped; after it V.A.PROG is that block's end.
+    let mut m = machine(&[]);
+    m.add_probe("Z", 100.0).unwrap();
+    let r = run(
+        &mut m,
+        "N05 #MEAS MODE[1]\nN10 G01 G90 Z200 F2000\nN20 G100 Z20 F2000\n\
+         N30 #MSG SYN[\"%f %f %f\", V.A.MESS.Z, V.A.PROG.Z, V.A.MOFFS.Z]\n\
+         N35 #MSG SYN[\"%f\", V.A.ABS.Z]\n\
+         N40 G91 G01 Z10 F1000\nN50 #MSG SYN[\"%f %f\", V.A.ABS.Z, V.A.PROG.Z]\nN60 M30\n",
+    );
+    completed(&r);
+    let out = r.output();
+    assert_eq!(out[0], "100.000000 20.000000 80.000000");
+    let stop: f64 = out[1].parse().unwrap();
+    assert!(stop < 100.0 && stop > 99.0, "stopped at {stop}");
+    let after: Vec<f64> = out[2].split(' ').map(|v| v.parse().unwrap()).collect();
+    close(
+        "G91 Z10 from the stop position",
+        after[0],
+        stop + 10.0,
+        1e-6,
+    );
+    close("V.A.PROG after the next block", after[1], stop + 10.0, 1e-6);
+}
+
+#[test]
+fn an_indp_asyn_axis_goes_on_beside_a_following_path_block() {
+    // Seed 004 §2: "An independent measurement run is also possible in parallel to a path motion
+    // of a G100 measurement run"; P-CHAN-00057: "a measurement travel is also possible with
+    // independent axes". X measures independently (probe at X = 60, looped to X only) while
+    // N20 moves Y on the path: N20 runs and ends while X is still travelling, X latches 60.
+    let mut m = machine(&[]);
+    let px = m.add_probe("X", 60.0).unwrap();
+    wire(&mut m, px, &[X]);
+    let r = run(
+        &mut m,
+        "N10 X[INDP_ASYN G100 G90 POS100 FEED600]\nN20 G01 Y50 F6000\n\
+         N30 #MSG SYN[\"%f %f\", V.A.ABS.X, V.A.ABS.Y]\nN40 M30\n",
+    );
+    completed(&r);
+    let at_n30: Vec<f64> = r.output()[0]
+        .split(' ')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    // Y at its end (50 mm at 100 mm/s: ~0.5 s), X still on its way (10 mm/s: 6 s to X = 60).
+    close("Y after N20", at_n30[1], 50.0, 1e-9);
+    assert!(
+        at_n30[0] > 0.0 && at_n30[0] < 60.0,
+        "X at N30: {}",
+        at_n30[0]
+    );
+    close(
+        "X latched beside the path",
+        r.measurements[X].result.expect("X latched").acs,
+        60.0,
+        LATCH_TOL,
+    );
+    // A path block that programs the moving axis is still refused.
+    let mut m = machine(&[]);
+    let r = run(
+        &mut m,
+        "N10 X[INDP_ASYN G90 POS100 FEED600]\nN20 G01 X50 F6000\nN30 M30\n",
+    );
+    let e = aborted_with(&r, 900001, 20);
+    assert!(e.text.contains("independent"), "{e}");
+}
+
+#[test]
+fn feed_reduction_warning_on_a_rotary_axis_is_in_degrees_per_minute() {
+    // Type 2 on rotary axis A: the feed is P-AXIS-00215 (seed 004 §8.2.2 dimension "R,S:
+    // 0.001°/s"; default 16666 → 999.96 °/min) and the stroke P-AXIS-00086 ("R: 0.0001°"):
+    // 0.01° cannot hold it, so it is reduced with 900044 — in °/min.
+    let toml = "[channel]\nmesstyp = 2\n[[axis]]\nname = \"X\"\n[[axis]]\nname = \"A\"\n\
+                kenngr.achs_typ = \"ACHSTYP_ROTATOR\"\nkenngr.messachse = 1\n\
+                kenngr.hub_messtaster = 100\n";
+    let cfg = MachineConfig::parse(toml, "rot.toml").unwrap();
+    let mut m = Machine::new(&cfg).unwrap();
+    m.add_probe("A", 30.0).unwrap();
+    let r = run(&mut m, "N10 G100 A50\nN20 M30\n");
+    assert_eq!(r.status, RunStatus::Completed, "{:?}", r.messages());
+    let w: Vec<_> = r
+        .messages()
+        .into_iter()
+        .filter(|x| x.id == 900044)
+        .collect();
+    assert_eq!(w.len(), 1, "{:?}", r.messages());
+    assert!(
+        w[0].text.contains("from 999.960 to") && w[0].text.contains("°/min"),
+        "{}",
+        w[0].text
+    );
+    assert!(!w[0].text.contains("mm/min"), "{}", w[0].text);
+    // A linear axis keeps mm/min.
+    let mut m = machine(&["P-CHAN-00057=2", "Z.P-AXIS-00086=100"]);
+    m.add_probe("Z", 30.0).unwrap();
+    let r = run(&mut m, "N10 G100 Z50\nN20 M30\n");
+    let w: Vec<_> = r
+        .messages()
+        .into_iter()
+        .filter(|x| x.id == 900044)
+        .collect();
+    assert_eq!(w.len(), 1, "{:?}", r.messages());
+    assert!(w[0].text.contains("mm/min"), "{}", w[0].text);
+}

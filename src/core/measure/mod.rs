@@ -8,6 +8,7 @@
 //! | fixed-stop detection (type 7) | [`fixed_stop`] |
 //! | a measuring motion without the NC channel (types 1–4): signal, braking, MERF, errors | [`run`] |
 //! | `V.A.MESS`, `MOFFS`, `MEAS.ACS/PCS.VALUE`, G101 / G102 | [`results`] |
+//! | signal source / input / edge from the new or the old parameters (§8.2.2) | [`source`] |
 //!
 //! Everything here is sans-IO: time comes in as [`Nanos`](crate::units::Nanos), positions in
 //! mm / ° (ACS).
@@ -16,6 +17,7 @@ pub mod fixed_stop;
 pub mod plc;
 pub mod results;
 pub mod run;
+pub mod source;
 pub mod timestamp;
 
 use crate::drive::{ProbeEdge, TriggerSourceMode};
@@ -142,10 +144,12 @@ pub const SOURCES_WITHOUT_DRIVE_LATCH: &str = "PLC (the probe input read by the 
      an EL1252 on the EtherCAT segment, §7.5) or PLC_EXT_LATCH_CONTROL (external measuring \
      hardware, §7.4)";
 
-/// Parse P-AXIS-00518 (`POS` / `NEG`; blank = POS).
+/// Parse an edge word of P-AXIS-00518 or `#MEAS [EDGE=..]` (`POS` / `NEG`). A blank
+/// P-AXIS-00518 is "not specified" and takes P-AXIS-00113 ([`source::ProbeSettings`]), so it
+/// is not an edge here.
 pub fn edge_from_text(text: &str) -> Option<ProbeEdge> {
     match text.trim().to_ascii_uppercase().as_str() {
-        "" | "POS" => Some(ProbeEdge::Positive),
+        "POS" => Some(ProbeEdge::Positive),
         "NEG" => Some(ProbeEdge::Negative),
         _ => None,
     }

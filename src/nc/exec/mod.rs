@@ -146,6 +146,12 @@ pub struct Executor {
     overrides: Vec<SignalOverride>,
     params: BTreeMap<u32, f64>,
     pending_meas: Option<PendingMeasurement>,
+    /// The PCS target of the last measuring block, per axis it programmed, until the next
+    /// motion block or frame change: `V.A.PROG` after a G100 the signal interrupted reads the
+    /// target point, as seed 004 §5 "MOFFS = V.A.MESS − V.A.PROG − …" reads it
+    /// (docs/interpretations.md M30); [`Executor::prog`] holds where the axis stopped, the start
+    /// of the next block.
+    meas_target: Vec<Option<f64>>,
     pending_reads: Vec<PendingRead>,
     /// Positions moved by something other than the program (measurement stop, fixed stop):
     /// re-read the programmed positions from the channel before the next block.
@@ -195,6 +201,7 @@ impl Executor {
             overrides: Vec::new(),
             params: BTreeMap::new(),
             pending_meas: None,
+            meas_target: vec![None; n],
             pending_reads: Vec::new(),
             resync: false,
             area_def: None,
@@ -262,9 +269,15 @@ impl Executor {
         &self.modal
     }
 
-    /// Programmed (PCS) position of axis `i` (`V.A.PROG`).
+    /// Programmed (PCS) position of axis `i` (`V.A.PROG`): after a measuring block, the
+    /// block's target point (seed 004 §5: "Measurement offset = measuring point - target
+    /// point", `MOFFS = V.A.MESS − V.A.PROG − …`) until the next motion block or frame change,
+    /// also when the signal stopped the axis short of it; else where the last block took it.
     pub fn programmed(&self, i: usize) -> Option<f64> {
-        self.prog.get(i).copied()
+        match self.meas_target.get(i) {
+            Some(Some(t)) => Some(*t),
+            _ => self.prog.get(i).copied(),
+        }
     }
 
     /// The frames (offsets, MEIN, `#CS`).
@@ -293,6 +306,27 @@ impl Executor {
         self.resync_positions(ch);
     }
 
+    /// A modulo axis the channel wrapped at rest (P-AXIS-00015 ACHSMODE_MODULO): its
+    /// programmed position follows, so the next block starts from the wrapped position.
+    fn resync_modulo(&mut self, ch: &Channel) {
+        let n = self.prog.len();
+        if !(0..n).any(|i| ch.modulo_range(i).is_some()) {
+            return;
+        }
+        let cmd = ch.command_positions();
+        if cmd.len() != n {
+            return;
+        }
+        let mut pcs = vec![0.0; n];
+        self.frames.acs_to_pcs(&cmd, &mut pcs);
+        for (i, p) in pcs.into_iter().enumerate() {
+            if ch.modulo_range(i).is_some() && !ch.moving_independently(i) && p != self.prog[i] {
+                self.prog[i] = p;
+                self.meas_target[i] = None;
+            }
+        }
+    }
+
     fn resync_positions(&mut self, ch: &Channel) {
         let cmd = ch.command_positions();
         if cmd.len() == self.prog.len() {
@@ -307,6 +341,14 @@ impl Executor {
     /// Execute the next block. Call only when the channel is idle.
     pub fn step(&mut self, ch: &mut Channel, events: &mut Vec<Event>) -> Step {
         if self.ended {
+            // What finished after the last block (an `INDP_ASYN` measurement the program end
+            // waited for) is still taken.
+            if let Err(f) = self.collect(ch) {
+                if let Fail::New(m) = f {
+                    ch.report(m);
+                }
+                return Step::Abort;
+            }
             return Step::End;
         }
         if let Some(e) = self.setup_error.clone() {
@@ -382,6 +424,7 @@ impl Executor {
             self.resync = false;
             self.resync_positions(ch);
         }
+        self.resync_modulo(ch);
         Ok(())
     }
 
@@ -623,6 +666,8 @@ impl Executor {
     /// are, so their PCS positions change. Also tells the channel the PCS offset for the PCS
     /// limit display (P-CHAN-00489).
     fn frames_changed(&mut self, ch: &mut Channel) {
+        // A target in the old PCS names no point of the new one.
+        self.meas_target.iter_mut().for_each(|t| *t = None);
         ch.set_frames(&self.frames);
         self.resync_positions(ch);
     }

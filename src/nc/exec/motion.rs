@@ -38,6 +38,16 @@ impl Executor {
         for &(i, _) in axes {
             programmed[i] = true;
         }
+        // An axis still moving as an independent axis (`INDP_ASYN`) that this block does not
+        // program goes on beside the path (FCT-C4 §2: independent axes move "in parallel to a
+        // path motion"): the path leaves it where it is, its programmed position stays the
+        // independent motion's target.
+        let commands = ch.command_positions();
+        for (i, t) in target.iter_mut().enumerate() {
+            if !programmed[i] && ch.moving_independently(i) {
+                *t = commands[i];
+            }
+        }
         let feed = match (self.modal.motion, meas_g) {
             (MotionMode::G0, None) => 0.0,
             // Measurement type 2 travels with P-AXIS-00215 of its axis, not with F (FCT-C4 §3
@@ -80,6 +90,14 @@ impl Executor {
         };
         match ch.start_motion(&req) {
             Prepared::Started => {
+                // V.A.PROG: the target point of a measuring block, until the next motion block.
+                for (t, (p, &programmed)) in self
+                    .meas_target
+                    .iter_mut()
+                    .zip(prog.iter().zip(&programmed))
+                {
+                    *t = (is_meas && programmed).then_some(*p);
+                }
                 if is_meas {
                     for (m, p) in measured.iter_mut().zip(&programmed) {
                         *m |= *p;
@@ -98,6 +116,7 @@ impl Executor {
                 Ok(true)
             }
             Prepared::Empty => {
+                self.meas_target.iter_mut().for_each(|t| *t = None);
                 self.prog = prog;
                 Ok(false)
             }
@@ -238,6 +257,9 @@ impl Executor {
                     });
                     pm.target_pcs[i] = target_pcs;
                     pm.programmed[i] = true;
+                }
+                if let Some(t) = self.meas_target.get_mut(i) {
+                    *t = meas.then_some(target_pcs);
                 }
                 self.prog[i] = target_pcs;
                 Ok(())

@@ -42,7 +42,7 @@ impl VarSource for Vars<'_> {
                 self.exec.frames.acs_to_w(&cmd, &mut w);
                 num(w.get(i).copied().unwrap_or(0.0))
             }
-            ["V", "A", "PROG", ax] => num(self.exec.prog[axis(ax)?]),
+            ["V", "A", "PROG", ax] => num(self.exec.programmed(axis(ax)?).unwrap_or(0.0)),
             ["V", "A", "-SWE", ax] | ["V", "A", "+SWE", ax] => {
                 let i = axis(ax)?;
                 let (neg, pos) = self.ch.soft_limits().active_limits(i).unwrap_or((0.0, 0.0));
