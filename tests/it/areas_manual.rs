@@ -414,3 +414,35 @@ fn a_refused_incremental_step_names_the_boundary_as_automatic_mode_does() {
         r.messages()[0].text
     );
 }
+
+/// Seed 000 §2.3 "a protection area must never be touched by the TCP" and §3.2 (issue 27 item
+/// 3): a jog stopped in front of a protection area leaves the TCP where automatic mode may go
+/// on. Back in automatic mode, a block moving away from the area runs (the path check's 1 µm
+/// band does not hold the stop point), and one moving towards the area is refused (900316).
+#[test]
+fn after_a_jog_stopped_at_a_protection_area_automatic_mode_moves_away() {
+    let mut m = machine(PROT, &["P-MANU-00014=1"]);
+    assert!(m.channel_mut().enter_manual());
+    assert!(m.channel_mut().jog_continuous(0, 40.0));
+    run_jog(&mut m);
+    let stop = x(&m);
+    let edge = prot_edge();
+    assert!(stop < edge, "stopped at {stop}, area from {edge}");
+    m.channel_mut().take_messages();
+    assert!(m.channel_mut().leave_manual());
+
+    let away = parse("N10 G01 G90 X-100 Y50 F5000\nN20 M30\n").unwrap();
+    let r = m.run_program(&away, &mut |_| {});
+    assert_eq!(
+        r.status,
+        RunStatus::Completed,
+        "moving away from {stop}: {:?}",
+        r.message_ids()
+    );
+    assert_eq!(m.channel().command_positions()[..2], [-100.0, 50.0]);
+
+    let toward = parse("N10 G01 G90 X0 Y50 F5000\nN20 M30\n").unwrap();
+    let r = m.run_program(&toward, &mut |_| {});
+    assert_ne!(r.status, RunStatus::Completed);
+    assert!(r.message_ids().contains(&900316), "{:?}", r.message_ids());
+}

@@ -13,10 +13,10 @@ mod common;
 mod area_geom;
 mod areas;
 mod areas_manual;
-#[cfg(feature = "sim")]
-mod areas_plane;
 #[cfg(feature = "cli")]
 mod areas_nc;
+#[cfg(feature = "sim")]
+mod areas_plane;
 #[cfg(feature = "cli")]
 mod can_busload;
 #[cfg(feature = "sim")]
@@ -94,11 +94,11 @@ mod limits;
 #[cfg(feature = "sim")]
 mod lost_cycles;
 mod machine_files;
+#[cfg(feature = "cli")]
+mod measure_old_params;
 mod measure_sources;
 #[cfg(feature = "cli")]
 mod measure_timestamp_terminal;
-#[cfg(feature = "cli")]
-mod measure_old_params;
 #[cfg(feature = "cli")]
 mod measure_without_drive_latch;
 mod measurement_accuracy;
