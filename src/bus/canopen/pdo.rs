@@ -73,6 +73,51 @@ impl Direction {
 /// PDOs per direction of the predefined connection set.
 pub const MAX_PDOS: usize = 4;
 
+/// The 11-bit CAN-IDs CiA 301 §7.3.5 restricts: no PDO (nor SDO, EMCY …) may use them,
+/// because NMT, the default SDO channels, LSS, NMT error control and the reserved ranges do
+/// (the same list as CANopenNode's `CO_IS_RESTRICTED_CAN_ID`). Inclusive ranges.
+pub const RESTRICTED_CAN_IDS: [(u16, u16); 6] = [
+    (0x000, 0x07F),
+    (0x101, 0x180),
+    (0x581, 0x5FF),
+    (0x601, 0x67F),
+    (0x6E0, 0x6FF),
+    (0x701, 0x7FF),
+];
+
+/// The 11-bit CAN-IDs a PDO may use: the complement of [`RESTRICTED_CAN_IDS`], as error
+/// messages name it.
+pub const ALLOWED_PDO_CAN_IDS: &str = "0x080-0x100, 0x181-0x580, 0x600, 0x680-0x6DF or 0x700";
+
+/// Is `id` (11 bit) one of the [`RESTRICTED_CAN_IDS`]?
+pub fn is_restricted_can_id(id: u16) -> bool {
+    RESTRICTED_CAN_IDS
+        .iter()
+        .any(|&(low, high)| (low..=high).contains(&id))
+}
+
+/// Check the value of a PDO COB-ID (sub-index 1 of 0x1400 … 0x15FF / 0x1800 … 0x19FF,
+/// CiA 301 §7.5.2.35 / §7.5.2.37): a PDO that is not valid (bit 31 set) may hold any
+/// identifier; a valid one needs an 11-bit CAN-ID (bit 29 and bits 11 … 28 clear) outside
+/// [`RESTRICTED_CAN_IDS`]. `Err` says why, for a message that adds the allowed range.
+pub fn check_pdo_cob_id(value: u32) -> Result<(), String> {
+    if value & 0x8000_0000 != 0 {
+        return Ok(());
+    }
+    if value & 0x3FFF_F800 != 0 {
+        return Err(format!(
+            "COB-ID {value:#010x} is not an 11-bit CAN-ID (bits 11 ... 29 must be 0)"
+        ));
+    }
+    let id = (value & 0x7FF) as u16;
+    if is_restricted_can_id(id) {
+        return Err(format!(
+            "COB-ID {value:#x}: CAN-ID {id:#05x} is restricted (CiA 301 §7.3.5)"
+        ));
+    }
+    Ok(())
+}
+
 /// One mapped object: `len` bytes at `pdo_offset` in the PDO's data are bytes at
 /// `image_offset` of the drive's image.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

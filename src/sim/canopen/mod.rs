@@ -107,7 +107,9 @@ use std::collections::BTreeMap;
 use self::pdo::{NodePdo, PdoData, Place, Slot, Transmission};
 use crate::bus::canopen::eds::{self, AccessType, Eds};
 use crate::bus::canopen::nmt::{self, Emcy, NmtCommand, NmtState};
-use crate::bus::canopen::pdo::{pack_layout, Direction, Mapped, Pdo, MAX_PDOS};
+use crate::bus::canopen::pdo::{
+    check_pdo_cob_id, pack_layout, Direction, Mapped, Pdo, ALLOWED_PDO_CAN_IDS, MAX_PDOS,
+};
 use crate::bus::canopen::sdo::{ObjectAccess, SdoServer, SDO_RX_BASE};
 use crate::drive::catalogue::DriveDefinition;
 use crate::drive::pdo::{is_touch_probe, PdoLayout};
@@ -545,6 +547,23 @@ impl EmulatedNode {
             // 0x1003.
             if beyond || matches!(index, 0x1018 | 0x1001 | 0x1003) {
                 continue;
+            }
+            // A PDO COB-ID the node would send or listen on must not be a restricted CAN-ID
+            // (CiA 301 §7.3.5): a TPDO on 0x000 would be an NMT command to every node.
+            let comm = (0x1400..=0x15FF).contains(&index) || (0x1800..=0x19FF).contains(&index);
+            if comm && sub == 1 {
+                let cob = e
+                    .value(id)
+                    .and_then(|v| v.as_u64())
+                    .and_then(|v| u32::try_from(v).ok());
+                if let Some(Err(why)) = cob.map(check_pdo_cob_id) {
+                    return Err(format!(
+                        "EDS {}: object {index:#06x}:01 ({}, section at line {}): {why}; a \
+                         valid PDO takes a CAN-ID in {ALLOWED_PDO_CAN_IDS} (bit 31 set: PDO \
+                         not valid)",
+                        eds.file, e.parameter_name, e.line
+                    ));
+                }
             }
             if let Some(m) = model_backed.get(&(index, sub)) {
                 entries.push((*m).clone());

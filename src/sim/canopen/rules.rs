@@ -18,12 +18,14 @@
 //! * sub-index 0 = n > 0 checks entries 1 … n again (0x0604_0041 / 0x0602_0000) and their
 //!   total length: more than 64 bits → 0x0604_0042;
 //! * a COB-ID (sub-index 1 of 0x1400 … 0x15FF, 0x1800 … 0x19FF) that keeps the PDO existing
-//!   but changes its identifier (bits 0 … 29), and a transmission type 241 … 251 (reserved)
-//!   → 0x0609_0030.
+//!   but changes its identifier (bits 0 … 29), a valid COB-ID on a restricted CAN-ID (CiA 301
+//!   §7.3.5, [`crate::bus::canopen::pdo::RESTRICTED_CAN_IDS`]: 0x000, the SDO channels …) or
+//!   with a 29-bit identifier, and a transmission type 241 … 251 (reserved) → 0x0609_0030.
 
 use std::collections::BTreeMap;
 
 use crate::bus::canopen::eds::{self, Eds};
+use crate::bus::canopen::pdo::check_pdo_cob_id;
 use crate::drive::pdo::PdoLayout;
 use crate::sim::esc::coe::{Access, CoeServer, DataType};
 
@@ -169,6 +171,11 @@ impl NodeRules {
         if comm {
             let v = le_u32(data);
             if sub == 1 {
+                // A valid PDO on a restricted CAN-ID (the NMT id 0x000, the SDO channels …,
+                // CiA 301 §7.3.5) or on a 29-bit id the node does not serve.
+                if check_pdo_cob_id(v).is_err() {
+                    return Err(INVALID_VALUE);
+                }
                 let old = read(index, 1).unwrap_or(0x8000_0000);
                 let exists = |c: u32| c & 0x8000_0000 == 0;
                 if exists(v) && exists(old) && (v & 0x3FFF_FFFF) != (old & 0x3FFF_FFFF) {
