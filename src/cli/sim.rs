@@ -239,6 +239,33 @@ enum Hosted {
     Timestamp,
 }
 
+/// Refuse (exit 2) drive `def`, named by `option`, when the emulator of `bus` cannot play it
+/// (`serves`), naming its profile and the built-in drives it can play (`plays` says which
+/// kinds).
+fn refuse_unserved(
+    option: &str,
+    def: &catalogue::DriveDefinition,
+    bus: &str,
+    plays: &str,
+    serves: fn(&catalogue::DriveDefinition) -> bool,
+) -> anyhow::Result<()> {
+    if serves(def) {
+        return Ok(());
+    }
+    let allowed: Vec<&str> = catalogue::builtin_names()
+        .iter()
+        .copied()
+        .filter(|n| catalogue::builtin(n).is_some_and(|d| serves(&d)))
+        .collect();
+    anyhow::bail!(
+        "{option}: drive '{}' is a {} drive, which the {bus} emulator cannot play; it plays \
+         {plays} (allowed: {}, or a drive file of such a drive)",
+        def.name,
+        def.profile.name(),
+        allowed.join(", ")
+    )
+}
+
 fn build_device(
     path: &Path,
     file: &EsiFile,
@@ -306,6 +333,20 @@ fn ethercat(a: EthercatArgs) -> anyhow::Result<i32> {
             drives.insert(pos, drive).is_none(),
             "--drive {spec}: device {pos} already has a drive"
         );
+    }
+    // A drive model this emulator cannot play on EtherCAT (PROFIdrive, Lightbus, the K-bus
+    // KL5101) is refused before anything is built. A drive that does not load is left to
+    // `build_device`, which names the device with the error.
+    for (pos, drive) in &drives {
+        if let Ok(def) = catalogue::load(drive) {
+            refuse_unserved(
+                &format!("--drive {pos}={drive}"),
+                &def,
+                "EtherCAT",
+                "CiA 402 drives (CoE), SERCOS drives (SoE) and EL5101 encoder terminals",
+                |d| fieldprobe::link::ethercat::esi_for(d).is_some(),
+            )?;
+        }
     }
     let mut escs = Vec::new();
     // Type name per ring position, for the event lines.
@@ -729,6 +770,13 @@ fn canopen(a: CanopenArgs) -> anyhow::Result<i32> {
             a.drive
         )
     })?;
+    refuse_unserved(
+        &format!("--drive {}", a.drive),
+        &def,
+        "CANopen",
+        "CiA 402 drives",
+        |d| d.profile == catalogue::Profile::Cia402,
+    )?;
     let eds = match &a.eds {
         None => None,
         Some(p) => Some(super::canopen_od::load_eds(Some("--eds"), p)?),
