@@ -100,6 +100,20 @@ pub enum LinkError {
         /// The code in words.
         text: &'static str,
     },
+    /// The device answered a mailbox request with the mailbox error reply "unsupported
+    /// protocol" (ETG.1000.4 detail 0x0002): it does not speak `protocol` (an SoE access to a
+    /// CoE-only device).
+    #[error("device {device} ({name}): the device does not support {protocol} (it answered with the mailbox error reply {code:#06x}, unsupported protocol)")]
+    Unsupported {
+        /// Device position on the link.
+        device: usize,
+        /// Device name (ESI).
+        name: String,
+        /// The mailbox protocol asked for (`SoE`, `CoE`).
+        protocol: &'static str,
+        /// The mailbox error detail code.
+        code: u16,
+    },
     /// The configuration is refused with a CNC message (its ID and text, e.g. error 900403: a
     /// cycle time the EtherCAT wire cannot carry).
     #[error("{0}")]
@@ -121,10 +135,14 @@ pub enum LinkError {
 }
 
 impl LinkError {
-    /// The device itself refused the access (SDO abort, SoE error): the request reached it and
+    /// The device itself refused the access (SDO abort, SoE error, a mailbox protocol it does
+    /// not support): the request reached it and
     /// was answered, as opposed to a transport, setup or input problem.
     pub fn is_refusal(&self) -> bool {
-        matches!(self, LinkError::Abort { .. } | LinkError::Soe { .. })
+        matches!(
+            self,
+            LinkError::Abort { .. } | LinkError::Soe { .. } | LinkError::Unsupported { .. }
+        )
     }
 }
 

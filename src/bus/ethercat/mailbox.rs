@@ -52,8 +52,8 @@ pub enum MailboxError {
     /// Malformed or unexpected response.
     #[error("protocol: {0}")]
     Protocol(String),
-    /// Mailbox error reply (type 0) with its detail code.
-    #[error("mailbox error reply, detail {0:#06x}")]
+    /// Mailbox error reply (type 0) with its detail code ([`mailbox_error_text`]).
+    #[error("mailbox error reply, detail {0:#06x} ({text})", text = mailbox_error_text(*.0))]
     MailboxErrorReply(u16),
     /// Request does not fit the write mailbox.
     #[error("request does not fit the write mailbox ({0} bytes)")]
@@ -802,6 +802,27 @@ impl CoeClient {
             )));
         }
         Ok(e)
+    }
+}
+
+/// Mailbox error reply detail "unsupported protocol": the device does not speak the mailbox
+/// protocol of the request (ETG.1000.4 mailbox error reply, type 0, service 1).
+pub const UNSUPPORTED_PROTOCOL: u16 = 0x0002;
+
+/// The detail code of a mailbox error reply (ETG.1000.4 mailbox error reply, type 0, service 1;
+/// the codes as SOEM's `MBXERR_*` and the emulator's `sim::esc::coe::mailbox_error` name them)
+/// in words.
+pub fn mailbox_error_text(detail: u16) -> &'static str {
+    match detail {
+        0x0001 => "mailbox syntax error",
+        0x0002 => "unsupported protocol",
+        0x0003 => "invalid channel",
+        0x0004 => "service not supported",
+        0x0005 => "invalid mailbox protocol header",
+        0x0006 => "received data too short",
+        0x0007 => "no more memory",
+        0x0008 => "inconsistent data size",
+        _ => "unknown detail code",
     }
 }
 

@@ -1161,7 +1161,7 @@ impl Session {
             let name = c.read_name(md, 0, idn).await.unwrap_or_default();
             Ok::<_, MailboxError>((v, name))
         });
-        r.map_err(|e| self.named(position, e))
+        r.map_err(|e| self.named_soe(position, e))
     }
 
     /// SoE write of `value` to IDN `idn` (length from its attribute).
@@ -1172,7 +1172,28 @@ impl Session {
             c.timeout = EMULATED_TIMEOUT;
         }
         let md = self.md;
-        drive(&mut self.wire, c.write_value(md, 0, idn, value)).map_err(|e| self.named(position, e))
+        drive(&mut self.wire, c.write_value(md, 0, idn, value))
+            .map_err(|e| self.named_soe(position, e))
+    }
+
+    /// [`Self::named`] for an SoE access: the mailbox error reply "unsupported protocol"
+    /// (0x0002) says the device has no SoE (a CoE-only device), and is said so.
+    fn named_soe(&self, position: usize, e: MailboxError) -> LinkError {
+        match e {
+            MailboxError::MailboxErrorReply(
+                code @ crate::bus::ethercat::mailbox::UNSUPPORTED_PROTOCOL,
+            ) => LinkError::Unsupported {
+                device: position,
+                name: self
+                    .devices
+                    .get(position)
+                    .map_or("?", |d| d.name.as_str())
+                    .to_string(),
+                protocol: "SoE",
+                code,
+            },
+            e => self.named(position, e),
+        }
     }
 }
 
