@@ -216,12 +216,18 @@ impl Executor {
             .function(&key)
             .ok_or_else(|| {
                 let keys: Vec<&str> = def.functions.iter().map(|f| f.key.as_str()).collect();
+                // A definition without a function table (an encoder terminal) has none at all:
+                // say so rather than list nothing (issue 28 item 10).
+                let has = if keys.is_empty() {
+                    "its definition has no drive functions".to_owned()
+                } else {
+                    format!("it has {}", keys.join(", "))
+                };
                 err(
                     ids::ACYCLIC_FAILED,
                     format!(
-                        "#DRIVE: drive '{}' of axis {ax} has no function {key}; it has {}",
-                        def.name,
-                        keys.join(", ")
+                        "#DRIVE: drive '{}' of axis {ax} has no function {key}; {has}",
+                        def.name
                     ),
                 )
             })?
