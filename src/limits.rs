@@ -25,10 +25,19 @@ const MIB: u64 = 1024 * 1024;
 /// 20 MB; hand-written programs are kilobytes.
 pub const MAX_NC_PROGRAM_BYTES: u64 = 32 * MIB;
 
-/// Most NC blocks in one program: 500,000. A parsed program holds ~0.8 KB per block (measured
-/// by `benches/nc_parse.rs`: 788 bytes resident per block of ~31 source characters), so this is
-/// ~400 MB at most.
+/// Most NC blocks in one program: 500,000. A parsed program held ~0.8 KB per block (measured
+/// by `benches/nc_parse.rs`: 788 bytes resident per block of ~31 source characters) before the
+/// items were made smaller and the program shared by its clones (issue 28 item 9: a run of
+/// 500,000 moves peaks at 152 MB), so this is a few hundred MB at most.
 pub const MAX_NC_BLOCKS: usize = 500_000;
+
+/// Longest NC line, and longest block joined from continued lines (`\` at the end, an open
+/// `[`): 65,536 characters. Hand-written and CAM-generated blocks are well below 1,000
+/// characters (a `#MSG SYN` with a long text a few hundred); the lexer holds a line as 12-byte
+/// characters, so without the cap one 32 MiB line (inside [`MAX_NC_PROGRAM_BYTES`]) made the
+/// parser peak near 1 GB. A block that reaches the cap by continuation is most often a `[`
+/// that never closes.
+pub const MAX_NC_LINE_CHARS: usize = 65_536;
 
 /// Largest machine file (TOML): 4 MiB. A 32-axis machine with every parameter set explicitly is
 /// below 1 MB.

@@ -17,8 +17,10 @@ pub struct Span {
 pub struct Program {
     /// The name after `%` on the first line, if any.
     pub name: Option<String>,
-    /// Blocks in source order (empty and comment-only lines are dropped).
-    pub blocks: Vec<Block>,
+    /// Blocks in source order (empty and comment-only lines are dropped). Shared: a clone of
+    /// the program (the executor's, the run's check) does not copy the blocks, so a large
+    /// program is held once (issue 28 item 9).
+    pub blocks: std::sync::Arc<Vec<Block>>,
 }
 
 /// One NC block (one logical line; `\` at the end of a line continues it).
@@ -85,8 +87,9 @@ pub enum Item {
     Independent {
         /// Axis name.
         axis: String,
-        /// The motion.
-        motion: IndependentMotion,
+        /// The motion (boxed: it is the largest item and rare, so every other item stays
+        /// small).
+        motion: Box<IndependentMotion>,
         /// Position of the axis letter.
         span: Span,
     },
@@ -101,8 +104,8 @@ pub enum Item {
     },
     /// A `#` control command.
     Command {
-        /// The command.
-        command: Command,
+        /// The command (boxed, as [`Item::Independent`]'s motion).
+        command: Box<Command>,
         /// Position of the `#`.
         span: Span,
     },
@@ -242,7 +245,10 @@ pub enum Expr {
     Param(u32, Span),
     /// Function call: `ABS[x]`, `SQRT[x]`, `SIN[x]` (degrees), `COS[x]`, `TAN[x]`, `ATAN2[y, x]`,
     /// `INT[x]` (truncate), `ROUND[x]`.
-    Call(String, Vec<Expr>, Span),
+    ///
+    /// Name and arguments are boxed slices (16 bytes each instead of 24), which keeps every
+    /// [`Expr`], and so every axis word, 16 bytes smaller.
+    Call(Box<str>, Box<[Expr]>, Span),
 }
 
 /// Binary operators (`+ - * /`), usual precedence, left associative.

@@ -21,12 +21,16 @@
 //! A `\` followed by more text on its line is not a continuation and stays in the text where it
 //! is; the parser rejects it, except directly in front of `#` (FCT-C4 §4 `N50 \#CS ON[…]`).
 //!
+//! Length: a line, and a block joined from continued lines, may hold at most
+//! [`MAX_NC_LINE_CHARS`] characters; a longer one is an error naming its line.
+//!
 //! Documentation placeholders: a line that consists only of `.`, `…` or `:` characters (the
 //! seeds write `...` and `:` for "more blocks here", e.g. FCT-A2 §3.3, FCT-C14 §4) is skipped
 //! like a blank line.
 
 use super::ast::{Span, VarRef};
 use super::parser::ParseError;
+use crate::limits::MAX_NC_LINE_CHARS;
 
 /// One source character with its position.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -119,6 +123,23 @@ fn split_each(
     for (idx, raw) in src.split('\n').enumerate() {
         let line_no = to_u32(idx + 1);
         let raw = raw.strip_suffix('\r').unwrap_or(raw);
+        // A line longer than the cap is refused before its characters are collected (a
+        // character is at least one byte, so the byte length bounds the count from above).
+        if raw.len() > MAX_NC_LINE_CHARS {
+            let n = raw.chars().count();
+            if n > MAX_NC_LINE_CHARS {
+                return Err(err(
+                    Span {
+                        line: line_no,
+                        col: 1,
+                    },
+                    format!(
+                        "line {line_no} has {n} characters, more than the limit of \
+                         {MAX_NC_LINE_CHARS} characters of one NC line (see docs/limits.md)"
+                    ),
+                ));
+            }
+        }
         let chars: Vec<char> = raw.chars().collect();
         let at = |i: usize| Span {
             line: line_no,
@@ -229,6 +250,19 @@ fn split_each(
                 });
             }
             cur.append(&mut line_out);
+            if cur.len() > MAX_NC_LINE_CHARS {
+                let start = cur.first().map_or(at(0), |c| c.span);
+                return Err(err(
+                    start,
+                    format!(
+                        "the block starting at line {} is longer than the limit of \
+                         {MAX_NC_LINE_CHARS} characters of one NC block when joined with its \
+                         continuation lines up to line {line_no} (is a '[' not closed? see \
+                         docs/limits.md)",
+                        start.line
+                    ),
+                ));
+            }
         }
         cur_end = at(chars.len());
         if !continued {

@@ -110,11 +110,14 @@ type PResult<T> = Result<T, ParseError>;
 const PERCENT_MISPLACED: &str =
     "'%' is only allowed at the start of the first line (program name '%name')";
 
-/// Parse an NC program.
+/// Parse an NC program. A leading UTF-8 byte-order mark (U+FEFF) is skipped.
 ///
 /// Never panics; every error names line, column and what was expected.
 pub fn parse(src: &str) -> Result<Program, ParseError> {
-    let mut program = Program::default();
+    // A UTF-8 byte-order mark that an editor put in front of the first line is not part of
+    // the program (columns of line 1 count from after it).
+    let src = src.strip_prefix('\u{feff}').unwrap_or(src);
+    let mut program = ProgramBuilder::default();
     // Lines are parsed as the lexer completes them, with one line of lookahead (a following
     // line that starts with '[' may supply the bracket of a `#` command that ends this line —
     // module documentation, leniencies). `index` counts logical lines taken so far.
@@ -140,13 +143,23 @@ pub fn parse(src: &str) -> Result<Program, ParseError> {
         take_line(&mut program, &last, None, index)?;
     }
     program.blocks.shrink_to_fit();
-    Ok(program)
+    Ok(Program {
+        name: program.name,
+        blocks: std::sync::Arc::new(program.blocks),
+    })
+}
+
+/// A program while it is parsed (its blocks not yet shared).
+#[derive(Default)]
+struct ProgramBuilder {
+    name: Option<String>,
+    blocks: Vec<Block>,
 }
 
 /// Take logical line number `index` (0-based) into `program`: the `%name` line or one block.
 /// Returns whether `next` was used. Refuses a program of more than [`MAX_NC_BLOCKS`] blocks.
 fn take_line(
-    program: &mut Program,
+    program: &mut ProgramBuilder,
     line: &LogicalLine,
     next: Option<&LogicalLine>,
     index: usize,
@@ -276,7 +289,7 @@ fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PRes
                     let motion = p.independent(&name, sync)?;
                     Item::Independent {
                         axis: name,
-                        motion,
+                        motion: Box::new(motion),
                         span,
                     }
                 } else {
@@ -286,7 +299,7 @@ fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PRes
             }
             '#' => {
                 p.cur.bump();
-                let command = p.command(span)?;
+                let command = Box::new(p.command(span)?);
                 Item::Command { command, span }
             }
             // FCT-C4 §4 `N50 \#CS ON[…]`: a stray '\' in front of a command (PDF extraction).
@@ -294,7 +307,7 @@ fn parse_block<'a>(line: &'a LogicalLine, next: Option<&'a LogicalLine>) -> PRes
                 p.cur.bump();
                 let span = p.cur.span();
                 p.cur.bump();
-                let command = p.command(span)?;
+                let command = Box::new(p.command(span)?);
                 Item::Command { command, span }
             }
             '%' => return Err(ParseError::at(span, PERCENT_MISPLACED)),
@@ -893,6 +906,9 @@ impl BlockParser<'_> {
             ));
         }
         let h = self.grow(span, h + 1)?;
-        Ok((Expr::Call(name, args, span), h))
+        Ok((
+            Expr::Call(name.into_boxed_str(), args.into_boxed_slice(), span),
+            h,
+        ))
     }
 }

@@ -353,11 +353,10 @@ N140 M30\n";
         ]
     );
     // The variable on the continuation line keeps its own position.
-    let Item::Command {
-        command: Command::Msg { args, .. },
-        span,
-    } = &p.blocks[3].items[0]
-    else {
+    let Item::Command { command, span } = &p.blocks[3].items[0] else {
+        panic!()
+    };
+    let Command::Msg { args, .. } = &**command else {
         panic!()
     };
     assert_eq!(*span, sp(5, 5));
@@ -528,22 +527,22 @@ fn seed_004_2_independent_measurement_path() {
         [
             Item::Independent {
                 axis: "X".into(),
-                motion: IndependentMotion {
+                motion: Box::new(IndependentMotion {
                     sync: true,
                     gcodes: vec![100, 90],
                     pos: Expr::Num(100.0),
                     feed: Some(Expr::Num(500.0)),
-                },
+                }),
                 span: sp(3, 5),
             },
             Item::Independent {
                 axis: "Y".into(),
-                motion: IndependentMotion {
+                motion: Box::new(IndependentMotion {
                     sync: true,
                     gcodes: vec![100, 90],
                     pos: Expr::Num(100.0),
                     feed: Some(Expr::Num(1000.0)),
-                },
+                }),
                 span: sp(4, 9),
             },
         ]
@@ -646,9 +645,9 @@ fn seed_004_5_meas1_from_seed() {
     assert_eq!(
         p.blocks[0].items,
         [Item::Command {
-            command: Command::MeasMode {
+            command: Box::new(Command::MeasMode {
                 mode: Some(Expr::Num(1.0))
-            },
+            }),
             span: sp(2, 5)
         }]
     );
@@ -848,7 +847,7 @@ fn seed_004_7_3_2_fixed_stop_canopen() {
     assert_eq!(
         p.blocks[2].items,
         [Item::Command {
-            command: Command::Drive {
+            command: Box::new(Command::Drive {
                 write: true,
                 sync: true,
                 args: vec![
@@ -857,7 +856,7 @@ fn seed_004_7_3_2_fixed_stop_canopen() {
                     key("VAL", n(10.0), sp(5, 43)),
                     key("WAIT", None, sp(5, 50)),
                 ],
-            },
+            }),
             span: sp(5, 6),
         }]
     );
@@ -1614,7 +1613,8 @@ fn evaluation_errors_carry_spans() {
     assert_eq!(e.span, at);
 
     // Hand-built trees: unknown function and wrong arity.
-    let call = |name: &str, n: usize| Expr::Call(name.into(), vec![Expr::Num(1.0); n], sp(2, 9));
+    let call =
+        |name: &str, n: usize| Expr::Call(name.into(), vec![Expr::Num(1.0); n].into(), sp(2, 9));
     let e = eval(&call("FOO", 1), &vars).unwrap_err();
     assert_eq!(
         (e.span, e.message.as_str()),
@@ -1648,7 +1648,7 @@ fn msg_command() {
         sync,
         format: f,
         args,
-    } = command
+    } = &**command
     else {
         panic!("{command:?}")
     };
@@ -1954,15 +1954,15 @@ fn printf_errors_name_the_argument() {
 fn msg_trace(src: &str, vars: &Vars) -> Vec<String> {
     let program = ok(src);
     let mut out = Vec::new();
-    for block in &program.blocks {
+    for block in program.blocks.iter() {
         for item in &block.items {
-            if let Item::Command {
-                command: Command::Msg {
+            if let Item::Command { command, span } = item {
+                let Command::Msg {
                     format: f, args, ..
-                },
-                span,
-            } = item
-            {
+                } = &**command
+                else {
+                    continue;
+                };
                 let values: Vec<Value> = args
                     .iter()
                     .map(|a| eval_at(a, vars, *span).unwrap())
@@ -2080,7 +2080,7 @@ fn parse_and_eval(s: &str) -> Result<(), TestCaseError> {
         Ok(p) => {
             let vars = Vars::new(&[]);
             let mut exprs: Vec<&Expr> = Vec::new();
-            for b in &p.blocks {
+            for b in p.blocks.iter() {
                 for it in &b.items {
                     match it {
                         Item::Axis { value, .. }
@@ -2092,7 +2092,7 @@ fn parse_and_eval(s: &str) -> Result<(), TestCaseError> {
                             exprs.push(&motion.pos);
                             exprs.extend(motion.feed.iter());
                         }
-                        Item::Command { command, .. } => match command {
+                        Item::Command { command, .. } => match &**command {
                             Command::Msg { args, .. } => exprs.extend(args),
                             Command::MeasConfig { args }
                             | Command::MeasPrepare { args }

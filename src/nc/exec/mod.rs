@@ -224,7 +224,7 @@ impl Executor {
         if let Some(e) = &self.setup_error {
             return Err((Span::default(), e.clone()));
         }
-        for b in &self.program.blocks {
+        for b in self.program.blocks.iter() {
             for item in &b.items {
                 match item {
                     Item::Axis { name, span, .. }
@@ -248,10 +248,9 @@ impl Executor {
                             ),
                         ));
                     }
-                    Item::Command {
-                        command: Command::Trafo { .. },
-                        span,
-                    } => {
+                    Item::Command { command, span }
+                        if matches!(**command, Command::Trafo { .. }) =>
+                    {
                         return Err((
                             *span,
                             "#TRAFO (kinematic transformation) is not supported by fieldprobe; measure in 2.5D or with #CS".into(),
@@ -547,14 +546,14 @@ impl Executor {
                     centre[k] = Some(self.num(value, *span, ch)?);
                 }
                 Item::Independent { axis, motion, span } => {
-                    independent.push((axis.clone(), motion.clone(), *span));
+                    independent.push((axis.clone(), (**motion).clone(), *span));
                 }
                 Item::Assign { param, value, span } => {
                     let v = self.num(value, *span, ch)?;
                     self.params.insert(*param, v);
                 }
                 Item::Command { command, span } => {
-                    if let Command::Msg { format, args, .. } = command {
+                    if let Command::Msg { format, args, .. } = &**command {
                         let mut vals = Vec::with_capacity(args.len());
                         for a in args {
                             let src = vars::Vars { exec: self, ch };
