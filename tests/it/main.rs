@@ -128,3 +128,5 @@ mod sii;
 mod sls_messages;
 mod sls_property;
 mod touch_probe;
+#[cfg(feature = "cli")]
+mod validation_gaps;
