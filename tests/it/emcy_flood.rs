@@ -12,7 +12,11 @@ use fieldprobe::units::Nanos;
 
 const PROGRAM: &str = "N10 G01 G90 X100 F3000\nN20 G01 X0 F6000\nN30 M30\n";
 
-fn flooded_run(every: Nanos) -> (RunStatus, Vec<(u32, String)>, Vec<(u32, String)>) {
+/// Messages as (id, text).
+type Lines = Vec<(u32, String)>;
+
+/// The run's status, its messages, and those of the end of the run (power off).
+fn flooded_run(every: Nanos) -> (RunStatus, Lines, Lines) {
     let mut cfg = MachineConfig::default_machine();
     // Three CiA 402 nodes need 4 ms at 1 Mbit/s (docs/canopen.md "Bus load").
     cfg.apply_set("cycle_time_us=4000").unwrap();
