@@ -906,6 +906,7 @@ impl Machine {
         for e in self.link.take_drive_emergencies() {
             self.channel.drive_emergency(e.device, e.code, e.text);
         }
+        self.channel.emergency_summary();
         let mut out = self.channel.take_messages();
         if !on.is_empty() {
             out.push(CncMessage::warning(

@@ -213,6 +213,10 @@ pub mod ids {
     /// over EtherCAT) — warning with the error code in words; the fault itself is handled by
     /// the statusword (900010).
     pub const DRIVE_EMERGENCY: u32 = 900015;
+    /// Project (warning, at the end of a run): a drive sent the same emergency more than once;
+    /// only the first was reported (900015), this one counts them (issue 28 item 8: a flood
+    /// of EMCYs gives one line per axis and code plus this summary, and the cycle goes on).
+    pub const DRIVE_EMERGENCY_SUMMARY: u32 = 900018;
     /// Project: a command position does not fit the drive's INTEGER32 position range.
     pub const DRIVE_RANGE: u32 = 900013;
     /// Project: an exact stop timed out: an axis did not come inside its in-position window

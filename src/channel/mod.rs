@@ -317,7 +317,15 @@ pub struct Channel {
     latch_log: Option<Vec<(Nanos, usize, f64)>>,
     /// Workspace and protection areas (FCT-C14).
     areas: areas::ChannelAreas,
+    /// Drive emergencies of this run by (axis, code): count and the code in words; at most
+    /// [`MAX_EMERGENCY_KINDS`] kinds, the rest counted in `emergencies_other`.
+    emergencies: std::collections::BTreeMap<(usize, u16), (u64, String)>,
+    emergencies_other: u64,
 }
+
+/// Distinct (axis, code) pairs of drive emergencies a channel keeps apart; beyond, they are
+/// only counted (a hostile device cannot grow the table).
+pub const MAX_EMERGENCY_KINDS: usize = 256;
 
 impl Channel {
     /// A channel over the given axes (same order as `cfg.axes`).
@@ -345,6 +353,8 @@ impl Channel {
         Ok(Channel {
             frames,
             areas: areas::ChannelAreas::new(names),
+            emergencies: std::collections::BTreeMap::new(),
+            emergencies_other: 0,
             cfg,
             axes,
             sls,
@@ -616,10 +626,27 @@ impl Channel {
     }
 
     /// A drive's emergency message (EMCY / CoE emergency): warning 900015 naming the axis and
-    /// the code in words. Code 0x0000 ("error reset or no error") is not reported.
+    /// the code in words, once per axis and code in a run; repetitions are counted and
+    /// summed up by [`emergency_summary`](Self::emergency_summary) (a device flooding EMCYs
+    /// gives one line, not one per message, and costs the cycle no more than a count). Code
+    /// 0x0000 ("error reset or no error") is not reported.
     pub fn drive_emergency(&mut self, axis: usize, code: u16, text: &str) {
         if code == 0 {
             return;
+        }
+        let kinds = self.emergencies.len();
+        match self.emergencies.get_mut(&(axis, code)) {
+            Some(e) => {
+                e.0 = e.0.saturating_add(1);
+                return;
+            }
+            None if kinds >= MAX_EMERGENCY_KINDS => {
+                self.emergencies_other = self.emergencies_other.saturating_add(1);
+                return;
+            }
+            None => {
+                self.emergencies.insert((axis, code), (1, text.to_string()));
+            }
         }
         let name = self.axes.get(axis).map_or("?", |a| a.name()).to_string();
         self.push(
@@ -629,6 +656,36 @@ impl Channel {
             )
             .on_axis(&name),
         );
+    }
+
+    /// Warnings 900018 for the emergencies that came more than once since the last summary
+    /// (axis, code, how many in all), then the count starts again.
+    pub fn emergency_summary(&mut self) {
+        let counts = std::mem::take(&mut self.emergencies);
+        for ((axis, code), (n, text)) in counts {
+            if n < 2 {
+                continue;
+            }
+            let name = self.axes.get(axis).map_or("?", |a| a.name()).to_string();
+            self.push(
+                CncMessage::warning(
+                    crate::messages::ids::DRIVE_EMERGENCY_SUMMARY,
+                    format!(
+                        "axis {name}: drive emergency {code:#06x} ({text}) came {n} times in this run; only the first was reported"
+                    ),
+                )
+                .on_axis(&name),
+            );
+        }
+        let other = std::mem::take(&mut self.emergencies_other);
+        if other > 0 {
+            self.push(CncMessage::warning(
+                crate::messages::ids::DRIVE_EMERGENCY_SUMMARY,
+                format!(
+                    "{other} more drive emergencies of further codes in this run (beyond {MAX_EMERGENCY_KINDS} kinds, not reported one by one)"
+                ),
+            ));
+        }
     }
 
     pub(super) fn push(&mut self, m: CncMessage) {

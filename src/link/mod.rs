@@ -240,6 +240,14 @@ pub trait Link: Send {
         None
     }
 
+    /// Fault knob (issue 28 item 8): device `device` sends emergency `code` every `every` of
+    /// its own time from now on, as a drive flooding EMCYs would (`None`: stop). Returns
+    /// whether the link could arrange it (only links with emulated devices can).
+    fn flood_emergencies(&mut self, device: usize, code: u16, every: Option<Nanos>) -> bool {
+        let _ = (device, code, every);
+        false
+    }
+
     /// Fault knob: lose the `n`-th exchange (0-based). Links that cannot inject ignore it.
     fn lose_exchange_at(&mut self, n: u64) {
         let _ = n;

@@ -1144,7 +1144,7 @@ proptest! {
                 prop_assert_eq!(&p.od.objs[&(0x2000, 2)], &data);
             }
             Ok(v) => prop_assert_eq!(v, data),
-            Err(SdoError::Timeout { .. }) | Err(SdoError::Abort { .. }) => {}
+            Err(SdoError::Timeout { .. } | SdoError::TransferTimeout { .. }) | Err(SdoError::Abort { .. }) => {}
             Err(SdoError::Protocol(m)) => {
                 // loss alone never looks like a protocol violation; only the refused
                 // expedited sizes end this way

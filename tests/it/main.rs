@@ -56,6 +56,8 @@ mod ds402;
 #[cfg(feature = "canopen")]
 mod eds;
 #[cfg(feature = "sim")]
+mod emcy_flood;
+#[cfg(feature = "sim")]
 mod esc;
 #[cfg(feature = "sim")]
 mod esc_clock;
@@ -120,6 +122,8 @@ mod params;
 mod path_profile;
 mod profidrive;
 mod run_robustness;
+#[cfg(feature = "canopen")]
+mod sdo_bounds;
 #[cfg(all(feature = "ethercat", feature = "sim"))]
 mod sdo_info_golden;
 mod sercos;

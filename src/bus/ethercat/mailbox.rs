@@ -28,6 +28,13 @@ const SM1_STATUS: u16 = 0x080D;
 /// Mailbox-full bit of a sync manager status register.
 const MBX_FULL: u8 = 0x08;
 
+/// Default bound of one whole mailbox transfer (all its segments or fragments): 10 s. Each
+/// wait has its own bound ([`MailboxTransport::timeout`], 2 s); this one ends a transfer whose
+/// device answers every request in time but never finishes (issue 28 item 1). An EtherCAT
+/// mailbox round trip takes a few ms, so 10 s carries even a 1 MiB object
+/// ([`crate::limits::MAX_MAILBOX_OBJECT_BYTES`]) through a 128-byte mailbox.
+pub const DEFAULT_TRANSFER_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// Errors of the mailbox clients ([`CoeClient`], [`super::soe::SoeClient`]).
 #[derive(Debug, thiserror::Error)]
 pub enum MailboxError {
@@ -46,6 +53,18 @@ pub enum MailboxError {
     /// No (matching) response within the timeout.
     #[error("mailbox timeout after {0:?} ({1})")]
     Timeout(Duration, &'static str),
+    /// A transfer that the device kept answering but never finished within its bound
+    /// ([`CoeClient::transfer_timeout`], [`super::soe::SoeClient::transfer_timeout`];
+    /// issue 28 item 1). For an SDO the client sent abort 0x05040000.
+    #[error("{what} not finished after {after:?} although the device kept answering ({progress})")]
+    TransferTimeout {
+        /// The transfer: "SDO 0x2000:01 upload", "SDO information OD list" …
+        what: String,
+        /// Time since the request.
+        after: Duration,
+        /// What came, and the abort sent, in words.
+        progress: String,
+    },
     /// ethercrab datagram error.
     #[error("datagram: {0}")]
     Datagram(String),
@@ -372,6 +391,9 @@ pub struct CoeClient {
     transport: MailboxTransport,
     /// Bound for each wait (mailbox free, response).
     pub timeout: Duration,
+    /// Bound of one whole transfer, request to last segment or fragment (default
+    /// [`DEFAULT_TRANSFER_TIMEOUT`]).
+    pub transfer_timeout: Duration,
 }
 
 impl CoeClient {
@@ -397,6 +419,7 @@ impl CoeClient {
     pub fn from_transport(transport: MailboxTransport) -> Self {
         Self {
             timeout: transport.timeout,
+            transfer_timeout: DEFAULT_TRANSFER_TIMEOUT,
             transport,
         }
     }
@@ -529,7 +552,14 @@ impl CoeClient {
         if f.data.len() < 4 {
             return Err(MailboxError::Protocol("missing size".into()));
         }
-        let total = u32::from_le_bytes([f.data[0], f.data[1], f.data[2], f.data[3]]) as usize;
+        let start = Instant::now();
+        let announced = u32::from_le_bytes([f.data[0], f.data[1], f.data[2], f.data[3]]) as usize;
+        // Without size indication the byte cap is the bound (CiA 301 0x05040005 beyond it).
+        let total = if size_indicated {
+            announced
+        } else {
+            crate::limits::MAX_MAILBOX_OBJECT_BYTES
+        };
         if total > crate::limits::MAX_MAILBOX_OBJECT_BYTES {
             self.send_abort(md, index, sub, 0x0504_0005).await;
             return Err(MailboxError::ObjectTooLarge {
@@ -538,13 +568,34 @@ impl CoeClient {
             });
         }
         let mut out = f.data[4..].to_vec();
-        if out.len() >= total {
+        if size_indicated && out.len() >= total {
             out.truncate(total);
             return Ok(out);
         }
-        // Segmented upload.
+        // Segmented upload: bounded by the size announced (or the cap) and by
+        // `transfer_timeout` (a device may answer every segment without data and end bit).
         let mut toggle = false;
+        let mut segments = 0u64;
         loop {
+            let after = start.elapsed();
+            if after > self.transfer_timeout {
+                self.send_abort(md, index, sub, 0x0504_0000).await;
+                let size = if size_indicated {
+                    format!("of the {total} bytes announced")
+                } else {
+                    "bytes, no size announced".to_string()
+                };
+                return Err(MailboxError::TransferTimeout {
+                    what: format!("SDO {index:#06x}:{sub:02x} upload"),
+                    after,
+                    progress: format!(
+                        "{segments} segments, {} {size}; sent abort 0x05040000, {}",
+                        out.len(),
+                        abort_text(0x0504_0000)
+                    ),
+                });
+            }
+            segments += 1;
             let mut seg = vec![SdoCommand::UploadSegmentRequest { toggle }.encode()];
             seg.extend_from_slice(&[0; 7]);
             self.send(md, &Self::sdo_body(&seg)).await?;
@@ -576,8 +627,29 @@ impl CoeClient {
             if data.len() <= 7 {
                 data = &data[..data.len().saturating_sub(usize::from(unused))];
             }
+            if out.len() + data.len() > total && !last {
+                // Never more than announced (or than the cap without a size).
+                let code = if size_indicated {
+                    0x0607_0012
+                } else {
+                    0x0504_0005
+                };
+                self.send_abort(md, index, sub, code).await;
+                if !size_indicated {
+                    return Err(MailboxError::ObjectTooLarge {
+                        size: out.len() + data.len(),
+                        limit: total,
+                    });
+                }
+                return Err(MailboxError::Protocol(format!(
+                    "SDO {index:#06x}:{sub:02x} upload: segment {segments} brings {} bytes after {}, {total} announced (sent abort {code:#010x}, {})",
+                    data.len(),
+                    out.len(),
+                    abort_text(code)
+                )));
+            }
             out.extend_from_slice(data);
-            if last || out.len() >= total {
+            if last || (size_indicated && out.len() >= total) {
                 out.truncate(total);
                 return Ok(out);
             }
@@ -703,7 +775,18 @@ impl CoeClient {
             .await
             .map_err(no_sdo_info)?;
         let mut c = sdo_info::FragmentCollector::new(expect);
+        let start = Instant::now();
+        let mut fragments = 0u64;
         loop {
+            let after = start.elapsed();
+            if after > self.transfer_timeout {
+                return Err(MailboxError::TransferTimeout {
+                    what: format!("SDO information {}", what()),
+                    after,
+                    progress: format!("{fragments} fragments"),
+                });
+            }
+            fragments += 1;
             let body = self
                 .tp()
                 .receive(md, MailboxType::Coe, "SDO information response")

@@ -299,6 +299,9 @@ pub struct SoeClient {
     transport: MailboxTransport,
     /// Bound for each wait (mailbox free, each reply or fragment).
     pub timeout: Duration,
+    /// Bound of one whole read, request to last fragment (default
+    /// [`super::mailbox::DEFAULT_TRANSFER_TIMEOUT`]; issue 28 item 1).
+    pub transfer_timeout: Duration,
 }
 
 impl SoeClient {
@@ -313,6 +316,7 @@ impl SoeClient {
     pub fn from_transport(transport: MailboxTransport) -> Self {
         Self {
             timeout: transport.timeout,
+            transfer_timeout: super::mailbox::DEFAULT_TRANSFER_TIMEOUT,
             transport,
         }
     }
@@ -412,7 +416,18 @@ impl SoeClient {
         self.send(md, req, &[]).await?;
         let mut out = Vec::new();
         let mut left: Option<u16> = None;
+        let start = std::time::Instant::now();
+        let mut fragments = 0u64;
         loop {
+            let after = start.elapsed();
+            if after > self.transfer_timeout {
+                return Err(MailboxError::TransferTimeout {
+                    what: format!("SoE read of {} (drive {drive_no})", format_idn(idn)),
+                    after,
+                    progress: format!("{fragments} fragments, {} bytes", out.len()),
+                });
+            }
+            fragments += 1;
             let (h, data) = self
                 .receive(
                     md,

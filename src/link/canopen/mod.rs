@@ -1369,6 +1369,14 @@ impl Link for CanopenLink {
     }
 
     #[cfg(feature = "sim")]
+    fn flood_emergencies(&mut self, device: usize, code: u16, every: Option<Nanos>) -> bool {
+        self.segment_mut()
+            .and_then(|s| s.nodes_mut().get_mut(device))
+            .map(|n| n.flood_emcy(code, every))
+            .is_some()
+    }
+
+    #[cfg(feature = "sim")]
     fn model(&self, device: usize) -> Option<&dyn DriveModel> {
         self.segment()?.nodes().get(device).map(|n| n.model())
     }

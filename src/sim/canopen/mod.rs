@@ -254,6 +254,8 @@ pub struct EmulatedNode {
     outgoing: Vec<CanFrame>,
     syncs: u64,
     sdo_muted: bool,
+    /// Fault knob [`Self::flood_emcy`]: (code, period, last sent).
+    emcy_flood: Option<(u16, Nanos, Option<Nanos>)>,
     fixed_len: BTreeMap<(u16, u8), usize>,
     /// Value ranges and the PDO configuration procedure of SDO downloads ([`rules`]).
     rules: NodeRules,
@@ -698,6 +700,7 @@ impl EmulatedNode {
             outgoing: Vec::new(),
             syncs: 0,
             sdo_muted: false,
+            emcy_flood: None,
             fixed_len,
             rules,
             touch_probe: def.rxpdo.contains(0x60B8, 0),
@@ -831,6 +834,12 @@ impl EmulatedNode {
     /// Fault knob: ignore SDO requests (the client times out).
     pub fn mute_sdo(&mut self, muted: bool) {
         self.sdo_muted = muted;
+    }
+
+    /// Fault knob: send EMCY `code` every `every` (from the next poll on; at most 64 per poll,
+    /// so a late poll cannot burst without bound); `None` stops it.
+    pub fn flood_emcy(&mut self, code: u16, every: Option<Nanos>) {
+        self.emcy_flood = every.map(|e| (code, Nanos(e.0.max(1)), None));
     }
 
     /// SYNC steps made.
@@ -1162,6 +1171,19 @@ impl EmulatedNode {
     /// Time-driven work at `now`: boot-up message, heartbeat, SDO server timeout, EMCY for a new
     /// model fault, the SYNC watch, RPDO deadlines, event-driven TPDOs.
     pub fn poll(&mut self, now: Nanos) {
+        if let Some((code, every, last)) = self.emcy_flood {
+            let mut at = last.unwrap_or(Nanos(now.0.saturating_sub(every.0)));
+            let mut sent = 0;
+            while now.0.saturating_sub(at.0) >= every.0 && sent < 64 {
+                at = Nanos(at.0 + every.0);
+                sent += 1;
+                self.emcy_with(code, 0x01);
+            }
+            if sent == 64 {
+                at = now;
+            }
+            self.emcy_flood = Some((code, every, Some(at)));
+        }
         if self.boot_pending {
             self.boot_pending = false;
             self.outgoing
