@@ -117,6 +117,11 @@
 //! is the detection time — more than 5 × 0x1006 since the last SYNC, or more than the
 //! event-timer since the last RPDO — plus at most one poll. Heartbeat consumer (0x1016) is not
 //! implemented: fieldprobe's master produces no heartbeat, the SYNC and RPDO watches cover it.
+//! The node also takes the 0x6007 reaction when it leaves OPERATIONAL (NMT stop, enter
+//! pre-operational, reset communication) while its drive is still OPERATION ENABLED: no PDO
+//! brings set-points any more (a master that dies between its NMT command and the disable, or
+//! one that never disables); a master that disables first (fieldprobe's end of a run) sees no
+//! reaction. (CiA 402's list of abort connection events is not quoted here: unverified.)
 //!
 //! # NMT reset (CiA 301 §7.3.2.2.1)
 //!
@@ -155,6 +160,9 @@ pub const VENDOR_ID: u32 = 0x0000_0FB0;
 pub const PRODUCT_CODE: u32 = 0x0002_0402;
 /// Default producer heartbeat time (0x1017), ms.
 pub const DEFAULT_HEARTBEAT_MS: u16 = 100;
+/// EMCY / 0x603F code of the abort connection fault when the node leaves OPERATIONAL with its
+/// drive enabled: 0x8100 "communication" (CiA 301 Table 21).
+pub const LEFT_OPERATIONAL_EMCY: u16 = 0x8100;
 /// Default 0x6007 abort connection option code: 1 = fault signal (CiA 402 §8.4.1 default).
 pub const ABORT_CONNECTION_DEFAULT: i16 = 1;
 /// Default 0x605E fault reaction option code: 2 = slow down on quick stop ramp (CiA 402
@@ -1146,7 +1154,8 @@ impl EmulatedNode {
         self.od.model_mut().finish_step(&mut self.inputs);
     }
 
-    fn nmt(&mut self, cmd: NmtCommand) {
+    fn nmt(&mut self, cmd: NmtCommand, now: Nanos) {
+        let was_operational = self.state == NmtState::Operational;
         match cmd {
             // Already started: the PDOs (which cannot change in OPERATIONAL) keep their state.
             NmtCommand::Start if self.state == NmtState::Operational => {}
@@ -1195,6 +1204,16 @@ impl EmulatedNode {
             self.rx.clear();
             self.tx.clear();
         }
+        // Out of OPERATIONAL with the drive still enabled: no PDO brings set-points any more,
+        // the connection to the master is gone (module documentation, "Loss of the master").
+        if was_operational
+            && self.state != NmtState::Operational
+            && self.od.model().state() == crate::drive::PowerState::OperationEnabled
+        {
+            tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
+                "left OPERATIONAL with the drive enabled: abort connection reaction");
+            self.lose_master(LEFT_OPERATIONAL_EMCY, now);
+        }
         // The SYNC watch arms again with the first SYNC in OPERATIONAL, the RPDO deadline
         // monitoring with each RPDO's first reception.
         self.last_sync = None;
@@ -1224,7 +1243,7 @@ impl EmulatedNode {
         if id == nmt::NMT_COB {
             if f.len == 2 && (f.data[1] == 0 || f.data[1] == self.id) {
                 if let Some(cmd) = NmtCommand::from_code(f.data[0]) {
-                    self.nmt(cmd);
+                    self.nmt(cmd, now);
                 }
             }
             return;

@@ -171,6 +171,20 @@ fn reset_node_brings_a_drive_left_enabled_back_to_its_power_on_state() {
 }
 
 #[test]
+fn leaving_operational_with_the_drive_disabled_is_no_reaction_enabled_is_one() {
+    // Disabled first (fieldprobe's end of a run): enter pre-operational changes nothing.
+    let mut b = enabled_then_master_gone(None);
+    b.write(0x6040, 0, &6u16.to_le_bytes()).unwrap();
+    b.nmt(NmtCommand::EnterPreOperational);
+    assert_eq!(b.statusword() & SW_MASK, SW_READY_TO_SWITCH_ON);
+    assert_eq!(b.node().master_lost_at(), None);
+    // Still enabled (a master that died between its NMT command and the disable): FAULT.
+    let mut b = enabled_then_master_gone(None);
+    b.nmt(NmtCommand::Stop);
+    assert_eq!(b.node().model().state(), crate::drive::PowerState::Fault);
+}
+
+#[test]
 fn reset_communication_restores_the_communication_area_and_keeps_the_application() {
     let mut b = enabled_then_master_gone(Some(3));
     b.write(0x6065, 0, &1234u32.to_le_bytes()).unwrap();
@@ -189,10 +203,14 @@ fn reset_communication_restores_the_communication_area_and_keeps_the_application
     // Application area: as the master left it.
     assert_eq!(b.read(0x6007, 0), Ok(3));
     assert_eq!(b.read(0x6065, 0), Ok(1234));
+    // The node left OPERATIONAL with its drive enabled: the abort connection reaction (3,
+    // quick stop) at once.
+    assert_eq!(b.statusword() & SW_MASK, SW_QUICK_STOP_ACTIVE);
+    assert_eq!(b.node().master_lost_at(), Some(Nanos(6_000_000)));
     // The SYNC watch is not armed in PRE-OPERATIONAL: a new master configures and starts the
-    // node; the drive is usable (shutdown, switch on, enable by SDO).
+    // node; the drive is usable (disable voltage, shutdown, switch on, enable by SDO).
     b.at_ms(100);
-    for cw in [6u16, 7, 0xF] {
+    for cw in [0u16, 6, 7, 0xF] {
         b.write(0x6040, 0, &cw.to_le_bytes()).unwrap();
     }
     assert_eq!(b.statusword() & SW_MASK, SW_OPERATION_ENABLED);
