@@ -223,13 +223,17 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
 /// SIGINT and SIGTERM during `run` (issue 28 item 3), through a signalfd read by a thread of
 /// its own (no signal handler, no unsafe code): the first one asks the machine to stop
 /// ([`StopRequest`], error 900018); the run then brakes the axes, disables every drive
-/// ([`Machine::power_off`]) and exits 128 + the signal's number (130 / 143). A second one
-/// exits at once with that code, leaving the drives to their own communication watchdogs.
+/// ([`Machine::power_off`]) and exits 128 + the signal's number (130 / 143). A second one, a
+/// second or more later, exits at once with that code, leaving the drives to their own
+/// communication watchdogs.
 /// A signal during the link's start-up is acted on when the run starts.
 mod stop_signals {
     use fieldprobe::machine::StopRequest;
     use std::sync::atomic::{AtomicI32, Ordering};
     use std::sync::Arc;
+
+    /// A second stop signal this soon after the first counts as the same one.
+    const REPEAT: std::time::Duration = std::time::Duration::from_secs(1);
 
     /// The signal received, if any.
     pub struct Received(Arc<AtomicI32>);
@@ -256,23 +260,32 @@ mod stop_signals {
         let seen = got.clone();
         let spawned = std::thread::Builder::new()
             .name("fieldprobe-signals".into())
-            .spawn(move || loop {
-                let info = match fd.read_signal() {
-                    Ok(Some(info)) => info,
-                    Ok(None) => continue,
-                    // The signalfd failed: nothing more to read.
-                    Err(_) => return,
-                };
-                let signo = info.ssi_signo as i32;
-                let name = Signal::try_from(signo).map_or("a stop signal", Signal::as_str);
-                if seen.swap(signo, Ordering::SeqCst) != 0 {
-                    eprintln!(
-                        "fieldprobe: {name} again: exit without waiting for the drives; they \
+            .spawn(move || {
+                let mut first = None;
+                loop {
+                    let info = match fd.read_signal() {
+                        Ok(Some(info)) => info,
+                        Ok(None) => continue,
+                        // The signalfd failed: nothing more to read.
+                        Err(_) => return,
+                    };
+                    let signo = info.ssi_signo as i32;
+                    let name = Signal::try_from(signo).map_or("a stop signal", Signal::as_str);
+                    // A repeat within a second is the same request reaching the run twice (a
+                    // signal to the process group and one forwarded, as `timeout` does).
+                    if first.is_some_and(|t: std::time::Instant| t.elapsed() < REPEAT) {
+                        continue;
+                    }
+                    if seen.swap(signo, Ordering::SeqCst) != 0 {
+                        eprintln!(
+                            "fieldprobe: {name} again: exit without waiting for the drives; they \
                          stop on their own communication watchdogs"
-                    );
-                    std::process::exit(128 + signo);
+                        );
+                        std::process::exit(128 + signo);
+                    }
+                    first = Some(std::time::Instant::now());
+                    stop.request(name);
                 }
-                stop.request(name);
             });
         if spawned.is_err() {
             let _ = mask.thread_unblock();

@@ -50,7 +50,7 @@ fn run_stopped_by_sigint_sigterm_or_sigkill_leaves_no_drive_enabled_and_the_next
            2>{d}/sim.err & SIM=$!; \
          i=0; while ! grep -q listening {d}/sim.err && [ $i -lt 200 ]; do sleep 0.05; i=$((i+1)); done; \
          for sig in INT TERM KILL; do \
-           timeout 40 {bin} run {d}/long.nc --link {bus} --set cycle_time_us=10000 -q \
+           timeout --foreground 40 {bin} run {d}/long.nc --link {bus} --set cycle_time_us=10000 -q \
              >{d}/run_$sig.out 2>{d}/run_$sig.err & RUN=$!; \
            sleep 2.5; kill -$sig $RUN; wait $RUN; echo $? >{d}/rc_$sig; \
            sleep 0.3; \
