@@ -239,6 +239,33 @@ pub struct Machine {
     terminals: Vec<String>,
     /// Axes whose probe is wired to a timestamp input terminal (`[[terminal]] probe_axis`).
     terminal_probes: Vec<TerminalProbe>,
+    /// A stop asked for from outside the run ([`Machine::set_stop_request`]).
+    stop_request: Option<StopRequest>,
+}
+
+/// A stop asked for from outside a run (`fieldprobe run` on SIGINT / SIGTERM): another thread
+/// [`request`](Self::request)s it with the cause; [`Machine::run_program`] sees it at its next
+/// step and stops as on an error ([`ids::RUN_INTERRUPTED`] with the cause): the axes brake to
+/// a stop, the program ends aborted, and the caller's [`Machine::power_off`] disables the
+/// drives.
+#[derive(Debug, Clone, Default)]
+pub struct StopRequest(std::sync::Arc<std::sync::OnceLock<String>>);
+
+impl StopRequest {
+    /// A request not made yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Ask for the stop, `cause` in words (e.g. "SIGINT"); the first request counts.
+    pub fn request(&self, cause: impl Into<String>) {
+        let _ = self.0.set(cause.into());
+    }
+
+    /// The cause, once requested.
+    pub fn cause(&self) -> Option<&str> {
+        self.0.get().map(String::as_str)
+    }
 }
 
 /// An axis's probe on an input of a timestamp input terminal (`[[terminal]] probe_axis`,
@@ -581,7 +608,13 @@ impl Machine {
             trace: None,
             terminals: cfg.terminals.iter().map(|t| t.name.clone()).collect(),
             terminal_probes,
+            stop_request: None,
         })
+    }
+
+    /// Watch `request` during runs ([`StopRequest`]).
+    pub fn set_stop_request(&mut self, request: StopRequest) {
+        self.stop_request = Some(request);
     }
 
     /// The channel.
@@ -985,7 +1018,20 @@ impl Machine {
         let mut out = Vec::new();
         let mut ended = false;
         let mut waited_for_independent = false;
+        let mut stop_reported = false;
         let status = loop {
+            if !stop_reported {
+                if let Some(cause) = self.stop_request.as_ref().and_then(StopRequest::cause) {
+                    stop_reported = true;
+                    self.channel.report(CncMessage::error(
+                        ids::RUN_INTERRUPTED,
+                        format!(
+                            "stop requested ({cause}): the axes brake to a stop, then every \
+                             drive is disabled"
+                        ),
+                    ));
+                }
+            }
             for m in self.channel.take_messages() {
                 emit(RunEvent::Message(m), &mut events);
             }

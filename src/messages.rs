@@ -234,6 +234,10 @@ pub mod ids {
     /// power stage on after the disable, or the bus did not take the end state (CANopen nodes
     /// not pre-operational). Warning; names the axes or nodes.
     pub const POWER_OFF: u32 = 900017;
+    /// Project: the run was told to stop from outside (`fieldprobe run` got SIGINT or
+    /// SIGTERM): the axes brake to a stop, every drive is disabled and the bus brought to its
+    /// end state as at the end of any run, then the command exits 130 / 143 (128 + signal).
+    pub const RUN_INTERRUPTED: u32 = 900018;
 
     /// FCT-C14 §3.4 notice: CLEAR of an active workspace / protection area (warning; the area
     /// stays active).

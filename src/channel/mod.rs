@@ -332,7 +332,13 @@ impl Channel {
     ///
     /// # Errors
     /// When the number of axes and configurations differ.
-    pub fn new(cfg: ChannelConfig, axes: Vec<Axis>) -> Result<Self, String> {
+    pub fn new(cfg: ChannelConfig, mut axes: Vec<Axis>) -> Result<Self, String> {
+        // The channel starts enabling, as after a program start: a drive that is in FAULT
+        // (left so by a master that died, issue 28 item 4) gets its fault reset like at every
+        // later program start ([`Channel::program_start`]).
+        for a in &mut axes {
+            a.set_fault_reset(true);
+        }
         if cfg.axes.len() != axes.len() {
             return Err(format!(
                 "channel has {} axis configurations but {} axes",

@@ -3,7 +3,7 @@
 use super::progress::Progress;
 use super::{load_machine, load_program, LinkArgs, EXIT_BAD_INPUT, EXIT_CNC_ERROR, EXIT_OK};
 use anyhow::Context;
-use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus};
+use fieldprobe::machine::{Machine, RunEvent, RunReport, RunStatus, StopRequest};
 use fieldprobe::nc::exec::Executor;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -74,7 +74,12 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         eprintln!("fieldprobe: {e}");
         return Ok(EXIT_BAD_INPUT);
     }
+    // SIGINT / SIGTERM from here on: the run stops its axes and disables the drives first
+    // (before the link starts threads, which inherit the blocked signals).
+    let stop = StopRequest::new();
+    let signal = stop_signals::watch(stop.clone());
     let mut machine = Machine::with_link(&cfg, &choice)?;
+    machine.set_stop_request(stop.clone());
     // The bus as it came up (EtherCAT segment, SubDevices not named, wire time per cycle): on
     // stderr for a real bus and for a machine that names terminals; the emulator's default
     // segment of axes only is logged (FIELDPROBE_LOG=info), not printed. A warning (a device
@@ -151,8 +156,21 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
     // The end of the run, completed or aborted: drives disabled (CiA 402 shutdown), CANopen
     // nodes to pre-operational (docs/canopen.md "The end of a run"); what could not be
     // confirmed is a warning.
-    for m in machine.power_off() {
+    let off = machine.power_off();
+    for m in &off {
         eprintln!("{m}");
+    }
+    if let Some(cause) = stop.cause() {
+        if off
+            .iter()
+            .any(|m| m.id == fieldprobe::messages::ids::POWER_OFF)
+        {
+            eprintln!(
+                "fieldprobe: {cause}: axes stopped; the drives could not all be confirmed disabled"
+            );
+        } else {
+            eprintln!("fieldprobe: {cause}: axes stopped, every drive disabled");
+        }
     }
     // A capture (--pcap, --candump) that could not be written all through: an error of the
     // command (not 0), reported now that the axes stopped.
@@ -192,10 +210,94 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
         v["cycle"] = serde_json::to_value(machine.cycle_summary())?;
         outln!("{}", serde_json::to_string_pretty(v)?);
     }
+    if let Some(signo) = signal.as_ref().and_then(stop_signals::Received::signal) {
+        // As a shell reports a command ended by the signal: 128 + its number.
+        return Ok(128 + signo);
+    }
     Ok(match report.status {
         RunStatus::Completed => EXIT_OK,
         RunStatus::Aborted => EXIT_CNC_ERROR,
     })
+}
+
+/// SIGINT and SIGTERM during `run` (issue 28 item 3), through a signalfd read by a thread of
+/// its own (no signal handler, no unsafe code): the first one asks the machine to stop
+/// ([`StopRequest`], error 900018); the run then brakes the axes, disables every drive
+/// ([`Machine::power_off`]) and exits 128 + the signal's number (130 / 143). A second one, a
+/// second or more later, exits at once with that code, leaving the drives to their own
+/// communication watchdogs.
+/// A signal during the link's start-up is acted on when the run starts.
+mod stop_signals {
+    use fieldprobe::machine::StopRequest;
+    use std::sync::atomic::{AtomicI32, Ordering};
+    use std::sync::Arc;
+
+    /// A second stop signal this soon after the first counts as the same one.
+    const REPEAT: std::time::Duration = std::time::Duration::from_secs(1);
+
+    /// The signal received, if any.
+    pub struct Received(Arc<AtomicI32>);
+
+    impl Received {
+        /// The number of the first stop signal received.
+        pub fn signal(&self) -> Option<i32> {
+            Some(self.0.load(Ordering::SeqCst)).filter(|&s| s != 0)
+        }
+    }
+
+    /// Block SIGINT and SIGTERM in this thread (threads started later inherit it) and read
+    /// them in a thread; `None` (the signals keep their default action) if that fails.
+    #[cfg(target_os = "linux")]
+    pub fn watch(stop: StopRequest) -> Option<Received> {
+        use nix::sys::signal::{SigSet, Signal};
+        use nix::sys::signalfd::{SfdFlags, SignalFd};
+        let mut mask = SigSet::empty();
+        mask.add(Signal::SIGTERM);
+        mask.add(Signal::SIGINT);
+        let fd = SignalFd::with_flags(&mask, SfdFlags::SFD_CLOEXEC).ok()?;
+        mask.thread_block().ok()?;
+        let got = Arc::new(AtomicI32::new(0));
+        let seen = got.clone();
+        let spawned = std::thread::Builder::new()
+            .name("fieldprobe-signals".into())
+            .spawn(move || {
+                let mut first = None;
+                loop {
+                    let info = match fd.read_signal() {
+                        Ok(Some(info)) => info,
+                        Ok(None) => continue,
+                        // The signalfd failed: nothing more to read.
+                        Err(_) => return,
+                    };
+                    let signo = info.ssi_signo as i32;
+                    let name = Signal::try_from(signo).map_or("a stop signal", Signal::as_str);
+                    // A repeat within a second is the same request reaching the run twice (a
+                    // signal to the process group and one forwarded, as `timeout` does).
+                    if first.is_some_and(|t: std::time::Instant| t.elapsed() < REPEAT) {
+                        continue;
+                    }
+                    if seen.swap(signo, Ordering::SeqCst) != 0 {
+                        eprintln!(
+                            "fieldprobe: {name} again: exit without waiting for the drives; they \
+                         stop on their own communication watchdogs"
+                        );
+                        std::process::exit(128 + signo);
+                    }
+                    first = Some(std::time::Instant::now());
+                    stop.request(name);
+                }
+            });
+        if spawned.is_err() {
+            let _ = mask.thread_unblock();
+            return None;
+        }
+        Some(Received(got))
+    }
+
+    #[cfg(not(target_os = "linux"))]
+    pub fn watch(_stop: StopRequest) -> Option<Received> {
+        None
+    }
 }
 
 fn report_json(name: &Option<String>, r: &RunReport, m: &Machine) -> serde_json::Value {

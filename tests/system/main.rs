@@ -61,6 +61,8 @@ mod rt_options;
 #[cfg(feature = "cli")]
 mod run_end_state;
 #[cfg(feature = "cli")]
+mod run_signals_canopen;
+#[cfg(feature = "cli")]
 mod serve_sessions;
 #[cfg(feature = "cli")]
 mod socketcan;

@@ -112,6 +112,12 @@ pub trait DriveModel: Send + fmt::Debug {
     fn settle(&mut self) {}
     /// Force a drive fault with this error code.
     fn inject_fault(&mut self, code: u16);
+    /// Force a drive fault with this error code now, between two cycles (the drive's reaction
+    /// to a lost master on its own clock, when no cycle comes). Default: [`Self::inject_fault`]
+    /// (the profile faults at its next cycle).
+    fn fault_now(&mut self, code: u16) {
+        self.inject_fault(code)
+    }
     /// Acyclic read.
     fn read_object(&self, index: u16, sub: u8) -> Result<i64, u32>;
     /// Acyclic write.
@@ -161,6 +167,9 @@ impl DriveModel for ds402::Ds402Model {
     }
     fn inject_fault(&mut self, code: u16) {
         ds402::Ds402Model::inject_fault(self, code)
+    }
+    fn fault_now(&mut self, code: u16) {
+        ds402::Ds402Model::fault_now(self, code)
     }
     fn read_object(&self, index: u16, sub: u8) -> Result<i64, u32> {
         ds402::Ds402Model::read_object(self, index, sub)

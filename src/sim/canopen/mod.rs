@@ -76,10 +76,10 @@
 //! `now` of [`EmulatedNode::poll`]), from the first SYNC after NMT start: no SYNC for longer than
 //! [`SYNC_TIMEOUT_PERIODS`] × 0x1006 sends EMCY [`SYNC_TIMEOUT_EMCY`] (0x8100 "communication",
 //! error register 0x11 = generic + communication; the code CANopenNode reports for its SYNC
-//! time-out, CiA 301 table 21) once per outage, and the CiA 402 drive faults (0x603F = 0x8100):
-//! it stops following its set-points (FAULT REACTION ACTIVE, then FAULT; the position holds) and
-//! stays in FAULT until the usual fault reset (controlword bit 7 rising edge), after the SYNC
-//! came back. CANopenNode times out at 1.5 × 0x1006; five periods here match fieldprobe's
+//! time-out, CiA 301 table 21) once per outage, and the CiA 402 drive takes its reaction to the
+//! loss of the master at once ("Loss of the master" below; by default FAULT with 0x603F =
+//! 0x8100: it stops following its set-points, the position holds) and stays in FAULT until
+//! the usual fault reset (controlword bit 7 rising edge). CANopenNode times out at 1.5 × 0x1006; five periods here match fieldprobe's
 //! master, which rides through up to three missed deadlines by default (a SYNC gap under 4.5
 //! periods) and reports a longer stall as error 900012 ([`crate::link::canopen::paced`]), so
 //! the emulated drives stop exactly when the master gives up. On `canopen-emu` the nodes' `now`
@@ -100,6 +100,38 @@
 //! master sets the event-timer to five cycles, rounded up to whole ms
 //! ([`crate::link::canopen::paced::rpdo_event_timer_ms`]). Reset communication sets it back
 //! to 0, as all communication parameters.
+//!
+//! # Loss of the master (issue 28; CiA 402 0x6007, 0x605E)
+//!
+//! A SYNC time-out or an RPDO time-out is the loss of the master. The node reacts at once, on
+//! its own clock — the `now` of [`EmulatedNode::poll`], which `sim canopen` calls every
+//! millisecond whether or not a frame came — without waiting for a SYNC (a crashed master
+//! sends none), as its **0x6007 abort connection option code** (INTEGER16, read-write,
+//! default 1) says: 0 no action (the EMCY still goes out); 1 fault signal: the drive goes to
+//! FAULT now ([`crate::drive::model::DriveModel::fault_now`]; 0x603F = the EMCY code); 2
+//! *disable voltage*: SWITCH ON DISABLED; 3 *quick stop*: QUICK STOP ACTIVE; manufacturer
+//! codes (< 0) and reserved ones fault as 1. The RPDO image gets the reaction's controlword,
+//! so a late SYNC with stale data does not enable the drive again. **0x605E fault reaction
+//! option code** (INTEGER16, default 2) is kept for the master to read and write; the model's
+//! drive holds its position at once whatever it says (it has no ramp model). The reaction time
+//! is the detection time — more than 5 × 0x1006 since the last SYNC, or more than the
+//! event-timer since the last RPDO — plus at most one poll. Heartbeat consumer (0x1016) is not
+//! implemented: fieldprobe's master produces no heartbeat, the SYNC and RPDO watches cover it.
+//! The node also takes the 0x6007 reaction when it leaves OPERATIONAL (NMT stop, enter
+//! pre-operational, reset communication) while its drive is still OPERATION ENABLED: no PDO
+//! brings set-points any more (a master that dies between its NMT command and the disable, or
+//! one that never disables); a master that disables first (fieldprobe's end of a run) sees no
+//! reaction. (CiA 402's list of abort connection events is not quoted here: unverified.)
+//!
+//! # NMT reset (CiA 301 §7.3.2.2.1)
+//!
+//! **Reset node** restarts the application: a new drive model with its power-on values (SWITCH
+//! ON DISABLED 0x0250, no fault, 0x6007 / 0x605E and every model object at their defaults, the
+//! axis where it stands), the writable application objects (0x2000 …) back to their boot
+//! values, the error history cleared — then reset communication. **Reset communication**
+//! restores the communication area 0x1000 … 0x1FFF (PDOs, 0x1006, 0x1007, 0x1017 …), ends an
+//! SDO transfer in progress and sends the boot-up message; the application (the drive's state
+//! and objects) stays as it is.
 
 use crate::bus::can::CanFrame;
 use std::collections::BTreeMap;
@@ -130,6 +162,18 @@ pub const VENDOR_ID: u32 = 0x0000_0FB0;
 pub const PRODUCT_CODE: u32 = 0x0002_0402;
 /// Default producer heartbeat time (0x1017), ms.
 pub const DEFAULT_HEARTBEAT_MS: u16 = 100;
+/// EMCY / 0x603F code of the abort connection fault when the node leaves OPERATIONAL with its
+/// drive enabled: 0x8100 "communication" (CiA 301 Table 21).
+pub const LEFT_OPERATIONAL_EMCY: u16 = 0x8100;
+/// Default 0x6007 abort connection option code: 1 = fault signal (CiA 402 §8.4.1 default).
+pub const ABORT_CONNECTION_DEFAULT: i16 = 1;
+/// Default 0x605E fault reaction option code: 2 = slow down on quick stop ramp (CiA 402
+/// default). The model's drive holds its position at once whatever it says.
+pub const FAULT_REACTION_DEFAULT: i16 = 2;
+/// Controlword *disable voltage* (CiA 402 §6.3).
+const CONTROLWORD_DISABLE_VOLTAGE: u16 = 0x0000;
+/// Controlword *quick stop* (CiA 402 §6.3).
+const CONTROLWORD_QUICK_STOP: u16 = 0x0002;
 /// The SYNC watch fires after more than this many communication cycle periods (0x1006)
 /// without a SYNC (the tolerance the master assumes too).
 pub use crate::bus::canopen::nmt::SYNC_TIMEOUT_PERIODS;
@@ -276,6 +320,13 @@ pub struct EmulatedNode {
     /// 0x1007, 0x1017, the PDO parameters …), restored by NMT reset communication:
     /// (index, sub-index, value).
     comm_defaults: Vec<(u16, u8, Vec<u8>)>,
+    /// The writable objects of the application area (0x2000 … 0xFFFF) that the drive model
+    /// does not back, as built; restored with a new drive model by NMT reset node.
+    app_defaults: Vec<(u16, u8, Vec<u8>)>,
+    /// The drive definition, for the power-on drive model of NMT reset node.
+    def: DriveDefinition,
+    /// When the node last reacted to the loss of its master (SYNC or RPDO time-out).
+    master_lost_at: Option<Nanos>,
 }
 
 fn u32_entry(index: u16, sub: u8, v: u32) -> ObjectEntry {
@@ -289,6 +340,13 @@ fn u16_entry(index: u16, sub: u8, v: u16) -> ObjectEntry {
     ObjectEntry {
         access: Access::Rw,
         ..ObjectEntry::constant(index, sub, DataType::U16, i64::from(v))
+    }
+}
+
+fn i16_entry(index: u16, sub: u8, v: i16) -> ObjectEntry {
+    ObjectEntry {
+        access: Access::Rw,
+        ..ObjectEntry::constant(index, sub, DataType::I16, i64::from(v))
     }
 }
 
@@ -460,6 +518,10 @@ impl EmulatedNode {
             // CiA 301 communication cycle period and synchronous window length, µs (0 = none).
             u32_entry(0x1006, 0, 0),
             u32_entry(0x1007, 0, 0),
+            // CiA 402 abort connection option code and fault reaction option code (module
+            // documentation, "Loss of the master").
+            i16_entry(0x6007, 0, ABORT_CONNECTION_DEFAULT),
+            i16_entry(0x605E, 0, FAULT_REACTION_DEFAULT),
             // CiA 301 §7.5.2.33 SDO server parameter of the default SDO (read-only): COB-IDs
             // client → server and server → client.
             ObjectEntry::constant(0x1200, 0, DataType::U8, 2),
@@ -681,6 +743,12 @@ impl EmulatedNode {
             .filter(|e| e.index != 0x1003)
             .filter_map(|e| Some((e.index, e.sub, e.data.clone()?)))
             .collect();
+        let app_defaults = od
+            .entries()
+            .iter()
+            .filter(|e| e.index >= 0x2000 && e.access != Access::Ro)
+            .filter_map(|e| Some((e.index, e.sub, e.data.clone()?)))
+            .collect();
         Ok(EmulatedNode {
             id,
             state: NmtState::BootUp,
@@ -712,6 +780,9 @@ impl EmulatedNode {
             rpdo_lost: [false; MAX_PDOS],
             rpdo_timeouts: 0,
             comm_defaults,
+            app_defaults,
+            def: def.clone(),
+            master_lost_at: None,
         })
     }
 
@@ -779,7 +850,85 @@ impl EmulatedNode {
         tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
             "no SYNC for {} µs (0x1006 = {us} µs): EMCY 0x8100, drive fault",
             now.0.saturating_sub(last.0) / 1000);
-        self.od.model_mut().inject_fault(SYNC_TIMEOUT_EMCY);
+        self.lose_master(SYNC_TIMEOUT_EMCY, now);
+    }
+
+    /// 0x6007 abort connection option code (INTEGER16; [`ABORT_CONNECTION_DEFAULT`] when the
+    /// dictionary lacks it, e.g. an EDS without it).
+    pub fn abort_connection_option(&self) -> i16 {
+        self.od
+            .read_with(0x6007, 0, |b| match b {
+                [lo, hi, ..] => i16::from_le_bytes([*lo, *hi]),
+                _ => ABORT_CONNECTION_DEFAULT,
+            })
+            .unwrap_or(ABORT_CONNECTION_DEFAULT)
+    }
+
+    /// When the node last reacted to the loss of its master (a SYNC or RPDO time-out, module
+    /// documentation "Loss of the master"), on its own clock.
+    pub fn master_lost_at(&self) -> Option<Nanos> {
+        self.master_lost_at
+    }
+
+    /// The master is lost (a SYNC or RPDO time-out with `code` at `now`): the CiA 402 drive
+    /// takes the reaction 0x6007 says, now, on the node's own clock — no SYNC needed (module
+    /// documentation, "Loss of the master"). The RPDO image gets the controlword of that
+    /// reaction too, so a late SYNC with the old image does not enable the drive again.
+    fn lose_master(&mut self, code: u16, now: Nanos) {
+        self.master_lost_at = Some(now);
+        let option = self.abort_connection_option();
+        let controlword = match option {
+            0 => return,
+            2 => CONTROLWORD_DISABLE_VOLTAGE,
+            3 => CONTROLWORD_QUICK_STOP,
+            // 1 fault signal; manufacturer-specific (< 0) and reserved codes fault too.
+            _ => {
+                self.od.model_mut().fault_now(code);
+                CONTROLWORD_DISABLE_VOLTAGE
+            }
+        };
+        if let Some(e) = self.model_rx.find(0x6040, 0) {
+            let _ = e.write(&mut self.outputs, i64::from(controlword));
+        }
+        if matches!(option, 2 | 3) {
+            let _ = self
+                .od
+                .model_mut()
+                .write_object(0x6040, 0, i64::from(controlword));
+        }
+        self.acted(true);
+    }
+
+    /// NMT reset node, the application part (CiA 301 §7.3.2.2.1): the drive restarts with its
+    /// power-on values (a new model of the drive definition, SWITCH ON DISABLED, no fault, the
+    /// RPDO image of a drive just powered up); the axis stays where it is (the mechanics do
+    /// not move with a reset). The application objects the model does not back go back to
+    /// their boot defaults.
+    fn reset_application(&mut self) {
+        let actual = self.od.model().actual();
+        let mut model = match crate::drive::model::for_definition(&self.def) {
+            Ok(m) => m,
+            Err(e) => {
+                // The definition built a model at start-up, so this does not happen; if it
+                // did, the old model stays rather than the node failing.
+                tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id, "reset node: {e}");
+                return;
+            }
+        };
+        model.set_actual(actual);
+        model.settle();
+        self.outputs.iter_mut().for_each(|b| *b = 0);
+        for e in self.model_rx.entries() {
+            if let Ok(v) = model.read_object(e.index, e.sub) {
+                let _ = e.write(&mut self.outputs, e.ty.saturate(v));
+            }
+        }
+        model.finish_step(&mut self.inputs);
+        self.od.replace_model(model);
+        for (index, sub, data) in self.app_defaults.clone() {
+            let _ = self.od.write(index, sub, &data);
+        }
+        self.master_lost_at = None;
     }
 
     /// Read `index:sub` from the object dictionary as an SDO upload would (bytes, or the
@@ -1033,7 +1182,8 @@ impl EmulatedNode {
         self.od.model_mut().finish_step(&mut self.inputs);
     }
 
-    fn nmt(&mut self, cmd: NmtCommand) {
+    fn nmt(&mut self, cmd: NmtCommand, now: Nanos) {
+        let was_operational = self.state == NmtState::Operational;
         match cmd {
             // Already started: the PDOs (which cannot change in OPERATIONAL) keep their state.
             NmtCommand::Start if self.state == NmtState::Operational => {}
@@ -1059,7 +1209,9 @@ impl EmulatedNode {
             NmtCommand::EnterPreOperational => self.state = NmtState::PreOperational,
             NmtCommand::ResetNode | NmtCommand::ResetCommunication => {
                 if cmd == NmtCommand::ResetNode {
-                    // The application restarts: its error history with it.
+                    // The application restarts (the drive with its power-on values), its
+                    // error history with it.
+                    self.reset_application();
                     self.errors.clear_history();
                     self.refresh_error_objects();
                 }
@@ -1079,6 +1231,16 @@ impl EmulatedNode {
             // Synchronous RPDO data not yet taken over are dropped with the PDOs.
             self.rx.clear();
             self.tx.clear();
+        }
+        // Out of OPERATIONAL with the drive still enabled: no PDO brings set-points any more,
+        // the connection to the master is gone (module documentation, "Loss of the master").
+        if was_operational
+            && self.state != NmtState::Operational
+            && self.od.model().state() == crate::drive::PowerState::OperationEnabled
+        {
+            tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
+                "left OPERATIONAL with the drive enabled: abort connection reaction");
+            self.lose_master(LEFT_OPERATIONAL_EMCY, now);
         }
         // The SYNC watch arms again with the first SYNC in OPERATIONAL, the RPDO deadline
         // monitoring with each RPDO's first reception.
@@ -1109,7 +1271,7 @@ impl EmulatedNode {
         if id == nmt::NMT_COB {
             if f.len == 2 && (f.data[1] == 0 || f.data[1] == self.id) {
                 if let Some(cmd) = NmtCommand::from_code(f.data[0]) {
-                    self.nmt(cmd);
+                    self.nmt(cmd, now);
                 }
             }
             return;
@@ -1347,7 +1509,7 @@ impl EmulatedNode {
             tracing::warn!(target: "fieldprobe::sim::canopen", node = self.id,
                 "RPDO {} missing for {} µs (event-timer {ms} ms): EMCY 0x8250, drive fault",
                 k + 1, now.0.saturating_sub(last.0) / 1000);
-            self.od.model_mut().inject_fault(RPDO_TIMEOUT_EMCY);
+            self.lose_master(RPDO_TIMEOUT_EMCY, now);
         }
     }
 

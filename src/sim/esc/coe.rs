@@ -465,6 +465,13 @@ impl CoeServer {
         self.model.as_mut()
     }
 
+    /// Put a new drive model in (a device's application restarting, CiA 301 NMT reset node);
+    /// returns the old one. The object entries stay.
+    pub fn replace_model(&mut self, model: Box<dyn DriveModel>) -> Box<dyn DriveModel> {
+        self.last_model_error = model.last_error_code();
+        std::mem::replace(&mut self.model, model)
+    }
+
     /// Bytes of a segmented download collected so far (at most [`SDO_DOWNLOAD_MAX`]).
     pub fn download_len(&self) -> usize {
         self.download.as_ref().map_or(0, |d| d.data.len())

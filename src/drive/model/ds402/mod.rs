@@ -512,4 +512,17 @@ impl Ds402Model {
     pub fn inject_fault(&mut self, code: u16) {
         self.pending_fault = Some(code);
     }
+
+    /// Make the drive fault with `code` (0x603F) now, between two cycles, on the drive's own
+    /// clock (a CiA 402 drive's communication fault reaction, 0x6007 abort connection option
+    /// code 1): FAULT REACTION ACTIVE and, since the model's fault reaction has nothing left to
+    /// do (speed and torque are zero at once, the brake holds the position in every state but
+    /// OPERATION ENABLED, whatever 0x605E fault reaction option code says), FAULT (transitions
+    /// 13, 14). No step is needed, so it happens when no SYNC comes at all. A fault pending
+    /// from [`Self::inject_fault`] is replaced.
+    pub fn fault_now(&mut self, code: u16) {
+        self.pending_fault = None;
+        self.enter_fault(code);
+        self.state = PowerState::Fault;
+    }
 }

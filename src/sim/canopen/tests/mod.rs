@@ -833,3 +833,5 @@ fn from_eds_the_error_objects_are_the_nodes_own_with_the_eds_size_of_0x1003() {
         (0x80, 0x0601_0002)
     );
 }
+
+mod master_loss;
