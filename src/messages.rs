@@ -237,7 +237,7 @@ pub mod ids {
     /// Project: the run was told to stop from outside (`fieldprobe run` got SIGINT or
     /// SIGTERM): the axes brake to a stop, every drive is disabled and the bus brought to its
     /// end state as at the end of any run, then the command exits 130 / 143 (128 + signal).
-    pub const RUN_INTERRUPTED: u32 = 900018;
+    pub const RUN_INTERRUPTED: u32 = 900019;
 
     /// FCT-C14 §3.4 notice: CLEAR of an active workspace / protection area (warning; the area
     /// stays active).

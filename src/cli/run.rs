@@ -222,7 +222,7 @@ pub fn run(a: RunArgs) -> anyhow::Result<i32> {
 
 /// SIGINT and SIGTERM during `run` (issue 28 item 3), through a signalfd read by a thread of
 /// its own (no signal handler, no unsafe code): the first one asks the machine to stop
-/// ([`StopRequest`], error 900018); the run then brakes the axes, disables every drive
+/// ([`StopRequest`], error 900019); the run then brakes the axes, disables every drive
 /// ([`Machine::power_off`]) and exits 128 + the signal's number (130 / 143). A second one, a
 /// second or more later, exits at once with that code, leaving the drives to their own
 /// communication watchdogs.

@@ -2,7 +2,7 @@
 //! move, against one `fieldprobe sim canopen` (issue 28 items 3 and 4), in a private network
 //! namespace with multicast on `lo` (SKIP where namespaces are missing).
 //!
-//! Asserted for each signal, from outside the run: SIGINT / SIGTERM give error 900018 naming
+//! Asserted for each signal, from outside the run: SIGINT / SIGTERM give error 900019 naming
 //! the signal, the confirmation that every drive is disabled, and exit 130 / 143 (128 + the
 //! signal, as shells report); for all three, a second master (`fieldprobe sdo read`, which
 //! sends no NMT command) reads 0x6041 of every emulated drive 300 ms after the signal and
@@ -90,7 +90,7 @@ fn run_stopped_by_sigint_sigterm_or_sigkill_leaves_no_drive_enabled_and_the_next
         let run_err = read(&format!("run_{sig}.err"));
         if sig != "KILL" {
             assert!(
-                run_err.contains("error 900018") && run_err.contains(&format!("SIG{sig}")),
+                run_err.contains("error 900019") && run_err.contains(&format!("SIG{sig}")),
                 "{context}"
             );
             assert!(
