@@ -184,6 +184,13 @@ impl Channel {
                 *cycles += 1;
                 for a in &mut self.axes {
                     a.set_enable(true);
+                    // A drive found in FAULT while enabling (left so by a master that died,
+                    // issue 28 item 4) gets its fault reset, as after a program start
+                    // ([`Channel::program_start`]); a drive without a fault gets none (a
+                    // SERCOS drive is held off while its reset is requested).
+                    if a.has_fault() {
+                        a.set_fault_reset(true);
+                    }
                 }
                 if self.axes.iter().all(Axis::is_operational) {
                     for a in &mut self.axes {

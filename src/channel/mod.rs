@@ -332,13 +332,7 @@ impl Channel {
     ///
     /// # Errors
     /// When the number of axes and configurations differ.
-    pub fn new(cfg: ChannelConfig, mut axes: Vec<Axis>) -> Result<Self, String> {
-        // The channel starts enabling, as after a program start: a drive that is in FAULT
-        // (left so by a master that died, issue 28 item 4) gets its fault reset like at every
-        // later program start ([`Channel::program_start`]).
-        for a in &mut axes {
-            a.set_fault_reset(true);
-        }
+    pub fn new(cfg: ChannelConfig, axes: Vec<Axis>) -> Result<Self, String> {
         if cfg.axes.len() != axes.len() {
             return Err(format!(
                 "channel has {} axis configurations but {} axes",

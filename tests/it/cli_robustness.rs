@@ -311,11 +311,26 @@ fn a_ten_million_digit_number_gives_a_short_message() {
     let e = stderr(&o);
     assert_eq!(o.status.code(), Some(2), "{}", &e[..e.len().min(300)]);
     assert!(e.len() < 400, "{} bytes", e.len());
+    // The line is refused by its length before its number is read (issue 28 item 9): the
+    // message names the line, its length and the cap.
+    let line_chars = "N10 G01 X".len() + digits.len() + " F1000".len();
     assert!(
-        e.contains(":1:") && e.contains("…") && e.contains("10000000 characters"),
+        e.contains(":1:") && e.contains(&format!("{line_chars} characters")) && e.contains("65536"),
         "{e}"
     );
-    // And on the command line, the largest an argument can be.
+    // A number inside the line cap: the message abbreviates it and says how long it is.
+    let digits = "9".repeat(60_000);
+    let (_d, p) = program(&format!("N10 G01 X{digits} F1000\nN20 M30\n"));
+    let o = fieldprobe(&["run", &p, "--link", "sim"]);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{}", &e[..e.len().min(300)]);
+    assert!(e.len() < 400, "{} bytes", e.len());
+    assert!(
+        e.contains(":1:") && e.contains("…") && e.contains("60000 characters"),
+        "{e}"
+    );
+    // And on the command line, the largest an argument can be (with a valid program).
+    let (_d, p) = program("N10 G01 X1 F1000\nN20 M30\n");
     let digits = "9".repeat(100_000);
     for args in [
         vec![
